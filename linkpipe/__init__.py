@@ -1,0 +1,10 @@
+"""linkpipe: planar linkage analysis — kinematic sweeps, forces, HDF5 and Rerun outputs."""
+__version__ = "0.1.0"
+
+from .errors import LinkpipeError, SceneError  # noqa: E402
+from .scene import Scene, load_scene, parse_scene  # noqa: E402
+from .pipeline import solve  # noqa: E402
+from .result import Result  # noqa: E402
+
+__all__ = ["LinkpipeError", "SceneError", "Scene", "load_scene", "parse_scene", "solve", "Result",
+           "__version__"]

@@ -1,0 +1,105 @@
+"""Decide which stages a scene needs, run them, time them; return a :class:`Result`."""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import kinematics as kin
+from .model import build_model, check_mobility
+from .result import Result
+from .scene import Scene, load_scene
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a scene calls for: kinematic orders and whether the force stage runs."""
+
+    velocity: bool
+    acceleration: bool
+    forces: bool
+
+    @classmethod
+    def of(cls, scene: Scene) -> "Plan":
+        eff = set(scene.effects)
+        out = scene.outputs
+        vectors = bool(out.vectors)
+        acc = "inertia" in eff or "acceleration" in out.kinematics or vectors
+        vel = acc or "damping" in eff or "velocity" in out.kinematics or vectors
+        return cls(velocity=vel, acceleration=acc, forces=bool(eff))
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        return ("positions",) + (("velocities",) if self.velocity else ()) + (
+            ("accelerations",) if self.acceleration else ()) + (("forces",) if self.forces else ())
+
+
+def solve(scene: Scene | str, progress=None) -> Result:
+    """Run every stage the scene calls for and return the result (failed steps are data)."""
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    plan = Plan.of(scene)
+    seconds: dict[str, float] = {}
+    t0 = _time.perf_counter()
+    model = build_model(scene)
+    mob = check_mobility(model)
+    seconds["model"] = _time.perf_counter() - t0
+
+    t0 = _time.perf_counter()
+    value, s, s_dot, s_ddot = kin.driver_motion(model)
+    q, residual, iterations, status = kin.solve_positions(model, s, s_dot)
+    X = model.positions(np.where(np.isfinite(q), q, 0.0))
+    X[~np.isfinite(q).all(axis=1)] = np.nan
+    X[:, model.fixed] = model.start_position[model.fixed]
+    link_angle = kin.link_angles_unwrapped(model, X)
+    seconds["positions"] = _time.perf_counter() - t0
+
+    t0 = _time.perf_counter()
+    Xz = np.where(np.isfinite(X), X, 0.0)
+    der = kin.derivatives(model, Xz, s, s_dot, s_ddot, status, plan.acceleration)
+    status = der["status"]
+    seconds["jacobian"] = _time.perf_counter() - t0
+
+    res = Result(scene=scene, model=model, mobility=mob, driver_value=value,
+                 time=_time_axis(scene, value), position=X, link_angle=link_angle,
+                 status=status, residual=residual, iterations=iterations,
+                 condition=der["condition"])
+    if plan.velocity:
+        res.velocity = der["velocity"]
+        res.velocity_residual = der["velocity_residual"]
+        res.link_angular_velocity, _ = kin.link_rates(model, X, res.velocity)
+    if plan.acceleration:
+        res.acceleration = der["acceleration"]
+        res.acceleration_residual = der["acceleration_residual"]
+        _, res.link_angular_acceleration = kin.link_rates(model, X, res.velocity, res.acceleration)
+    if plan.forces:
+        from .forces import force_stage
+
+        t0 = _time.perf_counter()
+        res.forces = force_stage(res, der["jacobian_inverse"], s, s_dot, s_ddot)
+        if "__status__" in res.forces:
+            res.status = res.forces.pop("__status__")[1]
+        seconds["forces"] = _time.perf_counter() - t0
+    res.seconds = seconds
+    res.message = _message(res)
+    return res
+
+
+def _time_axis(scene: Scene, value: np.ndarray):
+    """Return seconds per step when every driver has a rate and no acceleration, else None."""
+    rates = np.array([d.rate for d in scene.drivers], dtype=float)
+    accs = np.array([d.acceleration for d in scene.drivers], dtype=float)
+    if not len(rates) or np.any(rates == 0) or np.any(accs != 0):
+        return None
+    d0 = scene.drivers[0]
+    return np.abs(value[:, 0] - d0.from_value) / abs(d0.rate)
+
+
+def _message(res: Result) -> str:
+    counts = res.status_counts()
+    failed = res.n_steps - res.n_ok
+    if not failed:
+        return f"all {res.n_steps} steps ok"
+    return f"{res.n_ok}/{res.n_steps} steps ok; " + ", ".join(
+        f"{n} {k}" for k, n in counts.items() if k != "ok")

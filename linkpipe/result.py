@@ -1,0 +1,211 @@
+"""The result of one scene's run, and the one table of output names, dims and units.
+
+``Result.variables()`` is the single place where the contract's variable names
+(``shared/OUTPUT_FORMAT.md``) meet the arrays; both stores write from it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .kinematics import STATUS_NAMES
+from .model import Mobility, Model
+from .scene import Scene
+
+#: status codes beyond stage 1's (see kinematics.STATUS_NAMES)
+NO_LEVERAGE = 4
+FLAG_MEANINGS = STATUS_NAMES + ("no_leverage",)
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One output variable: contract name, dimension names, data, units and extra attributes."""
+
+    name: str
+    dims: tuple[str, ...]
+    data: np.ndarray
+    units: str
+    attrs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Result:
+    """Everything one run produced, step axis first (like scipy's ``OdeResult``).
+
+    Kinematic arrays: ``driver_value`` (S, n_drivers), ``time`` (S,) or None, ``position``
+    (S, n_points, 2), ``velocity``/``acceleration`` (S, n_points, 2) or None, ``link_angle``
+    (S, n_links) rad unwrapped, ``link_angular_velocity``/``_acceleration`` (S, n_links) or
+    None, ``status`` (S,) int8, ``residual`` (S,), ``iterations`` (S,), ``condition`` (S,).
+    ``forces``: name -> (dims, array, units) from stage 2 (None when no effect is on).
+    ``seconds``: stage name -> wall seconds, only for stages that ran.
+    """
+
+    scene: Scene
+    model: Model
+    mobility: Mobility
+    driver_value: np.ndarray
+    time: np.ndarray | None
+    position: np.ndarray
+    link_angle: np.ndarray
+    status: np.ndarray
+    residual: np.ndarray
+    iterations: np.ndarray
+    condition: np.ndarray
+    velocity: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
+    link_angular_velocity: np.ndarray | None = None
+    link_angular_acceleration: np.ndarray | None = None
+    velocity_residual: np.ndarray | None = None
+    acceleration_residual: np.ndarray | None = None
+    forces: dict[str, tuple[tuple[str, ...], np.ndarray, str]] | None = None
+    seconds: dict[str, float] = field(default_factory=dict)
+    message: str = ""
+
+    # ------------------------------------------------------------------ summaries
+    @property
+    def n_steps(self) -> int:
+        return self.position.shape[0]
+
+    @property
+    def n_ok(self) -> int:
+        return int((self.status == 0).sum())
+
+    @property
+    def success(self) -> bool:
+        """True when the run finished (failed steps are data, not a failed run)."""
+        return True
+
+    @property
+    def point_names(self) -> tuple[str, ...]:
+        return self.scene.point_names
+
+    @property
+    def link_names(self) -> tuple[str, ...]:
+        return tuple(l.name for l in self.scene.links)
+
+    @property
+    def driver_names(self) -> tuple[str, ...]:
+        return tuple(d.name for d in self.scene.drivers)
+
+    @property
+    def spring_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.scene.springs) if "springs" in self.scene.effects else ()
+
+    def status_counts(self) -> dict[str, int]:
+        return {name: int((self.status == code).sum()) for code, name in enumerate(FLAG_MEANINGS)
+                if (self.status == code).any()}
+
+    # ------------------------------------------------------------------ the output table
+    def units(self) -> dict[str, str]:
+        """Unit strings from the scene (free text), with neutral defaults."""
+        u = dict(self.scene.units)
+        L = u.get("length", "length")
+        T = u.get("time", "s")
+        F = u.get("force", "force")
+        M = u.get("mass", "mass")
+        return {"length": L, "time": T, "force": F, "mass": M}
+
+    def driver_units(self) -> list[str]:
+        L = self.units()["length"]
+        return ["degree" if d.kind == "angle" else L for d in self.scene.drivers]
+
+    def coordinates(self) -> list[Variable]:
+        """Coordinate variables (dimension scales)."""
+        coords = [
+            Variable("step", ("step",), np.arange(self.n_steps, dtype=np.int64), "1"),
+            Variable("point", ("point",), np.array(self.point_names, dtype=object), ""),
+            Variable("xy", ("xy",), np.array(["x", "y"], dtype=object), ""),
+            Variable("link", ("link",), np.array(self.link_names, dtype=object), ""),
+            Variable("driver", ("driver",), np.array(self.driver_names, dtype=object), ""),
+        ]
+        if self.spring_names:
+            coords.append(Variable("spring", ("spring",), np.array(self.spring_names, dtype=object), ""))
+        if self.forces:
+            extra = self.forces.get("__coords__")
+            if extra:
+                for name, values in extra[1].items():
+                    coords.append(Variable(name, (name,), np.array(values, dtype=object), ""))
+        return coords
+
+    def variables(self) -> list[Variable]:
+        """Data variables, each with dims and units; only what this run computed."""
+        u = self.units()
+        L, T = u["length"], u["time"]
+        dunits = self.driver_units()
+        out = [
+            Variable("driver_value", ("step", "driver"), self.driver_value,
+                     dunits[0] if len(set(dunits)) == 1 else "mixed",
+                     {"driver_units": ",".join(dunits)}),
+        ]
+        if self.time is not None:
+            out.append(Variable("time", ("step",), self.time, "s" if T in ("s", "") else T))
+        out.append(Variable("position", ("step", "point", "xy"), self.position, L))
+        if self.velocity is not None:
+            out.append(Variable("velocity", ("step", "point", "xy"), self.velocity, f"{L}/{T}"))
+        if self.acceleration is not None:
+            out.append(Variable("acceleration", ("step", "point", "xy"), self.acceleration, f"{L}/{T}^2"))
+        out.append(Variable("link_angle", ("step", "link"), self.link_angle, "rad"))
+        if self.link_angular_velocity is not None:
+            out.append(Variable("link_angular_velocity", ("step", "link"), self.link_angular_velocity, f"rad/{T}"))
+        if self.link_angular_acceleration is not None:
+            out.append(Variable("link_angular_acceleration", ("step", "link"),
+                                self.link_angular_acceleration, f"rad/{T}^2"))
+        if self.forces:
+            for name, (dims, data, units) in self.forces.items():
+                if name.startswith("__"):
+                    continue
+                out.append(Variable(name, dims, data, units))
+        out.append(Variable("status", ("step",), self.status.astype(np.int8), "1", {
+            "flag_values": np.arange(len(FLAG_MEANINGS), dtype=np.int8),
+            "flag_meanings": " ".join(FLAG_MEANINGS),
+        }))
+        out.append(Variable("residual", ("step",), self.residual, L,
+                            {"long_name": "max abs constraint residual after the position solve"}))
+        out.append(Variable("iterations", ("step",), self.iterations.astype(np.int32), "1",
+                            {"long_name": "Newton iterations"}))
+        out.append(Variable("condition", ("step",), self.condition, "1",
+                            {"long_name": "1-norm condition estimate of the constraint Jacobian "
+                                          "(sigma_1/sigma_n when redundant)"}))
+        if self.velocity_residual is not None:
+            out.append(Variable("velocity_residual", ("step",), self.velocity_residual, f"{L}/{T}",
+                                {"long_name": "max abs residual of Phi_q qd = -Phi_t"}))
+        if self.acceleration_residual is not None:
+            out.append(Variable("acceleration_residual", ("step",), self.acceleration_residual,
+                                f"{L}/{T}^2", {"long_name": "max abs residual of Phi_q qdd = gamma"}))
+        return out
+
+    def attributes(self) -> dict[str, Any]:
+        """Root attributes of the HDF5 file."""
+        from . import __version__
+        import datetime
+
+        sc = self.scene
+        attrs: dict[str, Any] = {
+            "linkpipe_version": __version__,
+            "scene_name": sc.name,
+            "scene_toml": sc.text,
+            "scene_path": str(sc.path),
+            "effects": list(sc.effects),
+            "present_but_off": list(sc.present_but_off),
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "solver_tol": sc.solver.tol,
+            "solver_max_iter": sc.solver.max_iter,
+            "degrees_of_freedom": self.mobility.dof,
+            "redundant_constraints": self.mobility.redundant,
+            "steps_ok": self.n_ok,
+            "steps_failed": self.n_steps - self.n_ok,
+            "max_residual": float(np.nanmax(self.residual)) if np.isfinite(self.residual).any() else np.nan,
+            "newton_iterations_mean": float(self.iterations.mean()) if self.n_steps else 0.0,
+            "newton_iterations_max": int(self.iterations.max()) if self.n_steps else 0,
+        }
+        if self.velocity_residual is not None and np.isfinite(self.velocity_residual).any():
+            attrs["max_velocity_residual"] = float(np.nanmax(self.velocity_residual))
+        if self.acceleration_residual is not None and np.isfinite(self.acceleration_residual).any():
+            attrs["max_acceleration_residual"] = float(np.nanmax(self.acceleration_residual))
+        for key, val in self.units().items():
+            attrs[f"units_{key}"] = val
+        for stage, sec in self.seconds.items():
+            attrs[f"seconds_{stage}"] = float(sec)
+        return attrs

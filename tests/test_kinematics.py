@@ -1,0 +1,133 @@
+"""Stage 1 against exact answers: closed forms, the shear-press seed's table, the parallelogram."""
+import numpy as np
+import pytest
+
+import linkpipe
+from linkpipe.kinematics import NO_ASSEMBLY, OK
+
+from closed_forms import fourbar, slider_crank
+
+
+def idx(result, name):
+    return result.point_names.index(name)
+
+
+def test_crank_rocker_matches_closed_form():
+    r = linkpipe.solve("configs/fourbar_crank_rocker.toml")
+    assert (r.status == OK).all()
+    th = np.deg2rad(r.driver_value[:, 0])
+    cf = fourbar(1.0, 3.5, 3.0, 4.0, th, 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
+    L, w = 4.0, 10.0  # length scale (ground link) and crank speed: tolerances are relative to them
+    for name in ("A", "B", "P"):
+        i = idx(r, name)
+        np.testing.assert_allclose(r.position[:, i], cf[name], rtol=0, atol=1e-10 * L)
+        np.testing.assert_allclose(r.velocity[:, i], cf["V" + name], rtol=0, atol=1e-10 * L * w)
+        np.testing.assert_allclose(r.acceleration[:, i], cf["A" + name], rtol=0, atol=1e-10 * L * w**2)
+    links = r.link_names
+    np.testing.assert_allclose(r.link_angular_velocity[:, links.index("coupler")], cf["omega3"], atol=1e-10 * w)
+    np.testing.assert_allclose(r.link_angular_velocity[:, links.index("rocker")], cf["omega4"], atol=1e-10 * w)
+    np.testing.assert_allclose(r.link_angular_acceleration[:, links.index("rocker")], cf["alpha4"],
+                               atol=1e-10 * w**2)
+    # the crank angle is unwrapped: 0 .. 2 pi without a jump
+    np.testing.assert_allclose(r.link_angle[:, links.index("crank")], th, atol=1e-12)
+
+
+def test_slider_crank_matches_closed_form():
+    r = linkpipe.solve("configs/slider_crank.toml")
+    assert (r.status == OK).all()
+    th = np.deg2rad(r.driver_value[:, 0])
+    cf = slider_crank(1.0, 3.5, 0.5, th, 10.0, 0.0)
+    L, w = 4.5, 10.0
+    for name in ("A", "B"):
+        i = idx(r, name)
+        np.testing.assert_allclose(r.position[:, i], cf[name], atol=1e-10 * L)
+        np.testing.assert_allclose(r.velocity[:, i], cf["V" + name], atol=1e-10 * L * w)
+        np.testing.assert_allclose(r.acceleration[:, i], cf["A" + name], atol=1e-10 * L * w**2)
+
+
+# The seed's printed table (003, R. Lot): xP yP | xB yB | xC yC, printed to 3 decimals.
+SHEAR_TABLE = np.array([
+    [+0.415, +0.500, +0.062, +0.222, +0.270, -0.120],
+    [+0.444, +0.475, +0.075, +0.218, +0.270, -0.131],
+    [+0.469, +0.450, +0.086, +0.213, +0.270, -0.142],
+    [+0.492, +0.425, +0.097, +0.208, +0.270, -0.152],
+    [+0.512, +0.400, +0.108, +0.203, +0.270, -0.162],
+    [+0.531, +0.375, +0.117, +0.198, +0.270, -0.172],
+    [+0.548, +0.350, +0.126, +0.192, +0.270, -0.181],
+    [+0.563, +0.325, +0.135, +0.186, +0.270, -0.190],
+    [+0.577, +0.300, +0.143, +0.180, +0.270, -0.199],
+])
+
+
+def test_shear_press_reproduces_seed_table():
+    r = linkpipe.solve("configs/shear_press.toml")
+    assert (r.status == OK).all()
+    got = np.concatenate([r.position[:, idx(r, n)] for n in ("P", "B", "C")], axis=1)
+    # the table is printed to 3 decimals: half a unit of the last digit, plus float slack
+    assert np.abs(got - SHEAR_TABLE).max() <= 0.0005 + 1e-12
+    # and the four constant distances of the Maple model hold exactly
+    P, B, C = (r.position[:, idx(r, n)] for n in ("P", "B", "C"))
+    for (u, v, L) in ((B, 0 * B, 0.230), (B, C, 0.400), (P, 0 * P, 0.650), (B, P, 0.450)):
+        np.testing.assert_allclose(np.linalg.norm(u - v, axis=1), L, atol=1e-12)
+
+
+def test_basketball_backboard_translates():
+    r = linkpipe.solve("configs/basketball_goal.toml")
+    assert (r.status == OK).all() and r.n_steps == 25
+    B, C = r.position[:, idx(r, "B")], r.position[:, idx(r, "C")]
+    # backboard stays vertical: B directly above C, 1 ft apart, at every step
+    np.testing.assert_allclose(B[:, 0] - C[:, 0], 0.0, atol=1e-12)
+    np.testing.assert_allclose(B[:, 1] - C[:, 1], 1.0, atol=1e-12)
+    # and the lower link is at the driven angle, the handle on its extension
+    th = np.deg2rad(np.arange(-60, 61, 5))
+    O4 = np.array([0.0, -2.0])
+    np.testing.assert_allclose(C, O4 + 2 * np.stack([np.cos(th), np.sin(th)], 1), atol=1e-12)
+    np.testing.assert_allclose(r.position[:, idx(r, "H")], O4 - np.stack([np.cos(th), np.sin(th)], 1),
+                               atol=1e-12)
+
+
+def test_sweep_out_of_assembly_range_gives_nan_and_recovers(tmp_path):
+    # A non-Grashof (triple-rocker) four-bar: crank 2, coupler 2, rocker 2, ground 3.5
+    # (2 + 3.5 > 2 + 2). Driven through a full turn it leaves the range and comes back.
+    text = """
+[points]
+O2 = { x = 0.0, y = 0.0, fixed = true }
+A = { x = 2.0, y = 0.0 }
+B = { x = 3.0, y = 1.9 }
+O4 = { x = 3.5, y = 0.0, fixed = true }
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+[[links]]
+name = "coupler"
+points = ["A", "B"]
+lengths = { "A-B" = 2.0 }
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = { "O4-B" = 2.0 }
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = 0.0
+to = 360.0
+steps = 361
+"""
+    path = tmp_path / "triple_rocker.toml"
+    path.write_text(text)
+    r = linkpipe.solve(str(path))
+    # assembly needs |A - O4| <= 4: 4 + 12.25 - 14 cos t <= 16 -> cos t >= 0.25/14
+    th = np.deg2rad(r.driver_value[:, 0])
+    dist = np.hypot(2 * np.cos(th) - 3.5, 2 * np.sin(th))
+    inside = dist < 4 - 1e-6
+    outside = dist > 4 + 1e-6
+    assert (r.status[outside] == NO_ASSEMBLY).all() and outside.sum() > 100
+    assert np.isnan(r.position[outside][:, idx(r, "A")]).all()
+    # fixed points keep their positions at failed steps
+    np.testing.assert_array_equal(r.position[outside][:, idx(r, "O4")], [[3.5, 0.0]] * outside.sum())
+    assert (r.status[inside] == OK).all()
+    # recovered steps are assembled: the links keep their lengths
+    A, B = r.position[inside][:, idx(r, "A")], r.position[inside][:, idx(r, "B")]
+    np.testing.assert_allclose(np.linalg.norm(B - A, axis=1), 2.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(B - [3.5, 0.0], axis=1), 2.0, atol=1e-12)
+    assert inside[-1] and r.status[-1] == OK  # the sweep came back and ends assembled
