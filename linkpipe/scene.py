@@ -169,7 +169,6 @@ class Scene:
         return tuple(e for e in EFFECTS if present[e] and e not in self.effects)
 
 
-
 # --------------------------------------------------------------------------------------------
 # The loader.
 #
@@ -215,7 +214,8 @@ KEYS: dict[str, dict[str, str]] = {
     "gravity": {"g": "[0.0, -9.81]"},
     "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",
                 "free_length": "0.5", "preload": "10.0", "damping": "0.0"},
-    "masses": {"link": '"coupler"', "mass": "1.0", "center": '"G" (or [u, v] in the link frame)', "inertia": "0.0"},
+    "masses": {"link": '"coupler"', "mass": "1.0", "center": '"G" (or [u, v] in the link frame)',
+               "inertia": "0.0"},
     "loads": {"name": '"cut"', "point": '"C"', "force": "[0.0, 500.0]", "link": '"rocker"',
               "torque": "-2.0"},
     "outputs": {"kinematics": '["velocity", "acceleration"]', "trace": '["P"]',
@@ -256,11 +256,17 @@ def _show(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
-        return f"{value:g}"
+        return repr(value)
     if isinstance(value, str):
         return f'"{value}"'
     text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _suggest(word: str, choices) -> str:
+    """A "did you mean" hint that also catches a wrong case ("p" for "P")."""
+    same = [c for c in choices if str(c).lower() == str(word).lower()]
+    return f'did you mean "{same[0]}"?' if same else did_you_mean(word, choices)
 
 
 def _is_number(value) -> bool:
@@ -278,14 +284,19 @@ class _Table:
     keys are names (``local``) passes ``examples`` instead and checks its keys itself.
     """
 
-    def __init__(self, path: str, label: str, data: dict, kind: str, examples=None):
+    def __init__(self, path: str, label: str, data: dict, kind: str, examples=None,
+                 check: bool = True):
         self.path, self.label, self.data, self.kind = path, label, data, kind
         self.examples = KEYS[kind] if examples is None else examples
-        if examples is None:
-            for key in data:
-                if key not in self.examples:
-                    raise self.error(key, f"unknown key in [{kind}]",
-                                     did_you_mean(key, self.examples))
+        if check and examples is None:
+            self.check_keys()
+
+    def check_keys(self) -> None:
+        """Raise on the first key that is not in the vocabulary, with a "did you mean"."""
+        for key in self.data:
+            if key not in self.examples:
+                raise self.error(key, "unknown key",
+                                 _suggest(key, self.examples))
 
     def error(self, key: str | None, message: str, hint: str = "") -> SceneError:
         return SceneError(self.path, self.label, key, message, hint)
@@ -442,16 +453,20 @@ class _Parser:
     def entries(self, name: str) -> list[_Table]:
         """The entries of an array of tables, labelled by their names, which must be unique."""
         tables, first_at = [], {}
+        named = "name" in KEYS[name]
         for i, raw in enumerate(self.top(name) or [], 1):
-            table = _Table(self.path, f"{name}[{i}]", raw, name)
-            if "name" in KEYS[name]:
+            table = _Table(self.path, f"{name}[{i}]", raw, name, check=False)
+            if named and "name" in raw:
                 entry_name = table.name()
                 if entry_name in first_at:
-                    raise table.error("name", f'"{entry_name}" is used twice ({first_at[entry_name]}'
-                                      f" and {name}[{i}])",
+                    raise table.error("name", f'"{entry_name}" is used twice '
+                                      f"({first_at[entry_name]} and {name}[{i}])",
                                       f"give each of the [[{name}]] its own name")
                 first_at[entry_name] = f"{name}[{i}]"
                 table.label = f'{name} "{entry_name}"'
+            table.check_keys()
+            if named and "name" not in raw:
+                table.name()  # "missing", once a misspelt name key has had its hint
             tables.append(table)
         return tables
 
@@ -460,13 +475,13 @@ class _Parser:
     def point(self, table: _Table, key: str, name: str) -> str:
         if name not in self.points:
             raise table.error(key, f'unknown point "{name}"',
-                              did_you_mean(name, self.points) or "declare it in [points]")
+                              _suggest(name, self.points) or "declare it in [points]")
         return name
 
     def link(self, table: _Table, key: str, name: str) -> Link:
         if name not in self.links:
             raise table.error(key, f'unknown link "{name}"',
-                              did_you_mean(name, self.links) or "declare it with [[links]]")
+                              _suggest(name, self.links) or "declare it with [[links]]")
         return self.links[name]
 
     # -- the tables ---------------------------------------------------------------------------
@@ -474,7 +489,7 @@ class _Parser:
     def parse(self) -> Scene:
         for name in self.data:
             if name not in TABLES:
-                raise self.error(name, None, "unknown table", did_you_mean(name, TABLES))
+                raise self.error(name, None, "unknown table", _suggest(name, TABLES))
         scene = self.scene_table()
         self.point_table()
         self.link_tables()
@@ -592,7 +607,7 @@ class _Parser:
             if name not in names:
                 if name not in self.points:
                     raise sub.error(name, f'unknown point "{name}"',
-                                    did_you_mean(name, names[2:] or self.points))
+                                    _suggest(name, names[2:] or self.points))
                 raise sub.error(name, f'point "{name}" is not a point of {table.label}',
                                 f'add "{name}" to its points')
             local[name] = sub.pair(name)
@@ -624,8 +639,10 @@ class _Parser:
                                   "points its line goes through",
                                   "name two other points of the link that carries the guide")
             if not any(a in link.points and b in link.points for link in self.links.values()):
-                on_a = [n for n, link in self.links.items() if a in link.points] or "no link"
-                on_b = [n for n, link in self.links.items() if b in link.points] or "no link"
+                def on(p):
+                    found = [f'"{n}"' for n, link in self.links.items() if p in link.points]
+                    return "links " + ", ".join(found) if found else "no link"
+                on_a, on_b = on(a), on(b)
                 raise table.error("along", f'"{a}" and "{b}" are not on one common link '
                                   f'("{a}" is on {on_a}, "{b}" on {on_b})',
                                   "name two points of the same link, or write "
@@ -712,7 +729,12 @@ class _Parser:
                               "use a non-zero step with the sign of to - from, e.g. step = "
                               f"{better if stop > start else -better:g}")
         # from, from + s, ... up to and including `to` when it lands within 1e-9*|s| of it
-        return math.floor((stop - start) / step + 1e-9) + 1, step
+        steps = math.floor((stop - start) / step + 1e-9) + 1
+        if steps == 1:
+            raise table.error("step", f"step = {step:g} with {span} gives no steps: it "
+                              "oversteps to, leaving a single position",
+                              f"use a step no larger than |to - from| = {abs(stop - start):g}")
+        return steps, step
 
     def solver_table(self) -> Solver:
         table = self.table("solver")
@@ -809,7 +831,7 @@ class _Parser:
         for effect in effects:
             if effect not in EFFECTS:
                 raise table.error("effects", f'unknown effect "{effect}"',
-                                  did_you_mean(effect, EFFECTS))
+                                  _suggest(effect, EFFECTS))
             for needed in EFFECT_NEEDS[effect]:
                 if not self.top(needed):
                     ref = _table_ref(needed)
@@ -823,7 +845,7 @@ class _Parser:
         for order in kinematics:
             if order not in KINEMATIC_ORDERS:
                 raise table.error("kinematics", f'unknown kinematic order "{order}"',
-                                  did_you_mean(order, KINEMATIC_ORDERS))
+                                  _suggest(order, KINEMATIC_ORDERS))
         lists = {key: table.strings(key, (), what="point") for key in ("trace", "vectors")}
         for key, names in lists.items():
             for name in names:

@@ -1,0 +1,272 @@
+"""Stage 2: the effects a scene names, the input force by virtual work, Lagrange multipliers.
+
+Everything is vectorised over steps. Notation (per step): ``q`` the moving coordinates,
+``J = Phi_q`` (n_rows, n_q), ``K = dq/ds`` (n_q, n_drivers) the influence coefficients
+(``K = -J^+ Phi_s`` over the driver rows). Applied forces are collected as point forces
+``(S, n_points, 2)`` plus couples on links ``(S, n_links)``.
+
+* Virtual work: the actuator's generalized force per driver is ``F = -K^T Q`` where ``Q``
+  holds the applied forces including d'Alembert inertia ``-m a_G`` and ``-I alpha`` — so it is
+  defined at ``rate = 0``; with ``input`` it is divided by the input point's leverage
+  ``n . dr_H/ds``.
+* Lagrange: ``J^T lambda = Q - M qdd`` with the constant natural-coordinate mass matrix of each
+  body, ``M = m N_G^T N_G + (I_G / L^2) D^T D`` (``N_G`` maps the basic points to the centre,
+  ``D`` to their difference) — a different formulation and a different linear solve; the driver
+  rows give ``F = lambda_d dPhi_d/ds``, the others the internal forces (tension positive).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .kinematics import OK
+from .model import Model, _R90
+from .result import NO_LEVERAGE
+
+LEVERAGE_RTOL = 1e-9  # |n . dr_H/ds| below this times the mechanism size: no leverage
+
+
+def _link_index(model: Model, name: str) -> int:
+    return [l.name for l in model.scene.links].index(name)
+
+
+def center_frame(model: Model, link_name: str, center) -> tuple[int, int, float, float, float]:
+    """Return (ia, ib, u, v, L) of a mass centre given as a point name or local (u, v)."""
+    li = _link_index(model, link_name)
+    link = model.scene.links[li]
+    names = model.point_names
+    ia, ib = names.index(link.points[0]), names.index(link.points[1])
+    X0 = model.start_position
+    L0 = float(np.hypot(*(X0[ib] - X0[ia])))
+    L = float(link.length) if link.length is not None else L0
+    if isinstance(center, str):
+        ip = names.index(center)
+        if ip == ia:
+            return ia, ib, 0.0, 0.0, L
+        if ip == ib:
+            return ia, ib, L, 0.0, L
+        hit = np.flatnonzero((model.loc_a == ia) & (model.loc_b == ib) & (model.loc_p == ip))
+        if len(hit):
+            return ia, ib, float(model.loc_u[hit[0]]), float(model.loc_v[hit[0]]), L
+        e = (X0[ib] - X0[ia]) / L0
+        r = X0[ip] - X0[ia]
+        return ia, ib, float(r @ e), float(r @ (_R90 @ e)), L
+    u, v = center
+    return ia, ib, float(u), float(v), L
+
+
+def _center(X, ia, ib, u, v, L):
+    """Return a body point ``a + (u I + v R)(b - a)/L`` for stacks (S, P, 2) -> (S, 2)."""
+    d = X[:, ib] - X[:, ia]
+    return X[:, ia] + (u * d + v * (d @ _R90.T)) / L
+
+
+def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
+    """Compute every named effect and the input force; return ``{name: (dims, data, units)}``.
+
+    ``jacobian_inverse`` (S, n_q, n_rows) from stage 1 (NaN at steps that are not ok).
+    Also returns ``"__status__"`` (the step status with NO_LEVERAGE added) and
+    ``"__coords__"`` (extra coordinate variables).
+    """
+    model: Model = res.model
+    scene = model.scene
+    eff = set(scene.effects)
+    S, P = res.position.shape[:2]
+    nl = len(scene.links)
+    u = res.units()
+    Lu, Fu, Tu = u["length"], u["force"], u["time"]
+    X = res.position
+    V = res.velocity if res.velocity is not None else np.zeros_like(X)
+    A = res.acceleration if res.acceleration is not None else np.zeros_like(X)
+    out: dict = {}
+    coords: dict = {}
+
+    drv = model.driver_rows
+    Jinv = jacobian_inverse
+    Xz = np.where(np.isfinite(X), X, 0.0)
+    phi_s = model.phi_s(Xz, s)  # (S, nd)
+    K = -Jinv[:, :, drv] * phi_s[:, None, :]  # (S, n_q, nd) influence coefficients dq/ds
+    Kp = np.zeros((S, P, 2, model.n_drivers))  # per point
+    Kp[:, model.moving] = K.reshape(S, -1, 2, model.n_drivers)
+    # link angle influence: dtheta/ds = cross(d, dd/ds) / L^2
+    d = X[:, model.link_b] - X[:, model.link_a]
+    Kd = Kp[:, model.link_b] - Kp[:, model.link_a]
+    Ktheta = (d[..., 0, None] * Kd[..., 1, :] - d[..., 1, None] * Kd[..., 0, :]) / np.einsum("slj,slj->sl", d, d)[..., None]
+
+    # applied forces per effect: point forces (S, P, 2) and link couples (S, n_links)
+    effects: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    lagr_point = np.zeros((S, P, 2))  # the Lagrange side's Q (no inertia: that enters as M qdd)
+    lagr_couple = np.zeros((S, nl))
+
+    springs = scene.springs if ("springs" in eff or "damping" in eff) else ()
+    if springs:
+        names = model.point_names
+        ia = np.array([names.index(sp.between[0]) for sp in springs])
+        ib = np.array([names.index(sp.between[1]) for sp in springs])
+        dd = X[:, ib] - X[:, ia]
+        length = np.hypot(dd[..., 0], dd[..., 1])  # (S, n_springs)
+        start_len = np.hypot(*(model.start_position[ib] - model.start_position[ia]).T)
+        k = np.array([sp.k for sp in springs], dtype=float)
+        ref = np.array([sp.free_length if sp.free_length is not None else start_len[i] for i, sp in enumerate(springs)])
+        t0 = np.array([0.0 if sp.free_length is not None else sp.preload for sp in springs])
+        e_ab = dd / np.where(length > 0, length, np.nan)[..., None]
+        if "springs" in eff:
+            tension = t0 + k * (length - ref)
+            energy = t0 * (length - ref) + 0.5 * k * (length - ref) ** 2
+            fp = np.zeros((S, P, 2))
+            np.add.at(fp, (slice(None), ia), tension[..., None] * e_ab)
+            np.add.at(fp, (slice(None), ib), -tension[..., None] * e_ab)
+            effects["springs"] = (fp, np.zeros((S, nl)))
+            out["spring_length"] = (("step", "spring"), length, Lu)
+            out["spring_extension"] = (("step", "spring"), length - np.where(k > 0, ref - t0 / np.where(k > 0, k, 1), ref), Lu)
+            out["spring_energy"] = (("step", "spring"), energy, f"{Fu}*{Lu}")
+        if "damping" in eff:
+            c = np.array([sp.damping for sp in springs], dtype=float)
+            rate = np.einsum("skj,skj->sk", V[:, ib] - V[:, ia], e_ab)
+            damp = c * rate
+            fp = np.zeros((S, P, 2))
+            np.add.at(fp, (slice(None), ia), damp[..., None] * e_ab)
+            np.add.at(fp, (slice(None), ib), -damp[..., None] * e_ab)
+            effects["damping"] = (fp, np.zeros((S, nl)))
+            out["spring_damping_force"] = (("step", "spring"), damp, Fu)
+        if "springs" in eff:
+            total = tension + (damp if "damping" in eff else 0.0)
+            out["spring_force"] = (("step", "spring"), total, Fu)
+
+    masses = [(m, center_frame(model, m.link, m.center)) for m in scene.masses]
+    if "gravity" in eff and masses:
+        g = np.asarray(scene.gravity, dtype=float)
+        fp = np.zeros((S, P, 2))
+        for m, (ia_, ib_, uu, vv, L) in masses:
+            _add_at_center(fp, m.mass * g, ia_, ib_, uu, vv, L)
+        effects["gravity"] = (fp, np.zeros((S, nl)))
+        pot = np.zeros(S)
+        for m, (ia_, ib_, uu, vv, L) in masses:
+            pot -= m.mass * (_center(X, ia_, ib_, uu, vv, L) @ g)
+        out["gravity_energy"] = (("step",), pot, f"{Fu}*{Lu}")
+
+    if "loads" in eff and scene.loads:
+        fp = np.zeros((S, P, 2))
+        cp = np.zeros((S, nl))
+        for ld in scene.loads:
+            if ld.point is not None:
+                fp[:, model.point_names.index(ld.point)] += np.asarray(ld.force, dtype=float)
+            else:
+                cp[:, _link_index(model, ld.link)] += float(ld.torque)
+        effects["loads"] = (fp, cp)
+
+    for fp, cp in effects.values():
+        lagr_point += fp
+        lagr_couple += cp
+
+    if "inertia" in eff and masses:
+        # physical d'Alembert forces for virtual work: -m a_G at G, -I alpha on the link
+        fp = np.zeros((S, P, 2))
+        cp = np.zeros((S, nl))
+        Mqdd = np.zeros((S, P, 2))
+        for m, (ia_, ib_, uu, vv, L) in masses:
+            aG = _center(A, ia_, ib_, uu, vv, L) - _center(np.zeros_like(A), ia_, ib_, uu, vv, L)
+            _add_at_center(fp, -m.mass * aG, ia_, ib_, uu, vv, L)
+            li = _link_index(model, m.link)
+            cp[:, li] += -m.inertia * res.link_angular_acceleration[:, li]
+            # M qdd with the constant natural-coordinate mass matrix
+            _add_at_center(Mqdd, m.mass * aG, ia_, ib_, uu, vv, L)
+            ddd = A[:, ib_] - A[:, ia_]
+            Mqdd[:, ib_] += m.inertia / L**2 * ddd
+            Mqdd[:, ia_] -= m.inertia / L**2 * ddd
+        effects["inertia"] = (fp, cp)
+        lagr_point = lagr_point - Mqdd
+
+    # ---- virtual work: F_j = -sum(Q . dq/ds_j)
+    gen = {}
+    for name, (fp, cp) in effects.items():
+        gen[name] = np.einsum("spj,spjd->sd", fp, Kp) + np.einsum("sl,sld->sd", cp, Ktheta)
+    F = -sum(gen.values()) if gen else np.zeros((S, model.n_drivers))
+    out["power"] = (("step", "effect"), np.stack([(gen[e] * s_dot).sum(axis=1) for e in effects], axis=1)
+                    if effects else np.zeros((S, 0)), f"{Fu}*{Lu}/{Tu}")
+    coords["effect"] = list(effects)
+
+    # ---- Lagrange multipliers: J^T lambda = Q - M qdd (an independent solve)
+    Qg = _generalized(model, lagr_point, lagr_couple, Xz)  # (S, n_q)
+    lam = np.full((S, model.n_rows), np.nan)
+    ok = res.status == OK
+    if ok.any():
+        J = model.jacobian(Xz[ok], s[ok])
+        JT = np.swapaxes(J, 1, 2)
+        if J.shape[1] == J.shape[2]:
+            lam[ok] = np.linalg.solve(JT, Qg[ok][..., None])[..., 0]
+        else:
+            lam[ok] = np.einsum("sij,sj->si", np.linalg.pinv(JT, rcond=1e-12), Qg[ok])
+    FL = lam[:, drv] * phi_s
+
+    # ---- report along the input direction where given
+    status = res.status.copy()
+    units = []
+    for j, dr in enumerate(scene.drivers):
+        if dr.input is not None:
+            n = np.asarray(dr.input.direction, dtype=float)
+            n = n / np.hypot(*n)
+            ip = model.point_names.index(dr.input.point)
+            lev = Kp[:, ip, :, j] @ n  # (S,) input displacement per unit driver value
+            scale = model.size * (1.0 if dr.kind != "angle" else 1.0)
+            flat = np.abs(lev) < LEVERAGE_RTOL * scale
+            status[flat & (status == OK)] = NO_LEVERAGE
+            safe = np.where(flat, np.nan, lev)
+            F[:, j] = F[:, j] / safe
+            FL[:, j] = FL[:, j] / safe
+            units.append(Fu)
+        else:
+            units.append(f"{Fu}*{Lu}" if dr.kind == "angle" else Fu)
+    bad = status != OK
+    F[bad] = np.nan
+    FL[bad] = np.nan
+    unit = units[0] if len(set(units)) == 1 else "mixed"
+    out["input_force"] = (("step", "driver"), F, unit)
+    out["input_force_lagrange"] = (("step", "driver"), FL, unit)
+
+    # ---- internal forces: links (tension positive) and sliders
+    nd_rows = len(model.dist_a)
+    link_force = np.full((S, nl), np.nan)
+    row_of_link = {}
+    r = 0
+    for li, link in enumerate(scene.links):
+        ia_, ib_ = model.link_a[li], model.link_b[li]
+        if r < nd_rows and model.dist_a[r] == ia_ and model.dist_b[r] == ib_:
+            row_of_link[li] = r
+            r += 1
+    for li, r in row_of_link.items():
+        link_force[:, li] = lam[:, r]
+    out["link_force"] = (("step", "link"), link_force, Fu)
+    if scene.sliders:
+        first = nd_rows + 2 * len(model.loc_a)
+        sl = np.full((S, len(scene.sliders)), np.nan)
+        fixed_i = [i for i, x in enumerate(scene.sliders) if not x.moving]
+        moving_i = [i for i, x in enumerate(scene.sliders) if x.moving]
+        for k, i in enumerate(fixed_i):
+            sl[:, i] = -lam[:, first + k]
+        for k, i in enumerate(moving_i):
+            sl[:, i] = -lam[:, first + len(fixed_i) + k]
+        out["slider_force"] = (("step", "slider"), sl, Fu)
+        coords["slider"] = [x.name for x in scene.sliders]
+    out["__status__"] = (("step",), status, "1")
+    out["__coords__"] = ((), coords, "")
+    return out
+
+
+def _add_at_center(fp, force, ia, ib, u, v, L):
+    """Distribute a force at body point (u, v) onto the basic points: N_G^T f, in place."""
+    force = np.broadcast_to(force, (fp.shape[0], 2))
+    C = (u * np.eye(2) + v * _R90) / L  # r_G = (I - C) r_a + C r_b
+    fp[:, ia] += force @ (np.eye(2) - C)
+    fp[:, ib] += force @ C
+
+
+def _generalized(model: Model, point_forces, couples, X):
+    """Return generalized forces (S, n_q) from point forces (S, P, 2) and link couples (S, n_l)."""
+    fp = point_forces.copy()
+    d = X[:, model.link_b] - X[:, model.link_a]
+    n2 = np.einsum("slj,slj->sl", d, d)
+    # a couple tau on a link = forces tau R d / L^2 on b and -tau R d / L^2 on a
+    f = (couples / n2)[..., None] * (d @ _R90.T)
+    np.add.at(fp, (slice(None), model.link_b), f)
+    np.add.at(fp, (slice(None), model.link_a), -f)
+    return fp[:, model.moving].reshape(fp.shape[0], -1)
