@@ -84,7 +84,8 @@ def _write_variable(f: h5py.File, var, scales: dict[str, h5py.Dataset]) -> h5py.
 def read(path: str | os.PathLike, form: str = "dataset"):
     """Read a file written by :func:`write`.
 
-    ``form="dataset"``: an ``xarray.Dataset`` (loaded into memory, file closed). xarray is an
+    ``form="dataset"``: an ``xarray.Dataset`` (loaded into memory, file closed; values as
+    stored, no time decoding). xarray is an
     optional (test) dependency; without it this returns a plain ``dict`` of numpy arrays,
     name -> array, coordinates included (strings as ``str`` arrays; no attributes — open the
     file with h5py for those).
@@ -103,7 +104,7 @@ def read(path: str | os.PathLike, form: str = "dataset"):
     except ImportError:
         with h5py.File(path, "r") as f:
             return {name: _decoded(ds[()]) for name, ds in f.items()}
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
+    with xr.open_dataset(path, engine="h5netcdf", decode_timedelta=False) as ds:
         return ds.load()
 
 

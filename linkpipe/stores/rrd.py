@@ -1,0 +1,284 @@
+"""Write a :class:`~linkpipe.result.Result` as a Rerun recording (``.rrd``), rerun-sdk 0.41.
+
+Entity paths and timelines follow ``shared/OUTPUT_FORMAT.md``. Everything that changes per
+step goes out columnar with ``send_columns`` (one call per entity, never one per step);
+geometry that does not change is logged once as static. Steps where a point is NaN (failed
+assembly) log an empty batch for the entities that need it, which clears them at that step.
+
+The 2D view of Rerun has +y pointing down; a static ``Transform3D`` on ``mechanism`` flips
+it so the mechanism appears y-up. The logged data are the scene's own coordinates.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import uuid
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from . import atomic_path
+
+APPLICATION_ID = "linkpipe"
+#: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
+PLOTTED = ("input_force", "spring_force", "link_angle")
+SOLVER = ("residual", "iterations")
+#: longest velocity / acceleration arrow, as a fraction of the mechanism's size
+ARROW_FRACTION = 0.25
+
+_PALETTE = np.array([[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40],
+                     [148, 103, 189], [140, 86, 75], [227, 119, 194], [23, 190, 207],
+                     [188, 189, 34], [127, 127, 127]], dtype=np.uint8)
+_POINT = [235, 235, 235]
+_GROUND = [110, 110, 110]
+_GUIDE = [150, 150, 150]
+_TRACE = [200, 200, 200, 150]
+_SPRING = [240, 200, 40]
+_VECTOR_COLORS = {"velocity": [0, 150, 70], "acceleration": [200, 30, 120]}
+
+
+def write(result, path, spawn: bool = False, connect: str | None = None) -> None:
+    """Write the recording of ``result`` to ``path`` (``None``: no file) and optionally stream it.
+
+    ``spawn=True`` starts a Rerun viewer and streams to it; ``connect`` streams to a running
+    viewer at that address (``rerun+http://host:port/proxy``). The file is written to a
+    temporary name and renamed into place when complete.
+    """
+    scene = result.scene
+    stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
+    with atomic_path(path) if path is not None else contextlib.nullcontext() as tmp:
+        sinks = []
+        if tmp is not None:
+            sinks.append(rr.FileSink(tmp))
+        if spawn:
+            rr.spawn(connect=False)
+            sinks.append(rr.GrpcSink())
+        if connect:
+            sinks.append(rr.GrpcSink(connect))
+        if not sinks:
+            return
+        stream.set_sinks(*sinks, default_blueprint=blueprint(result))
+        with stream:  # on exit: flush, and finalise the file (footer) so it is complete
+            stream.send_recording_name(scene.name)
+            log_result(stream, result)
+    if spawn or connect:
+        stream.disconnect()
+
+
+# ------------------------------------------------------------------------------ geometry
+def _extent(result) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (lower, upper) corners of every finite position of the sweep."""
+    X = result.position.reshape(-1, 2)
+    X = X[np.isfinite(X).all(axis=1)]
+    if not len(X):
+        X = np.array([[p.x, p.y] for p in result.scene.points], dtype=float)
+    return X.min(axis=0), X.max(axis=0)
+
+
+def mechanism_size(result) -> float:
+    """Return the diagonal of the sweep's bounding box (1 when it is a single point)."""
+    lo, hi = _extent(result)
+    return float(np.hypot(*(hi - lo))) or 1.0
+
+
+def arrow_scales(result) -> dict[str, float]:
+    """Return the length per unit of each vector quantity: its longest arrow is 25 % of the size."""
+    k = _point_index(result, result.scene.outputs.vectors)
+    scales = {}
+    for name in ("velocity", "acceleration"):
+        data = getattr(result, name)
+        if data is None or not k:
+            continue
+        norm = np.linalg.norm(data[:, k], axis=-1)
+        vmax = np.nanmax(norm) if np.isfinite(norm).any() else 0.0
+        scales[name] = ARROW_FRACTION * mechanism_size(result) / vmax if vmax > 0 else 1.0
+    return scales
+
+
+def _point_index(result, names) -> list[int]:
+    index = {n: i for i, n in enumerate(result.point_names)}
+    return [index[n] for n in names]
+
+
+def _runs(path: np.ndarray) -> list[np.ndarray]:
+    """Split an (S, 2) path at its non-finite rows into runs of 2 or more points."""
+    ok = np.isfinite(path).all(axis=1)
+    edges = np.flatnonzero(np.diff(ok.astype(np.int8))) + 1
+    return [run for run, good in zip(np.split(path, edges), np.split(ok, edges))
+            if good[0] and len(run) >= 2]
+
+
+# ------------------------------------------------------------------------------ logging
+def log_result(stream: rr.RecordingStream, result) -> None:
+    """Log every entity of the contract for ``result`` to ``stream``."""
+    steps = np.arange(result.n_steps)
+
+    def send(entity: str, columns, rows: np.ndarray | None = None) -> None:
+        rows = slice(None) if rows is None else rows
+        index = [rr.TimeColumn("step", sequence=steps[rows])]
+        if result.time is not None:
+            index.append(rr.TimeColumn("time", duration=np.asarray(result.time, float)[rows]))
+        stream.send_columns(entity, indexes=index, columns=columns)
+
+    stream.log("mechanism", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+    _log_points(stream, send, result)
+    _log_links(stream, send, result)
+    _log_guides(stream, send, result)
+    _log_springs(stream, send, result)
+    _log_traces(stream, result)
+    _log_vectors(stream, send, result)
+    _log_series(stream, send, result)
+
+
+def _log_points(stream, send, result) -> None:
+    X = result.position
+    names = np.array(result.point_names, dtype=str)
+    ok = np.isfinite(X).all(axis=-1)                      # (S, P)
+    stream.log("mechanism/points", rr.Points2D.from_fields(
+        radii=rr.components.Radius.ui_points(4.0), colors=_POINT, show_labels=True,
+        draw_order=30.0), static=True)
+    labels = np.broadcast_to(names, ok.shape)[ok]
+    send("mechanism/points",
+         rr.Points2D.columns(positions=X[ok], labels=labels).partition(ok.sum(axis=1)))
+    fixed = [i for i, p in enumerate(result.scene.points) if p.fixed]
+    if fixed:
+        ground = np.array([[result.scene.points[i].x, result.scene.points[i].y] for i in fixed])
+        stream.log("mechanism/ground", rr.Points2D(
+            ground, radii=rr.components.Radius.ui_points(8.0), colors=_GROUND, draw_order=25.0),
+            static=True)
+
+
+def _log_links(stream, send, result) -> None:
+    for j, link in enumerate(result.scene.links):
+        k = _point_index(result, link.points)
+        if len(k) >= 3:
+            k.append(k[0])
+        _send_strips(stream, send, f"mechanism/links/{link.name}", result.position[:, k],
+                     radii=rr.components.Radius.ui_points(2.5),
+                     colors=_PALETTE[j % len(_PALETTE)], draw_order=20.0)
+
+
+def _send_strips(stream, send, entity: str, strips: np.ndarray, **style) -> None:
+    """Log one strip per step from ``strips`` (S, n, 2); steps with a NaN get none (cleared)."""
+    ok = np.isfinite(strips).all(axis=(1, 2))
+    stream.log(entity, rr.LineStrips2D.from_fields(**style), static=True)
+    if ok.any():
+        send(entity, rr.LineStrips2D.columns(strips=strips[ok]).partition(ok.astype(int)))
+
+
+def _log_guides(stream, send, result) -> None:
+    margin = 0.1 * mechanism_size(result)
+    for slider in result.scene.sliders:
+        (k,) = _point_index(result, [slider.point])
+        P = result.position[:, k]
+        entity = f"mechanism/guides/{slider.name}"
+        style = dict(radii=rr.components.Radius.ui_points(1.5), colors=_GUIDE, draw_order=5.0)
+        if not slider.moving:
+            t0 = np.asarray(slider.through, float)
+            d = np.asarray(slider.direction, float)
+            d = d / np.linalg.norm(d)
+            s = (P - t0) @ d
+            s = s[np.isfinite(s)]
+            lo, hi = (s.min(), s.max()) if len(s) else (0.0, 0.0)
+            segment = t0 + np.outer([lo - margin, hi + margin], d)
+            stream.log(entity, rr.LineStrips2D([segment], **style), static=True)
+            continue
+        D, E = (result.position[:, i] for i in _point_index(result, slider.line_points))
+        length = np.linalg.norm(E - D, axis=1, keepdims=True)
+        d = (E - D) / np.where(length > 0, length, np.nan)
+        s = np.stack([np.zeros(len(P)), length[:, 0], np.einsum("ij,ij->i", P - D, d)], axis=1)
+        ends = np.stack([s.min(axis=1) - margin, s.max(axis=1) + margin], axis=1)  # (S, 2)
+        _send_strips(stream, send, entity, D[:, None, :] + ends[:, :, None] * d[:, None, :], **style)
+
+
+def _log_springs(stream, send, result) -> None:
+    """Log ``mechanism/springs/<spring>`` (an addition to the contract): a line per step."""
+    if not result.spring_names:
+        return
+    for spring in result.scene.springs:
+        _send_strips(stream, send, f"mechanism/springs/{spring.name}",
+                     result.position[:, _point_index(result, spring.between)],
+                     radii=rr.components.Radius.ui_points(1.0), colors=_SPRING, draw_order=15.0)
+
+
+def _log_traces(stream, result) -> None:
+    for name in result.scene.outputs.trace:
+        (k,) = _point_index(result, [name])
+        runs = _runs(result.position[:, k])
+        if runs:
+            stream.log(f"mechanism/trace/{name}", rr.LineStrips2D(
+                runs, radii=rr.components.Radius.ui_points(1.0), colors=_TRACE,
+                labels=[f"trace {name}"] * len(runs), show_labels=False, draw_order=10.0),
+                static=True)
+
+
+def _log_vectors(stream, send, result) -> None:
+    units = {v.name: v.units for v in result.variables()}
+    length_unit = result.units()["length"]
+    for quantity, scale in arrow_scales(result).items():
+        data = getattr(result, quantity)
+        for name in result.scene.outputs.vectors:
+            (k,) = _point_index(result, [name])
+            origins, vectors = result.position[:, k], data[:, k]
+            ok = np.isfinite(origins).all(axis=1) & np.isfinite(vectors).all(axis=1)
+            entity = f"mechanism/{quantity}/{name}"
+            label = f"{quantity[0]} {name} (1 {length_unit} = {1 / scale:.3g} {units[quantity]})"
+            stream.log(entity, rr.Arrows2D.from_fields(
+                labels=[label], colors=_VECTOR_COLORS[quantity],
+                radii=rr.components.Radius.ui_points(1.5), draw_order=40.0), static=True)
+            if ok.any():
+                send(entity, rr.Arrows2D.columns(origins=origins[ok], vectors=vectors[ok] * scale)
+                     .partition(ok.astype(int)))
+
+
+def _log_series(stream, send, result) -> None:
+    variables = {v.name: v for v in result.variables()}
+    labels = {c.name: c.data for c in result.coordinates()}
+    series = []
+    for name in PLOTTED:
+        var = variables.get(name)
+        if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2:
+            continue
+        for j, label in enumerate(labels[var.dims[1]]):
+            series.append((f"plots/{name}/{label}", f"{label} [{var.units}]", var.data[:, j]))
+    for name in SOLVER:
+        var = variables[name]
+        series.append((f"solver/{name}", f"{name} [{var.units}]", var.data))
+    for entity, title, values in series:
+        values = np.asarray(values, dtype=float)
+        ok = np.isfinite(values)
+        if not ok.any():
+            continue
+        stream.log(entity, rr.SeriesLines(names=title), static=True)
+        send(entity, rr.Scalars.columns(scalars=values[ok]), rows=ok)
+
+
+# ------------------------------------------------------------------------------ blueprint
+def blueprint(result) -> rrb.Blueprint:
+    """Return the default layout: the mechanism (y up) beside the plots and solver series."""
+    lo, hi = _extent(result)
+    tips = [result.position.reshape(-1, 2)]
+    for quantity, scale in arrow_scales(result).items():
+        k = _point_index(result, result.scene.outputs.vectors)
+        tips.append((result.position[:, k] + scale * getattr(result, quantity)[:, k]).reshape(-1, 2))
+    tips = np.concatenate(tips)
+    tips = tips[np.isfinite(tips).all(axis=1)]
+    if len(tips):
+        lo, hi = np.minimum(lo, tips.min(axis=0)), np.maximum(hi, tips.max(axis=0))
+    pad = 0.08 * max(float(np.max(hi - lo)), 1e-9)
+    lo, hi = lo - pad, hi + pad
+    mechanism = rrb.Spatial2DView(
+        origin="/", contents="mechanism/**", name=f"{result.scene.name} (y up)",
+        visual_bounds=rrb.VisualBounds2D(x_range=[lo[0], hi[0]], y_range=[-hi[1], -lo[1]]))
+    variables = {v.name: v for v in result.variables()}
+    plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{variables[name].units}]")
+             for name in PLOTTED if name in variables]
+    solver = [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]")
+              for name in SOLVER]
+    return rrb.Blueprint(
+        rrb.Horizontal(mechanism, rrb.Vertical(*plots, rrb.Tabs(*solver)), column_shares=[3, 2]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="step", state="collapsed"),
+    )

@@ -1,0 +1,247 @@
+"""Stage 2 against exact answers: closed forms, energy balance, Norton's Example 11-3, and
+virtual work against Lagrange multipliers (two formulations, two different linear solves)."""
+import pathlib
+import re
+
+import numpy as np
+import pytest
+
+import linkpipe
+from linkpipe.kinematics import OK
+from linkpipe.result import NO_LEVERAGE
+
+CONFIGS = pathlib.Path(__file__).parent.parent / "configs"
+DATA = pathlib.Path(__file__).parent / "data"
+BASKETBALL = (CONFIGS / "basketball_goal.toml").read_text()
+
+# basketball goal geometry (ft): spring anchors r from O2 on the upper link, h above O2 on the pole
+R_SPRING, H_SPRING, K, L_FREE, N_SPRINGS = 0.9412, 0.3429, 4.0, 0.5833, 2
+M_BOARD, G = 50 / 32.174, 32.174
+
+
+def scene_from(text, tmp_path, name="variant"):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return linkpipe.load_scene(path)
+
+
+def with_effects(text, effects):
+    return re.sub(r"effects = \[[^\]]*\]", "effects = [" + ", ".join(f'"{e}"' for e in effects) + "]", text)
+
+
+def basketball_closed_form(theta_deg, effects):
+    """Vertical handle force (lbf, +y) holding the goal quasi-statically, by hand.
+
+    Spring length L^2 = r^2 + h^2 - 2 r h sin(theta); dL/dtheta = -r h cos(theta) / L.
+    The handle rises dH_y/dtheta = -cos(theta); the board centre rises 2 cos(theta).
+    f dH_y = dV  ->  f = dV/dtheta / (-cos theta).
+    """
+    th = np.deg2rad(theta_deg)
+    f = np.zeros_like(th)
+    if "springs" in effects:
+        L = np.sqrt(R_SPRING**2 + H_SPRING**2 - 2 * R_SPRING * H_SPRING * np.sin(th))
+        dV = N_SPRINGS * K * (L - L_FREE) * (-R_SPRING * H_SPRING * np.cos(th) / L)
+        f += dV / -np.cos(th)
+    if "gravity" in effects:
+        f += M_BOARD * G * 2 * np.cos(th) / -np.cos(th)
+    return f
+
+
+@pytest.mark.parametrize("effects", [["springs"], ["gravity"], ["springs", "gravity"],
+                                     ["springs", "gravity", "inertia"]])
+def test_basketball_input_force_closed_form(tmp_path, effects):
+    r = linkpipe.solve(scene_from(with_effects(BASKETBALL, effects), tmp_path))
+    assert (r.status == OK).all()
+    f = r.forces["input_force"][1][:, 0]
+    # inertia does no virtual work here: the board translates on a circle at constant rate
+    # (centripetal acceleration normal to its velocity), so the quasi-static answer is exact
+    expect = basketball_closed_form(r.driver_value[:, 0], effects)
+    np.testing.assert_allclose(f, expect, rtol=0, atol=1e-9)  # lbf; float round-off only
+    np.testing.assert_allclose(r.forces["input_force_lagrange"][1][:, 0], expect, rtol=0, atol=1e-9)
+
+
+def test_seed_conclusion_and_what_gravity_changes():
+    r = linkpipe.solve(str(CONFIGS / "basketball_goal.toml"))
+    th = r.driver_value[:, 0]
+    springs_only = basketball_closed_form(th, ["springs"])
+    # the seed: with springs alone the largest input force is at -60 deg
+    assert th[np.argmax(np.abs(springs_only))] == -60.0
+    # with the 50 lb board's weight the handle must hold ~100 lbf down, largest at +60 deg
+    f = r.forces["input_force"][1][:, 0]
+    assert th[np.argmax(np.abs(f))] == 60.0
+    np.testing.assert_allclose(f - springs_only, -2 * 50.0, atol=1e-9)
+
+
+def test_spring_outputs_closed_form():
+    r = linkpipe.solve(str(CONFIGS / "basketball_goal.toml"))
+    th = np.deg2rad(r.driver_value[:, 0])
+    L = np.sqrt(R_SPRING**2 + H_SPRING**2 - 2 * R_SPRING * H_SPRING * np.sin(th))
+    for j in range(2):
+        np.testing.assert_allclose(r.forces["spring_length"][1][:, j], L, atol=1e-12)
+        np.testing.assert_allclose(r.forces["spring_force"][1][:, j], K * (L - L_FREE), atol=1e-12)
+        np.testing.assert_allclose(r.forces["spring_energy"][1][:, j], 0.5 * K * (L - L_FREE) ** 2, atol=1e-12)
+    # the seed's span: about 0.667 ft at +60 deg to 1.25 ft at -60 deg, longest at -60
+    assert abs(L[0] - 1.25) < 1e-3 and abs(L[-1] - 0.6667) < 1e-3 and np.argmax(L) == 0
+
+
+def test_energy_balance_conservative_sweep(tmp_path):
+    """Integral of F_in ds over a quasi-static sweep = change of spring + gravity potential."""
+    text = with_effects(BASKETBALL, ["springs", "gravity"])
+    text = text.replace("step = 5.0", "step = 0.25").replace("rate = 28.64788975654116", "rate = 0.0")
+    text = re.sub(r"input = \{[^}]*\}\n", "", text)  # generalized force: a torque per radian
+    r = linkpipe.solve(scene_from(text, tmp_path))
+    assert (r.status == OK).all()
+    s = np.deg2rad(r.driver_value[:, 0])
+    F = r.forces["input_force"][1][:, 0]
+    work = np.trapezoid(F, s)
+    V = r.forces["spring_energy"][1].sum(axis=1) + r.forces["gravity_energy"][1]
+    dV = V[-1] - V[0]
+    # trapezoid error bound: (b - a) h^2 / 12 * max|F''|, F'' from second differences
+    h = s[1] - s[0]
+    f2 = np.abs(np.diff(F, 2)).max() / h**2
+    bound = (s[-1] - s[0]) * h**2 / 12 * f2 * 1.5 + 1e-12 * abs(dV)
+    assert abs(work - dV) <= bound
+    assert bound < 1e-4 * abs(dV)  # the check is tight, not vacuous
+
+
+def test_norton_example_11_3():
+    r = linkpipe.solve(str(DATA / "norton_11_3.toml"))
+    assert (r.status == OK).all()
+    T12 = r.forces["input_force"][1][0, 0]
+    # Norton rounds his intermediate kinematics to ~4 significant figures: 0.05 lb-in (0.02 %)
+    assert abs(T12 - 243.24) < 0.05
+    assert abs(r.forces["input_force_lagrange"][1][0, 0] - T12) < 1e-9 * abs(T12)
+    # his kinematics: theta3 = 20.92 deg, theta4 = 104.41 deg
+    np.testing.assert_allclose(np.rad2deg(r.link_angle[0, 1:]), [20.92, 104.41], atol=0.005)
+
+
+def all_effect_scenes():
+    out = [CONFIGS / "basketball_goal.toml", CONFIGS / "shear_press.toml", DATA / "norton_11_3.toml"]
+    return [str(p) for p in out]
+
+
+@pytest.mark.parametrize("path", all_effect_scenes())
+def test_virtual_work_equals_lagrange(path):
+    r = linkpipe.solve(path)
+    ok = r.status == OK
+    assert ok.any()
+    f = r.forces["input_force"][1][ok]
+    fl = r.forces["input_force_lagrange"][1][ok]
+    scale = np.abs(f).max()
+    assert np.abs(f - fl).max() <= 1e-9 * scale
+
+
+def test_virtual_work_equals_lagrange_with_every_effect(tmp_path):
+    """Springs with damping, gravity, inertia with rotation, loads: a crank-rocker at speed."""
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text() + """
+[analysis]
+effects = ["springs", "gravity", "inertia", "damping", "loads"]
+
+[gravity]
+g = [0.0, -9.81]
+
+[[springs]]
+name = "s"
+between = ["O4", "P"]
+k = 120.0
+free_length = 1.0
+damping = 3.5
+
+[[masses]]
+link = "coupler"
+mass = 2.0
+center = [1.2, 0.3]
+inertia = 0.4
+
+[[masses]]
+link = "rocker"
+mass = 1.0
+center = [1.5, 0.0]
+inertia = 0.75
+
+[[loads]]
+name = "push"
+point = "P"
+force = [10.0, -20.0]
+
+[[loads]]
+name = "brake"
+link = "rocker"
+torque = -2.0
+"""
+    r = linkpipe.solve(scene_from(text, tmp_path))
+    assert (r.status == OK).all()
+    f = r.forces["input_force"][1][:, 0]
+    fl = r.forces["input_force_lagrange"][1][:, 0]
+    assert np.abs(f - fl).max() <= 1e-9 * np.abs(f).max()
+    # power balance: the actuator's power equals minus the effects' powers
+    power = r.forces["power"][1].sum(axis=1)
+    np.testing.assert_allclose(f * 10.0, -power, atol=1e-9 * np.abs(power).max())
+
+
+def test_shear_press_force_at_P_and_rod_force(tmp_path):
+    r = linkpipe.solve(str(CONFIGS / "shear_press.toml"))
+    names = r.point_names
+    P, B, C = (r.position[:, names.index(n)] for n in ("P", "B", "C"))
+    A = np.zeros_like(P)
+    fP = r.forces["input_force"][1][:, 0]
+    rod = r.forces["link_force"][1][:, r.link_names.index("rod")]
+    # by hand: the blade C is in equilibrium under the load (0, 500), the rod force along BC and
+    # the guide's horizontal reaction: rod tension T pulls C towards B -> T e_CB,y + 500 = 0
+    e_cb = (B - C) / np.linalg.norm(B - C, axis=1)[:, None]
+    T = -500.0 / e_cb[:, 1]
+    np.testing.assert_allclose(rod, T, rtol=1e-10)
+    # the lever A-B-P: moments about A of the rod's pull at B and the vertical force at P vanish
+    FB = -T[:, None] * e_cb  # force of the rod on B (towards C when in tension)
+    moment_B = B[:, 0] * FB[:, 1] - B[:, 1] * FB[:, 0]
+    np.testing.assert_allclose(fP, -moment_B / P[:, 0], rtol=1e-10)
+    assert (rod < 0).all()  # the rod is in compression while cutting
+
+
+def test_no_leverage_is_flagged_not_infinite(tmp_path):
+    """A centred slider-crank pushed at the slider: dead centres at 0 and 180 deg."""
+    text = (CONFIGS / "slider_crank.toml").read_text()
+    text = text.replace("y = 0.5 }", "y = 0.0 }").replace("through = [0.0, 0.5]", "through = [0.0, 0.0]")
+    text = text.replace("x = 4.4641", "x = 4.5").replace("steps = 361", "steps = 13")
+    text = text.replace('rate = 572.9577951308232     # 10 rad/s',
+                        'rate = 572.9577951308232\ninput = { point = "B", direction = [1.0, 0.0] }')
+    text += '\n[analysis]\neffects = ["loads"]\n\n[[loads]]\nname = "gas"\npoint = "B"\nforce = [-100.0, 0.0]\n'
+    r = linkpipe.solve(scene_from(text, tmp_path))
+    dead = np.isin(r.driver_value[:, 0], [0.0, 180.0, 360.0])
+    assert (r.status[dead] == NO_LEVERAGE).all()
+    assert np.isnan(r.forces["input_force"][1][dead]).all()
+    assert (r.status[~dead] == OK).all()
+    # elsewhere the actuator simply balances the gas force along x
+    np.testing.assert_allclose(r.forces["input_force"][1][~dead, 0], 100.0, rtol=1e-9)
+
+
+def test_skipped_stages_do_not_run(monkeypatch):
+    """No effects: the force stage is never called; no inertia and no outputs: no gamma."""
+    import linkpipe.forces
+    import linkpipe.model
+
+    def boom(*a, **k):
+        raise AssertionError("this stage must not run")
+
+    monkeypatch.setattr(linkpipe.forces, "force_stage", boom)
+    monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+    text = text.split("[outputs]")[0]  # no extra kinematic orders asked for
+    r = linkpipe.solve(linkpipe.parse_scene(text, "crank_rocker_positions.toml"))
+    assert r.forces is None and r.velocity is None and r.acceleration is None
+    assert "forces" not in r.seconds
+    # the shear press asks for loads only: forces run, accelerations still do not
+    monkeypatch.undo()
+    monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
+    r = linkpipe.solve(str(CONFIGS / "shear_press.toml"))
+    assert r.forces is not None and r.acceleration is None and "forces" in r.seconds
+
+
+def test_present_but_off_is_reported_and_unused(tmp_path):
+    text = with_effects(BASKETBALL, ["springs"])
+    r = linkpipe.solve(scene_from(text, tmp_path))
+    assert r.scene.present_but_off == ("gravity", "inertia")
+    np.testing.assert_allclose(r.forces["input_force"][1][:, 0],
+                               basketball_closed_form(r.driver_value[:, 0], ["springs"]), atol=1e-9)
+    assert "gravity_energy" not in r.forces and "power" in r.forces
+    assert r.forces["power"][1].shape[1] == 1  # springs only
