@@ -97,6 +97,11 @@ def summary(result, written=(), seconds_total=None) -> str:
     if np.isfinite(result.residual).any():
         lines.append(f"  max residual {np.nanmax(result.residual):.2e} {result.units()['length']}, "
                      f"Newton iterations mean {result.iterations.mean():.2f} max {result.iterations.max()}")
+    if result.velocity_residual is not None and np.isfinite(result.velocity_residual).any():
+        extra = f"  max linear-equation residuals: velocity {np.nanmax(result.velocity_residual):.1e}"
+        if result.acceleration_residual is not None and np.isfinite(result.acceleration_residual).any():
+            extra += f", acceleration {np.nanmax(result.acceleration_residual):.1e}"
+        lines.append(extra)
     if sc.effects:
         lines.append(f"  effects: {', '.join(sc.effects)}")
     if sc.present_but_off:

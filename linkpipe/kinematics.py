@@ -19,7 +19,6 @@ from .model import Model, driver_scale, driver_values
 OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED = 0, 1, 2, 3
 STATUS_NAMES = ("ok", "no_assembly", "singular", "not_converged")
 
-SINGULAR_RCOND = 1e-10  # 1/condition below which the Jacobian counts as rank-deficient
 
 
 @dataclass
@@ -75,7 +74,19 @@ def _lin_solve(J, b):
     return np.einsum("sij,sj->si", np.linalg.pinv(J, rcond=1e-13), b)
 
 
-def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int):
+def fd_jacobian(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Return Phi_q (S, n_rows, n_q) by central differences (the accuracy ladder's knob)."""
+    h = np.cbrt(np.finfo(float).eps) * model.size
+    cols = []
+    for k in range(q.shape[1]):
+        dq = np.zeros_like(q)
+        dq[:, k] = h
+        cols.append((model.phi(model.positions(q + dq), s) - model.phi(model.positions(q - dq), s)) / (2 * h))
+    return np.stack(cols, axis=2)
+
+
+def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,
+           jacobian: str = "analytic"):
     """Refine ``q`` (S, n_q) at driver values ``s`` (S, nd) by Newton-Raphson, all steps at once.
 
     Returns (q, residual (S,), iterations (S,), converged (S,) bool). Steps are iterated until
@@ -98,7 +109,8 @@ def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter:
         if it == max_iter or not keep.any():
             break
         active, F, X = active[keep], F[keep], X[keep]
-        J = model.jacobian(X, s[active])
+        J = (model.jacobian(X, s[active]) if jacobian == "analytic"
+             else fd_jacobian(model, q[active], s[active]))
         dq = _lin_solve(J, -F)
         big = np.abs(dq).max(axis=1)
         scale = np.where(big > step_cap, step_cap / np.where(big > 0, big, 1.0), 1.0)
@@ -187,8 +199,9 @@ def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
     return (dot > 0).all(axis=1)
 
 
-def solve_positions(model: Model, s: np.ndarray, s_rate_hint: np.ndarray, tol: float | None = None,
-                    max_iter: int | None = None, predictor: str = "first"):
+def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
+                    max_iter: int | None = None, predictor: str | None = None,
+                    jacobian: str | None = None):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
@@ -198,6 +211,8 @@ def solve_positions(model: Model, s: np.ndarray, s_rate_hint: np.ndarray, tol: f
     sc = model.scene.solver
     tol = sc.tol if tol is None else tol
     max_iter = sc.max_iter if max_iter is None else max_iter
+    predictor = sc.predictor if predictor is None else predictor
+    jacobian = sc.jacobian if jacobian is None else jacobian
     tol_abs = tol * model.size
     S = s.shape[0]
     nq = model.n_q
@@ -221,14 +236,14 @@ def solve_positions(model: Model, s: np.ndarray, s_rate_hint: np.ndarray, tol: f
                 guess += 0.5 * np.einsum("qij,i,j->q", last_d2q, ds, ds)
         if last_dq is None:
             guess = aim_drivers(model, guess, s[i])
-        qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter)
+        qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
         residual[i] = res[0]
         iterations[i] = it[0]
         if conv[0] and not drivers_aligned(model, qi, s[i][None])[0]:
             # the angle constraint's other root (vector pointing backwards): not this step's
             # mechanism; retry with the driven point aimed along the driven direction
             qi, res, it2, conv = newton(model, aim_drivers(model, guess, s[i])[None], s[i][None],
-                                        tol_abs, max_iter)
+                                        tol_abs, max_iter, jacobian)
             iterations[i] += it2[0]
             residual[i] = res[0]
             conv = conv & drivers_aligned(model, qi, s[i][None])
@@ -292,7 +307,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
             inv, cond = _pinv_cond(J)
         condition[idx] = cond
         Jinv[idx] = inv
-        sing = ~(cond * SINGULAR_RCOND < 1.0)
+        sing = ~(cond * model.scene.solver.singular_rcond < 1.0)
         status[idx[sing]] = SINGULAR
         Jinv[idx[sing]] = np.nan
     good = status == OK
@@ -333,29 +348,32 @@ def _pinv_cond(J):
     return inv, cond
 
 
-def solve_sweep(model: Model, need_velocity: bool = False, need_acceleration: bool = False,
-                predictor: str = "first") -> Kinematics:
-    """Run stage 1 over the scene's sweep and return the :class:`Kinematics` arrays."""
-    value, s, s_dot, s_ddot = driver_motion(model)
-    q, residual, iterations, status = solve_positions(model, s, s_dot, predictor=predictor)
-    X = model.positions(np.where(np.isfinite(q), q, 0.0))
-    X[~np.isfinite(q).all(axis=1)] = np.nan
-    X[:, model.fixed] = model.start_position[model.fixed]
-    kin = Kinematics(driver_value=value, s=s, s_dot=s_dot, s_ddot=s_ddot, position=X,
-                     status=status, residual=residual, iterations=iterations,
-                     condition=np.full(len(s), np.nan))
-    Xz = np.where(np.isfinite(X), X, 0.0)
-    d = derivatives(model, Xz, s, s_dot, s_ddot, status, need_acceleration or False)
-    kin.status = d["status"]
-    kin.condition = d["condition"]
-    kin.jacobian_inverse = d["jacobian_inverse"]
-    if need_velocity or need_acceleration:
-        kin.velocity = d["velocity"]
-        kin.velocity_residual = d["velocity_residual"]
+def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,
+                   status: np.ndarray, need_acceleration: bool):
+    """Return velocities and accelerations (S, n_points, 2) by finite differences along the sweep.
+
+    The shortcut many scripts take (the accuracy ladder compares it with the linear solves):
+    dX/ds by second-order differences over the first driver's values (``np.gradient``),
+    then V = dX/ds * s_dot and A = d2X/ds2 * s_dot^2 + dX/ds * s_ddot. Steps next to a failed
+    step are NaN.
+    """
+    S = X.shape[0]
+    V = np.full_like(X, np.nan)
+    A = np.full_like(X, np.nan) if need_acceleration else None
+    if S < 3:
+        return V, A
+    x = s[:, 0]
+    dX = np.gradient(X, x, axis=0, edge_order=2)
+    V = dX * s_dot[:, 0, None, None]
     if need_acceleration:
-        kin.acceleration = d["acceleration"]
-        kin.acceleration_residual = d["acceleration_residual"]
-    return kin
+        d2X = np.gradient(dX, x, axis=0, edge_order=2)
+        A = d2X * s_dot[:, 0, None, None] ** 2 + dX * s_ddot[:, 0, None, None]
+    bad = status != OK
+    near = bad | np.r_[bad[1:], False] | np.r_[False, bad[:-1]]
+    V[near] = np.nan
+    if A is not None:
+        A[near] = np.nan
+    return V, A
 
 
 def link_angles_unwrapped(model: Model, X: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
 
     t0 = _time.perf_counter()
     value, s, s_dot, s_ddot = kin.driver_motion(model)
-    q, residual, iterations, status = kin.solve_positions(model, s, s_dot)
+    q, residual, iterations, status = kin.solve_positions(model, s)
     X = model.positions(np.where(np.isfinite(q), q, 0.0))
     X[~np.isfinite(q).all(axis=1)] = np.nan
     X[:, model.fixed] = model.start_position[model.fixed]
@@ -65,6 +65,11 @@ def solve(scene: Scene | str, progress=None) -> Result:
                  time=_time_axis(scene, value), position=X, link_angle=link_angle,
                  status=status, residual=residual, iterations=iterations,
                  condition=der["condition"])
+    if scene.solver.derivatives == "finite_difference" and plan.velocity:
+        fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, plan.acceleration)
+        der["velocity"] = np.where(status[:, None, None] == kin.OK, fdV, np.nan)
+        if plan.acceleration:
+            der["acceleration"] = np.where(status[:, None, None] == kin.OK, fdA, np.nan)
     if plan.velocity:
         res.velocity = der["velocity"]
         res.velocity_residual = der["velocity_residual"]

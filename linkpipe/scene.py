@@ -85,10 +85,34 @@ class Driver:
     input: Input | None = None
 
 
+#: Choices of the [solver] knobs that trade accuracy for speed (first = default).
+SOLVER_CHOICES = {
+    "jacobian": ("analytic", "finite_difference"),
+    "derivatives": ("linear", "finite_difference"),
+    "predictor": ("first", "second", "none"),
+    "method": ("auto", "newton", "dyads"),
+}
+
+
 @dataclass(frozen=True)
 class Solver:
+    """Settings of stage 1. ``tol`` is relative to the mechanism's size.
+
+    ``jacobian``: analytic or finite-difference Newton Jacobian. ``derivatives``: velocities and
+    accelerations by linear solves or by finite differences of positions along the sweep.
+    ``predictor``: start guess of each step (none / first order / second order).
+    ``method``: ``auto`` (closed-form dyads where the scene decomposes, else Newton),
+    ``newton`` (always the general path) or ``dyads`` (require the fast path).
+    ``singular_rcond``: 1/condition below which a step's Jacobian counts as singular.
+    """
+
     tol: float = 1e-12
     max_iter: int = 25
+    jacobian: str = "analytic"
+    derivatives: str = "linear"
+    predictor: str = "first"
+    method: str = "auto"
+    singular_rcond: float = 1e-10
 
 
 @dataclass(frozen=True)
@@ -209,7 +233,9 @@ KEYS: dict[str, dict[str, str]] = {
                 "from": "0.0", "to": "360.0", "steps": "361", "step": "1.0", "rate": "0.0",
                 "acceleration": "0.0", "input": '{ point = "H", direction = [0.0, 1.0] }'},
     "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]"},
-    "solver": {"tol": "1e-12", "max_iter": "25"},
+    "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
+               "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
+               "singular_rcond": "1e-10"},
     "analysis": {"effects": '["springs", "gravity"]'},
     "gravity": {"g": "[0.0, -9.81]"},
     "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",
@@ -745,7 +771,18 @@ class _Parser:
         if max_iter < 1:
             raise table.error("max_iter", f"must be at least 1, got {max_iter}",
                               "write e.g. max_iter = 25")
-        return Solver(tol, max_iter)
+        choices = {}
+        for key, allowed in SOLVER_CHOICES.items():
+            value = table.string(key, allowed[0])
+            if value not in allowed:
+                raise table.error(key, f"unknown choice {_show(value)}",
+                                  _suggest(value, allowed))
+            choices[key] = value
+        rcond = table.number("singular_rcond", Solver.singular_rcond)
+        if not 0 < rcond < 1:
+            raise table.error("singular_rcond", f"must be between 0 and 1, got {rcond:g}",
+                              "write e.g. singular_rcond = 1e-10")
+        return Solver(tol, max_iter, singular_rcond=rcond, **choices)
 
     def gravity_table(self) -> tuple[float, float] | None:
         return self.table("gravity").pair("g") if self.top("gravity") is not None else None
