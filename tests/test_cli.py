@@ -1,0 +1,104 @@
+"""The command line, called as `main(argv)`: exit codes, messages, and the model-level errors."""
+import pathlib
+
+import pytest
+
+import linkpipe
+from linkpipe.__main__ import main
+
+CONFIGS = pathlib.Path(__file__).parent.parent / "configs"
+
+CRANK_ROCKER = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+
+
+def write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_dof_mismatch_names_both_numbers(tmp_path, capsys):
+    # drop the rocker: a five-bar-like chain with 2 degrees of freedom, still 1 driver
+    text = CRANK_ROCKER.replace('[[links]]\nname = "rocker"\npoints = ["O4", "B"]\nlengths = { "O4-B" = 3.0 }\n', "")
+    p = write(tmp_path, "two_dof.toml", text)
+    assert main(["check", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "two_dof.toml" in err and "[drivers]" in err
+    assert "2 degree(s) of freedom" in err and "but 1 driver(s)" in err
+    assert "Traceback" not in err
+
+
+def test_overconstrained_names_both_numbers(tmp_path, capsys):
+    text = CRANK_ROCKER + '\n[[drivers]]\nname = "rocker"\nangle = ["O4", "B"]\nfrom = 10.0\nto = 20.0\nsteps = 361\n'
+    p = write(tmp_path, "two_drivers.toml", text)
+    assert main(["run", str(p), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "1 degree(s) of freedom" in err and "but 2 driver(s)" in err
+
+
+def test_start_configuration_that_cannot_assemble(tmp_path, capsys):
+    # a coupler longer than crank + rocker + ground can span: no assembly anywhere
+    text = CRANK_ROCKER.replace('lengths = { "A-B" = 3.5 }', 'lengths = { "A-B" = 9.5 }')
+    p = write(tmp_path, "too_long.toml", text)
+    assert main(["run", str(p), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "too_long.toml" in err and "[points]" in err
+    assert "cannot be assembled" in err and "check the link lengths" in err
+    with pytest.raises(linkpipe.SceneError):
+        linkpipe.solve(str(p))
+
+
+def test_bad_scene_does_not_stop_the_others(tmp_path, capsys):
+    bad = write(tmp_path, "typo.toml", CRANK_ROCKER.replace("steps = 361", "stepps = 361"))
+    good = CONFIGS / "shear_press.toml"
+    out = tmp_path / "out"
+    assert main(["run", str(bad), str(good), "--out", str(out), "--no-rrd"]) == 2
+    captured = capsys.readouterr()
+    assert 'did you mean "steps"?' in captured.err and "typo.toml" in captured.err
+    assert (out / "shear_press.h5").exists()
+    assert "shear_press: all 9 steps ok" in captured.out
+
+
+def test_run_summary_and_quiet(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(CONFIGS / "basketball_goal.toml"), "--out", str(out), "--no-rrd"]) == 0
+    text = capsys.readouterr().out
+    assert "basketball_goal: all 25 steps ok (25 steps, 25 ok, 0 failed)" in text
+    assert "input force theta3a: -99.6771 .. -98.6229 lbf" in text
+    assert "seconds:" in text and "positions" in text and "forces" in text
+    assert main(["run", str(CONFIGS / "shear_press.toml"), "--out", str(out), "--quiet", "--no-rrd"]) == 0
+    assert capsys.readouterr().out == ""
+
+
+def test_check_describes_without_solving(capsys, monkeypatch):
+    import linkpipe.kinematics
+
+    def boom(*a, **k):
+        raise AssertionError("check must not solve")
+
+    monkeypatch.setattr(linkpipe.kinematics, "solve_positions", boom)
+    assert main(["check", str(CONFIGS / "basketball_goal.toml")]) == 0
+    text = capsys.readouterr().out
+    assert "degrees of freedom: 1" in text and "theta3a (25 steps)" in text
+    assert "effects: springs, gravity, inertia" in text
+    assert "O2 (fixed)" in text
+
+
+def test_present_but_off_in_summary(tmp_path, capsys):
+    text = (CONFIGS / "basketball_goal.toml").read_text().replace(
+        'effects = ["springs", "gravity", "inertia"]', 'effects = ["springs"]')
+    p = write(tmp_path, "springs_only.toml", text)
+    assert main(["run", str(p), "--out", str(tmp_path), "--no-rrd", "--no-h5"]) == 0
+    assert "present but off: gravity, inertia" in capsys.readouterr().out
+
+
+def test_python_dash_m_runs_as_a_process(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "linkpipe", "check", str(CONFIGS / "shear_press.toml")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0 and "degrees of freedom: 1" in proc.stdout
+    proc = subprocess.run([sys.executable, "-m", "linkpipe", "check", str(tmp_path / "missing.toml")],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and "missing.toml" in proc.stderr and "Traceback" not in proc.stderr
