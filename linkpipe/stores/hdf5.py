@@ -56,8 +56,7 @@ def _set_attr(attrs, key: str, value: Any) -> None:
 def _write_coordinate(f: h5py.File, coord) -> h5py.Dataset:
     ds = f.create_dataset(coord.name, data=_array(coord.data))
     ds.make_scale(coord.name)
-    if coord.units:
-        ds.attrs["units"] = coord.units
+    ds.attrs["units"] = coord.units  # "" for name labels: every variable carries units
     for key, value in coord.attrs.items():
         _set_attr(ds.attrs, key, value)
     return ds

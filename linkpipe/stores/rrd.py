@@ -11,7 +11,6 @@ it so the mechanism appears y-up. The logged data are the scene's own coordinate
 from __future__ import annotations
 
 import contextlib
-import os
 import uuid
 
 import numpy as np
@@ -45,19 +44,17 @@ def write(result, path, spawn: bool = False, connect: str | None = None) -> None
     viewer at that address (``rerun+http://host:port/proxy``). The file is written to a
     temporary name and renamed into place when complete.
     """
+    if path is None and not spawn and not connect:
+        return
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
     with atomic_path(path) if path is not None else contextlib.nullcontext() as tmp:
-        sinks = []
-        if tmp is not None:
-            sinks.append(rr.FileSink(tmp))
+        sinks = [rr.FileSink(tmp)] if tmp is not None else []
         if spawn:
             rr.spawn(connect=False)
             sinks.append(rr.GrpcSink())
         if connect:
             sinks.append(rr.GrpcSink(connect))
-        if not sinks:
-            return
         stream.set_sinks(*sinks, default_blueprint=blueprint(result))
         with stream:  # on exit: flush, and finalise the file (footer) so it is complete
             stream.send_recording_name(scene.name)
@@ -67,18 +64,17 @@ def write(result, path, spawn: bool = False, connect: str | None = None) -> None
 
 
 # ------------------------------------------------------------------------------ geometry
-def _extent(result) -> tuple[np.ndarray, np.ndarray]:
-    """Return the (lower, upper) corners of every finite position of the sweep."""
-    X = result.position.reshape(-1, 2)
-    X = X[np.isfinite(X).all(axis=1)]
-    if not len(X):
-        X = np.array([[p.x, p.y] for p in result.scene.points], dtype=float)
-    return X.min(axis=0), X.max(axis=0)
+def _bounds(result, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (lower, upper) corners of the finite rows of ``points`` (N, 2)."""
+    points = points[np.isfinite(points).all(axis=1)]
+    if not len(points):
+        points = np.array([[p.x, p.y] for p in result.scene.points], dtype=float)
+    return points.min(axis=0), points.max(axis=0)
 
 
 def mechanism_size(result) -> float:
-    """Return the diagonal of the sweep's bounding box (1 when it is a single point)."""
-    lo, hi = _extent(result)
+    """Return the diagonal of the bounding box of every position of the sweep (1 if none)."""
+    lo, hi = _bounds(result, result.position.reshape(-1, 2))
     return float(np.hypot(*(hi - lo))) or 1.0
 
 
@@ -139,8 +135,9 @@ def _log_points(stream, send, result) -> None:
         radii=rr.components.Radius.ui_points(4.0), colors=_POINT, show_labels=True,
         draw_order=30.0), static=True)
     labels = np.broadcast_to(names, ok.shape)[ok]
-    send("mechanism/points",
-         rr.Points2D.columns(positions=X[ok], labels=labels).partition(ok.sum(axis=1)))
+    if ok.any():
+        send("mechanism/points",
+             rr.Points2D.columns(positions=X[ok], labels=labels).partition(ok.sum(axis=1)))
     fixed = [i for i, p in enumerate(result.scene.points) if p.fixed]
     if fixed:
         ground = np.array([[result.scene.points[i].x, result.scene.points[i].y] for i in fixed])
@@ -257,15 +254,11 @@ def _log_series(stream, send, result) -> None:
 # ------------------------------------------------------------------------------ blueprint
 def blueprint(result) -> rrb.Blueprint:
     """Return the default layout: the mechanism (y up) beside the plots and solver series."""
-    lo, hi = _extent(result)
-    tips = [result.position.reshape(-1, 2)]
-    for quantity, scale in arrow_scales(result).items():
-        k = _point_index(result, result.scene.outputs.vectors)
-        tips.append((result.position[:, k] + scale * getattr(result, quantity)[:, k]).reshape(-1, 2))
-    tips = np.concatenate(tips)
-    tips = tips[np.isfinite(tips).all(axis=1)]
-    if len(tips):
-        lo, hi = np.minimum(lo, tips.min(axis=0)), np.maximum(hi, tips.max(axis=0))
+    drawn = [result.position.reshape(-1, 2)]
+    k = _point_index(result, result.scene.outputs.vectors)
+    for quantity, scale in arrow_scales(result).items():    # arrow tips too
+        drawn.append((result.position[:, k] + scale * getattr(result, quantity)[:, k]).reshape(-1, 2))
+    lo, hi = _bounds(result, np.concatenate(drawn))
     pad = 0.08 * max(float(np.max(hi - lo)), 1e-9)
     lo, hi = lo - pad, hi + pad
     mechanism = rrb.Spatial2DView(

@@ -1,0 +1,236 @@
+"""The Rerun store against the output contract: write real .rrd files, read them back."""
+import dataclasses
+import os
+import pathlib
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from linkpipe import solve as solve_scene
+from linkpipe.stores import hdf5, rrd
+
+RERUN = pathlib.Path(sys.executable).with_name("rerun")
+ARCHETYPE = {"links": "LineStrips2D", "guides": "LineStrips2D", "trace": "LineStrips2D",
+             "springs": "LineStrips2D", "points": "Points2D", "ground": "Points2D",
+             "velocity": "Arrows2D", "acceleration": "Arrows2D"}
+
+
+class Recording:
+    """A written .rrd read back: entity paths, archetypes, and one row per step (pandas)."""
+
+    def __init__(self, path):
+        reader = RrdReader(path)
+        self.blueprints = reader.blueprints()
+        self.store = reader.store().stream().collect()
+        columns = self.store.schema().component_columns()
+        self.archetypes = {}
+        for col in columns:
+            if col.is_property:      # /__properties: the recording's name and start time
+                continue
+            self.archetypes.setdefault(col.entity_path, set()).add(col.archetype.rsplit(".", 1)[-1])
+        self.entities = set(self.archetypes) - {"/mechanism"}   # its Transform3D flips y up
+
+    def steps(self, entity):
+        """Return the pandas frame of ``entity`` on the ``step`` timeline (static columns too)."""
+        return self.store.reader(index="step", contents=entity).to_pandas()
+
+    def static(self, entity, component):
+        return self.store.reader(index=None, contents=entity).to_pandas()[f"{entity}:{component}"][0]
+
+
+def _column(frame, entity, component):
+    return frame[f"{entity}:{component}"]
+
+
+def _write(result, folder):
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{result.scene.name}.rrd"
+    rrd.write(result, path)
+    assert sorted(os.listdir(folder)) == [path.name]   # no temporary file left behind
+    verify = subprocess.run([str(RERUN), "rrd", "verify", str(path)], capture_output=True, text=True)
+    assert verify.returncode == 0, verify.stderr
+    return path
+
+
+def _expected_entities(result) -> set[str]:
+    """The contract's entity paths for what this scene computed."""
+    sc = result.scene
+    out = {"/mechanism/points", "/solver/residual", "/solver/iterations"}
+    out |= {"/mechanism/ground"} if any(p.fixed for p in sc.points) else set()
+    out |= {f"/mechanism/links/{link}" for link in result.link_names}
+    out |= {f"/plots/link_angle/{link}" for link in result.link_names}
+    out |= {f"/mechanism/guides/{s.name}" for s in sc.sliders}
+    out |= {f"/mechanism/trace/{p}" for p in sc.outputs.trace}
+    for quantity in ("velocity", "acceleration"):
+        if getattr(result, quantity) is not None:
+            out |= {f"/mechanism/{quantity}/{p}" for p in sc.outputs.vectors}
+    forces = result.forces or {}
+    if "input_force" in forces:
+        out |= {f"/plots/input_force/{d}" for d in result.driver_names}
+    if "spring_force" in forces:
+        out |= {f"/plots/spring_force/{s}" for s in result.spring_names}
+        out |= {f"/mechanism/springs/{s}" for s in result.spring_names}   # an addition
+    return out
+
+
+def test_each_config_has_exactly_the_contract_entities(result, tmp_path):
+    rec = Recording(_write(result, tmp_path))
+    assert rec.entities == _expected_entities(result)
+    for entity in rec.entities:
+        kind = entity.split("/")[2] if entity.startswith("/mechanism/") else None
+        expected = ARCHETYPE.get(kind, "Scalars")
+        assert expected in rec.archetypes[entity], entity
+    assert len(rec.blueprints) == 1
+
+
+def test_shipped_scenes_in_particular(solve, tmp_path):
+    press = Recording(_write(solve("shear_press"), tmp_path / "press"))
+    assert "/mechanism/guides/blade_guide" in press.entities
+    assert not {e for e in press.entities if "velocity" in e or "acceleration" in e}
+    assert "/plots/input_force/handle" in press.entities
+    goal = Recording(_write(solve("basketball_goal"), tmp_path / "goal"))
+    assert {"/plots/spring_force/left", "/plots/spring_force/right", "/plots/input_force/theta3a",
+            "/mechanism/velocity/C", "/mechanism/acceleration/C"} <= goal.entities
+    rocker = Recording(_write(solve("fourbar_crank_rocker"), tmp_path / "rocker"))
+    assert not {e for e in rocker.entities if e.startswith(("/plots/input_force", "/plots/spring_force"))}
+
+
+def test_values_match_the_result_and_the_hdf5_file(solve, tmp_path):
+    result = solve("fourbar_crank_rocker")
+    rec = Recording(_write(result, tmp_path))
+    h5 = tmp_path / "r.h5"
+    hdf5.write(result, h5)
+    with h5py.File(h5, "r") as f:
+        position = f["position"][:]
+    S = result.n_steps
+
+    points = rec.steps("/mechanism/points")
+    np.testing.assert_array_equal(points["step"], np.arange(S))
+    got = np.array([np.stack(row) for row in _column(points, "/mechanism/points", "Points2D:positions")])
+    assert got.shape == position.shape
+    np.testing.assert_allclose(got, position, rtol=1e-6, atol=1e-6)      # rerun stores float32
+    labels = _column(points, "/mechanism/points", "Points2D:labels")
+    assert all(list(row) == list(result.point_names) for row in labels)
+    seconds = points["time"].to_numpy().astype("timedelta64[ns]").astype(np.int64) / 1e9
+    np.testing.assert_allclose(seconds, result.time, atol=1e-9)
+
+    iterations = rec.steps("/solver/iterations")
+    np.testing.assert_array_equal(iterations["step"], np.arange(S))
+    got = np.concatenate(_column(iterations, "/solver/iterations", "Scalars:scalars").to_list())
+    np.testing.assert_array_equal(got, result.iterations)
+
+    # the coupler's outline is closed (A, B, P, A); the crank's is its two points
+    i = {n: k for k, n in enumerate(result.point_names)}
+    coupler = rec.steps("/mechanism/links/coupler")
+    strips = _column(coupler, "/mechanism/links/coupler", "LineStrips2D:strips")
+    step = 100
+    (strip,) = strips[step]
+    np.testing.assert_allclose(np.stack(strip), position[step, [i["A"], i["B"], i["P"], i["A"]]],
+                               rtol=1e-6, atol=1e-6)
+
+    # arrows: scaled so the longest is 25 % of the mechanism's size; the label names the scale
+    scale = rrd.arrow_scales(result)["velocity"]
+    arrows = rec.steps("/mechanism/velocity/P")
+    vectors = np.array([np.stack(r)[0] for r in _column(arrows, "/mechanism/velocity/P", "Arrows2D:vectors")])
+    np.testing.assert_allclose(vectors / scale, result.velocity[:, i["P"]], rtol=1e-5, atol=1e-5)
+    lengths = np.hypot(*result.velocity[:, [i["P"], i["B"]]].reshape(-1, 2).T) * scale
+    assert lengths.max() == pytest.approx(0.25 * rrd.mechanism_size(result))
+    (label,) = rec.static("/mechanism/velocity/P", "Arrows2D:labels")
+    assert f"1 m = {1 / scale:.3g} m/s" in label
+
+    # the traced coupler curve is one static strip through every step
+    (trace,) = rec.static("/mechanism/trace/P", "LineStrips2D:strips")
+    np.testing.assert_allclose(np.stack(trace), position[:, i["P"]], rtol=1e-6, atol=1e-6)
+
+
+def test_nan_steps_are_cleared_not_fatal(solve, tmp_path):
+    base = solve("fourbar_crank_rocker")
+    moving = [k for k, p in enumerate(base.scene.points) if not p.fixed]
+    position = base.position.copy()
+    velocity = base.velocity.copy()
+    position[10:20, moving] = np.nan
+    velocity[10:20, moving] = np.nan
+    result = dataclasses.replace(base, position=position, velocity=velocity)
+    rec = Recording(_write(result, tmp_path))
+
+    points = _column(rec.steps("/mechanism/points"), "/mechanism/points", "Points2D:positions")
+    counts = np.array([len(row) for row in points])
+    assert (counts[10:20] == len(base.point_names) - len(moving)).all()
+    assert (np.delete(counts, range(10, 20)) == len(base.point_names)).all()
+    strips = _column(rec.steps("/mechanism/links/crank"), "/mechanism/links/crank", "LineStrips2D:strips")
+    assert [len(s) for s in strips] == [1] * 10 + [0] * 10 + [1] * (base.n_steps - 20)
+    trace = rec.static("/mechanism/trace/P", "LineStrips2D:strips")
+    assert [len(run) for run in trace] == [10, base.n_steps - 20]      # split at the gap
+    got = _column(rec.steps("/solver/iterations"), "/solver/iterations", "Scalars:scalars")
+    np.testing.assert_array_equal(np.concatenate(got.to_list()), base.iterations)
+
+
+MOVING_GUIDE = """
+[scene]
+name = "inverted_slider"
+units = { length = "m", mass = "kg", time = "s", force = "N" }
+
+[points]
+O2 = { x = 0.0, y = 2.0, fixed = true }
+A  = { x = 1.0, y = 2.0 }
+O4 = { x = 0.0, y = 0.0, fixed = true }
+D  = { x = 1.5, y = 3.0 }
+
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+
+[[links]]
+name = "rocker"
+points = ["O4", "D"]
+
+[[sliders]]
+name = "slot"
+point = "A"
+along = ["O4", "D"]
+
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = 0.0
+to = 360.0
+steps = 37
+"""
+
+
+def test_a_moving_guide_is_logged_per_step(tmp_path):
+    scene = tmp_path / "inverted_slider.toml"
+    scene.write_text(MOVING_GUIDE)
+    result = solve_scene(str(scene))
+    rec = Recording(_write(result, tmp_path / "out"))
+    assert "/mechanism/guides/slot" in rec.entities
+    frame = rec.steps("/mechanism/guides/slot")
+    np.testing.assert_array_equal(frame["step"], np.arange(37))
+    assert "time" not in frame or frame["time"].isna().all()             # no rate: no time
+    i = {n: k for k, n in enumerate(result.point_names)}
+    for step, (strip,) in enumerate(_column(frame, "/mechanism/guides/slot", "LineStrips2D:strips")):
+        a, b = np.stack(strip)
+        for name in ("O4", "D", "A"):             # the segment lies on the line and covers them
+            p = result.position[step, i[name]]
+            t = np.dot(p - a, b - a) / np.dot(b - a, b - a)
+            assert 0 < t < 1
+            np.testing.assert_allclose(a + t * (b - a), p, atol=1e-5)
+
+
+def test_a_crash_mid_write_keeps_the_previous_recording(solve, tmp_path, monkeypatch):
+    result = solve("shear_press")
+    path = _write(result, tmp_path)
+    before = path.read_bytes()
+
+    def failing(*args):
+        raise RuntimeError("viewer on fire")
+
+    monkeypatch.setattr(rrd, "_log_series", failing)
+    with pytest.raises(RuntimeError, match="viewer on fire"):
+        rrd.write(result, path)
+    assert path.read_bytes() == before
+    assert os.listdir(tmp_path) == [path.name]
