@@ -58,12 +58,15 @@ def _run(args) -> int:
         try:
             t0 = time.perf_counter()
             scene = load_scene(path)
-            result = solve(scene, progress=not args.quiet)
+            bar = _progress_bar(scene, args)
+            result = solve(scene, progress=bar.stage if bar else None)
             written = []
             out.mkdir(parents=True, exist_ok=True)
             if not args.no_h5:
                 from .stores import hdf5
 
+                if bar:
+                    bar.stage("hdf5")
                 t1 = time.perf_counter()
                 target = out / f"{scene.name}.h5"
                 hdf5.write(result, target)
@@ -72,12 +75,16 @@ def _run(args) -> int:
             if not args.no_rrd or args.spawn or args.connect:
                 from .stores import rrd
 
+                if bar:
+                    bar.stage("rrd")
                 t1 = time.perf_counter()
                 target = None if args.no_rrd else out / f"{scene.name}.rrd"
                 rrd.write(result, target, spawn=args.spawn, connect=args.connect)
                 result.seconds["rrd"] = time.perf_counter() - t1
                 if target is not None:
                     written.append(str(target))
+            if bar:
+                bar.close()
             if not args.quiet:
                 print(summary(result, written, time.perf_counter() - t0))
         except LinkpipeError as exc:
@@ -87,6 +94,38 @@ def _run(args) -> int:
             _err(f"{path}: internal error: {type(exc).__name__}: {exc}")
             worst = max(worst, 1)
     return worst
+
+
+PROGRESS_MIN_STEPS = 20_000  # sweeps at least this long get a progress bar
+
+
+class _StageBar:
+    """A tqdm bar over one scene's stages (solve stages, then the writers)."""
+
+    def __init__(self, scene, total):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc=scene.name, unit="stage", leave=False, file=sys.stderr)
+        self.started = False
+
+    def stage(self, name):
+        if self.started:
+            self.bar.update(1)
+        self.started = True
+        self.bar.set_postfix_str(name)
+
+    def close(self):
+        self.bar.update(1)
+        self.bar.close()
+
+
+def _progress_bar(scene, args):
+    if args.quiet or scene.n_steps < PROGRESS_MIN_STEPS:
+        return None
+    from .pipeline import Plan
+
+    writers = (0 if args.no_h5 else 1) + (0 if args.no_rrd else 1)
+    return _StageBar(scene, len(Plan.of(scene).stages) + 1 + writers)
 
 
 def summary(result, written=(), seconds_total=None) -> str:

@@ -36,16 +36,22 @@ class Plan:
 
 
 def solve(scene: Scene | str, progress=None) -> Result:
-    """Run every stage the scene calls for and return the result (failed steps are data)."""
+    """Run every stage the scene calls for and return the result (failed steps are data).
+
+    ``progress``: an optional callable ``progress(stage_name)`` told as each stage starts
+    (the CLI drives a tqdm bar with it on long sweeps).
+    """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     plan = Plan.of(scene)
+    tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     t0 = _time.perf_counter()
     model = build_model(scene)
     mob = check_mobility(model)
     seconds["model"] = _time.perf_counter() - t0
 
+    tell("positions")
     t0 = _time.perf_counter()
     value, s, s_dot, s_ddot = kin.driver_motion(model)
     q, residual, iterations, status = kin.solve_positions(model, s)
@@ -55,6 +61,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
     link_angle = kin.link_angles_unwrapped(model, X)
     seconds["positions"] = _time.perf_counter() - t0
 
+    tell("jacobian")
     t0 = _time.perf_counter()
     Xz = np.where(np.isfinite(X), X, 0.0)
     der = kin.derivatives(model, Xz, s, s_dot, s_ddot, status, plan.acceleration)
@@ -81,6 +88,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
     if plan.forces:
         from .forces import force_stage
 
+        tell("forces")
         t0 = _time.perf_counter()
         res.forces = force_stage(res, der["jacobian_inverse"], s, s_dot, s_ddot)
         if "__status__" in res.forces:
