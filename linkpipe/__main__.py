@@ -133,14 +133,28 @@ def summary(result, written=(), seconds_total=None) -> str:
     sc = result.scene
     lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
              f"{result.n_steps - result.n_ok} failed)"]
-    if np.isfinite(result.residual).any():
-        lines.append(f"  max residual {np.nanmax(result.residual):.2e} {result.units()['length']}, "
+    solved = np.isfinite(result.position).all(axis=(1, 2))  # not no_assembly / not_converged
+    if np.isfinite(result.residual[solved]).any():
+        lines.append(f"  max residual {np.nanmax(result.residual[solved]):.2e} {result.units()['length']}"
+                     f" (solved steps), "
                      f"Newton iterations mean {result.iterations.mean():.2f} max {result.iterations.max()}")
     if result.velocity_residual is not None and np.isfinite(result.velocity_residual).any():
         extra = f"  max linear-equation residuals: velocity {np.nanmax(result.velocity_residual):.1e}"
         if result.acceleration_residual is not None and np.isfinite(result.acceleration_residual).any():
             extra += f", acceleration {np.nanmax(result.acceleration_residual):.1e}"
         lines.append(extra)
+    from .scene import Solver
+
+    changed = {k: v for k, v in vars(sc.solver).items() if v != getattr(Solver, k)}
+    if changed:  # the [solver] knobs this run did not leave at linkpipe's defaults
+        lines.append("  solver: " + ", ".join(f"{k} {v}" for k, v in changed.items()))
+    if result.mobility.redundant:
+        line = (f"  redundant constraints: {result.mobility.redundant} (solved by least squares; "
+                f"'singular' only beyond them)")
+        names = result.forces_not_unique()
+        if names:
+            line += f"; not unique (minimum-norm choice): {', '.join(names)}"
+        lines.append(line)
     if sc.effects:
         lines.append(f"  effects: {', '.join(sc.effects)}")
     if sc.present_but_off:
@@ -178,6 +192,10 @@ def _check(args) -> int:
             print(f"  degrees of freedom: {mob.dof} ({mob.n_q} unknowns, {mob.n_constraints} constraints, "
                   f"rank {mob.rank}, {mob.redundant} redundant); drivers: "
                   + ", ".join(f"{d.name} ({d.steps} steps)" for d in scene.drivers))
+            if mob.redundant:
+                print(f"  redundant: {mob.redundant} constraint(s) implied by the others (e.g. a link "
+                      "parallel to two others); solved by least squares, 'singular' flags only rank "
+                      "loss beyond them, and the forces they share are a minimum-norm choice")
             print(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
             if scene.present_but_off:
                 print(f"  present but off: {', '.join(scene.present_but_off)}")

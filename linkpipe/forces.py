@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .batch import engine
 from .kinematics import OK
 from .model import Model, _R90
 from .result import NO_LEVERAGE
@@ -57,7 +58,7 @@ def center_frame(model: Model, link_name: str, center) -> tuple[int, int, float,
 def _center(X, ia, ib, u, v, L):
     """Return a body point ``a + (u I + v R)(b - a)/L`` for stacks (S, P, 2) -> (S, 2)."""
     d = X[:, ib] - X[:, ia]
-    return X[:, ia] + (u * d + v * (d @ _R90.T)) / L
+    return X[:, ia] + (u * d + v * _perp(d)) / L
 
 
 def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
@@ -113,8 +114,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             tension = t0 + k * (length - ref)
             energy = t0 * (length - ref) + 0.5 * k * (length - ref) ** 2
             fp = np.zeros((S, P, 2))
-            np.add.at(fp, (slice(None), ia), tension[..., None] * e_ab)
-            np.add.at(fp, (slice(None), ib), -tension[..., None] * e_ab)
+            _scatter(fp, ia, ib, tension[..., None] * e_ab)
             effects["springs"] = (fp, np.zeros((S, nl)))
             out["spring_length"] = (("step", "spring"), length, Lu)
             out["spring_extension"] = (("step", "spring"), length - np.where(k > 0, ref - t0 / np.where(k > 0, k, 1), ref), Lu)
@@ -124,8 +124,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             rate = np.einsum("skj,skj->sk", V[:, ib] - V[:, ia], e_ab)
             damp = c * rate
             fp = np.zeros((S, P, 2))
-            np.add.at(fp, (slice(None), ia), damp[..., None] * e_ab)
-            np.add.at(fp, (slice(None), ib), -damp[..., None] * e_ab)
+            _scatter(fp, ia, ib, damp[..., None] * e_ab)
             effects["damping"] = (fp, np.zeros((S, nl)))
             out["spring_damping_force"] = (("step", "spring"), damp, Fu)
         if "springs" in eff:
@@ -141,7 +140,8 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
         effects["gravity"] = (fp, np.zeros((S, nl)))
         pot = np.zeros(S)
         for m, (ia_, ib_, uu, vv, L) in masses:
-            pot -= m.mass * (_center(X, ia_, ib_, uu, vv, L) @ g)
+            G = _center(X, ia_, ib_, uu, vv, L)
+            pot -= m.mass * (G[:, 0] * g[0] + G[:, 1] * g[1])
         out["gravity_energy"] = (("step",), pot, f"{Fu}*{Lu}")
 
     if "loads" in eff and scene.loads:
@@ -189,13 +189,24 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
     Qg = _generalized(model, lagr_point, lagr_couple, Xz)  # (S, n_q)
     lam = np.full((S, model.n_rows), np.nan)
     ok = res.status == OK
-    if ok.any():
+    eng = engine(model)  # square and structurally regular: sparse block solves
+    if ok.any() and eng is not None:
+        idx = np.flatnonzero(ok)
+        for lo in range(0, len(idx), 8192):
+            ii = idx[lo:lo + 8192]
+            E = eng.entries(model.q_of(Xz[ii]), s[ii])
+            lam[ii] = np.stack(eng.solve_transpose(E, list(np.ascontiguousarray(Qg[ii].T))), axis=1)
+        undetermined = np.zeros(model.n_rows, dtype=bool)
+    elif ok.any():
         J = model.jacobian(Xz[ok], s[ok])
         JT = np.swapaxes(J, 1, 2)
         if J.shape[1] == J.shape[2]:
             lam[ok] = np.linalg.solve(JT, Qg[ok][..., None])[..., 0]
         else:
             lam[ok] = np.einsum("sij,sj->si", np.linalg.pinv(JT, rcond=1e-12), Qg[ok])
+        undetermined = undetermined_rows(J)
+    else:
+        undetermined = np.zeros(model.n_rows, dtype=bool)
     FL = lam[:, drv] * phi_s
 
     # ---- report along the input direction where given
@@ -206,8 +217,8 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             n = np.asarray(dr.input.direction, dtype=float)
             n = n / np.hypot(*n)
             ip = model.point_names.index(dr.input.point)
-            lev = Kp[:, ip, :, j] @ n  # (S,) input displacement per unit driver value
-            scale = model.size * (1.0 if dr.kind != "angle" else 1.0)
+            lev = Kp[:, ip, 0, j] * n[0] + Kp[:, ip, 1, j] * n[1]  # (S,) input displacement per unit driver value
+            scale = model.size if dr.kind == "angle" else 1.0  # length/rad, or length/length
             flat = np.abs(lev) < LEVERAGE_RTOL * scale
             status[flat & (status == OK)] = NO_LEVERAGE
             safe = np.where(flat, np.nan, lev)
@@ -236,6 +247,12 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
     for li, r in row_of_link.items():
         link_force[:, li] = lam[:, r]
     out["link_force"] = (("step", "link"), link_force, Fu)
+    if undetermined.any():
+        # redundant constraints: these are the minimum-norm choice, not the unique answer
+        unique = np.ones(nl, dtype=np.int8)
+        for li, r in row_of_link.items():
+            unique[li] = 0 if undetermined[r] else 1
+        out["link_force_unique"] = (("link",), unique, "1")
     if scene.sliders:
         first = nd_rows + 2 * len(model.loc_a)
         sl = np.full((S, len(scene.sliders)), np.nan)
@@ -246,18 +263,53 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
         for k, i in enumerate(moving_i):
             sl[:, i] = -lam[:, first + len(fixed_i) + k]
         out["slider_force"] = (("step", "slider"), sl, Fu)
+        if undetermined.any():
+            rows = [first + k for k in range(len(fixed_i))] + [first + len(fixed_i) + k for k in range(len(moving_i))]
+            unique = np.ones(len(scene.sliders), dtype=np.int8)
+            for i, r in zip(fixed_i + moving_i, rows):
+                unique[i] = 0 if undetermined[r] else 1
+            out["slider_force_unique"] = (("slider",), unique, "1")
         coords["slider"] = [x.name for x in scene.sliders]
     out["__status__"] = (("step",), status, "1")
     out["__coords__"] = ((), coords, "")
     return out
 
 
+def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:
+    """Return (n_rows,) True for multipliers that redundant constraints leave undetermined.
+
+    ``J`` (S, n_rows, n_q) at solved (not singular) steps. With more rows than columns the
+    left null space of J (the last ``n_rows - n_q`` left singular vectors) holds self-stresses:
+    adding any of them to ``lambda`` still solves ``J^T lambda = Q``. A row with a component in
+    it at any step is not unique there; the reported value is the minimum-norm choice.
+    """
+    S, m, n = J.shape
+    if m <= n or S == 0:
+        return np.zeros(m, dtype=bool)
+    U = np.linalg.svd(J)[0]  # (S, m, m)
+    return np.abs(U[:, :, n:]).max(axis=(0, 2)) > tol
+
+
+def _perp(d):
+    """Return d turned +90 degrees, for stacks (..., 2) (d @ _R90.T without a matmul)."""
+    return np.stack([-d[..., 1], d[..., 0]], axis=-1)
+
+
+def _scatter(fp, ia, ib, f):
+    """fp[:, ia[k]] += f[:, k] and fp[:, ib[k]] -= f[:, k] for each k (np.add.at, but fast)."""
+    for k in range(f.shape[1]):
+        fp[:, ia[k]] += f[:, k]
+        fp[:, ib[k]] -= f[:, k]
+
+
 def _add_at_center(fp, force, ia, ib, u, v, L):
     """Distribute a force at body point (u, v) onto the basic points: N_G^T f, in place."""
     force = np.broadcast_to(force, (fp.shape[0], 2))
     C = (u * np.eye(2) + v * _R90) / L  # r_G = (I - C) r_a + C r_b
-    fp[:, ia] += force @ (np.eye(2) - C)
-    fp[:, ib] += force @ C
+    # force @ M written out: BLAS' threaded matmul of (S, 2) x (2, 2) is slow on a busy machine
+    for idx, M in ((ia, np.eye(2) - C), (ib, C)):
+        fp[:, idx, 0] += force[:, 0] * M[0, 0] + force[:, 1] * M[1, 0]
+        fp[:, idx, 1] += force[:, 0] * M[0, 1] + force[:, 1] * M[1, 1]
 
 
 def _generalized(model: Model, point_forces, couples, X):
@@ -266,7 +318,6 @@ def _generalized(model: Model, point_forces, couples, X):
     d = X[:, model.link_b] - X[:, model.link_a]
     n2 = np.einsum("slj,slj->sl", d, d)
     # a couple tau on a link = forces tau R d / L^2 on b and -tau R d / L^2 on a
-    f = (couples / n2)[..., None] * (d @ _R90.T)
-    np.add.at(fp, (slice(None), model.link_b), f)
-    np.add.at(fp, (slice(None), model.link_a), -f)
+    f = (couples / n2)[..., None] * _perp(d)
+    _scatter(fp, model.link_b, model.link_a, f)
     return fp[:, model.moving].reshape(fp.shape[0], -1)

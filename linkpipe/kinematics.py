@@ -11,12 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from .errors import SceneError
-from .model import Model, driver_scale, driver_values
+from .model import Model, constraint_source, driver_scale, driver_values
 
 OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED = 0, 1, 2, 3
+NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
 STATUS_NAMES = ("ok", "no_assembly", "singular", "not_converged")
 
 
@@ -63,6 +63,97 @@ def driver_motion(model: Model):
     return value, value * scale, np.broadcast_to(rate, (S, len(rate))).copy(), np.broadcast_to(acc, (S, len(acc))).copy()
 
 
+def effective_rcond(model: Model) -> float:
+    """Return the reciprocal condition below which a step's Jacobian counts as singular.
+
+    The scene's ``singular_rcond`` (default 1e-6). At a change point or an assembly limit the
+    root is double: Newton converges only linearly, and even iterated to rounding level
+    (:func:`_polish`) the position along the near-null direction is off by about
+    ``sqrt(eps) * size``, so the Jacobian there keeps a smallest singular value near 1e-8.
+    """
+    return float(model.scene.solver.singular_rcond)
+
+
+def jacobian_condition(J: np.ndarray) -> np.ndarray:
+    """Return the condition (S,) of Jacobians (S, m, n) as derivatives() measures it.
+
+    Square: the 1-norm condition ``|J|_1 |J^-1|_1`` (inf when exactly singular); more rows than
+    columns (known redundancy): ``sigma_1 / sigma_n``, the rank deficiency beyond the redundancy.
+    """
+    if J.shape[1] == J.shape[2]:
+        return np.linalg.cond(J, 1)
+    sv = np.linalg.svd(J, compute_uv=False)
+    n = J.shape[2]
+    return sv[:, 0] / np.where(sv[:, n - 1] > 0, sv[:, n - 1], np.finfo(float).tiny)
+
+
+def _polish(model: Model, q: np.ndarray, s_row: np.ndarray, max_iter: int):
+    """Return (q, residual, iterations): Newton on past the tolerance while the residual falls.
+
+    At a singular root Newton converges only linearly (the error halves, the residual quarters
+    per iteration), so it stops at ``tol`` with the position off by about ``sqrt(tol) * size``
+    along the near-null direction; going on to rounding level tells a step near a singularity
+    from one at it. ``q`` (1, n_q).
+    """
+    X = model.positions(q)
+    F = model.phi(X, s_row[None])
+    best_q, best_r = q, float(np.abs(F).max())
+    it = 0
+    while it < max_iter and best_r > 0.0:
+        it += 1
+        qn = best_q + _lin_solve(model.jacobian(X, s_row[None]), -F)
+        Xn = model.positions(qn)
+        Fn = model.phi(Xn, s_row[None])
+        r = float(np.abs(Fn).max())
+        if not r < best_r:
+            break
+        best_q, X, F, progress, best_r = qn, Xn, Fn, r / best_r, r
+        if progress > 0.5:  # no longer converging: rounding level reached
+            break
+    return best_q, best_r, it
+
+
+def _null_line_roots(model: Model, q: np.ndarray, s_row: np.ndarray):
+    """Return (v, roots): where Phi vanishes along the Jacobian's near-null direction from ``q``.
+
+    Phi is at most quadratic in natural coordinates (J is affine in q), so along a line
+    ``q + t v`` it is exactly ``Phi(q) + t J v + t^2/2 H(v, v)`` with
+    ``H(v, v) = (J(q + h v) - J(q)) v / h``. With ``J v = sigma u`` (v, u the singular vectors of
+    the smallest singular value), the component along u vanishes at the roots of
+    ``kappa/2 t^2 + sigma t + u.Phi(q) = 0``, ``kappa = u.H(v, v)``: the two sides of a fold or
+    change point near q. ``q`` (1, n_q); roots may be empty.
+    """
+    s1 = s_row[None]
+    J = model.jacobian(model.positions(q), s1)[0]
+    U, sv, Vt = np.linalg.svd(J)
+    n = J.shape[1]
+    v, u, sigma = Vt[n - 1], U[:, n - 1], sv[n - 1]
+    h = model.size
+    kappa = float(u @ ((model.jacobian(model.positions(q + h * v), s1)[0] - J) @ v) / h)
+    c = float(u @ model.phi(model.positions(q), s1)[0])
+    disc = sigma**2 - 2.0 * kappa * c
+    if not np.isfinite(kappa) or kappa == 0.0 or not disc >= 0.0:
+        return v, []
+    return v, [(-sigma + np.sqrt(disc)) / kappa, (-sigma - np.sqrt(disc)) / kappa]
+
+
+def _mirror_root(model: Model, q: np.ndarray, s_row: np.ndarray, tol_abs: float, max_iter: int,
+                 jacobian: str):
+    """Return (q, iterations) of the root across the nearest fold from the root ``q`` (1, n_q).
+
+    The other root of :func:`_null_line_roots` (one is ``t = 0``: q itself), polished by Newton.
+    Returns (None, iterations) when there is none.
+    """
+    v, roots = _null_line_roots(model, q, s_row)
+    if not roots:
+        return None, 0
+    t = max(roots, key=abs)
+    qn, _, it, conv = newton(model, q + t * v, s_row[None], tol_abs, max_iter, jacobian)
+    if conv[0] and drivers_aligned(model, qn, s_row[None])[0]:
+        return qn, int(it[0])
+    return None, int(it[0])
+
+
 def _lin_solve(J, b):
     """Solve J x = b for stacks (S, m, n), (S, m) in the least-squares, minimum-norm sense."""
     S, m, n = J.shape
@@ -90,12 +181,19 @@ def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter:
     """Refine ``q`` (S, n_q) at driver values ``s`` (S, nd) by Newton-Raphson, all steps at once.
 
     Returns (q, residual (S,), iterations (S,), converged (S,) bool). Steps are iterated until
-    their residual (max abs of Phi) is below ``tol_abs``; converged ones are frozen.
+    their residual (max abs of Phi) is below ``tol_abs``; converged ones are frozen. A step whose
+    residual has made no progress (a new best, or half the previous residual) for
+    ``NEWTON_STALL`` iterations is given up early (Newton wandering where there is no solution:
+    a step past an assembly limit); near a singular root the residual falls by about 4 per
+    iteration after a jump, which counts as progress.
     """
     q = np.array(q, dtype=float)
     S = q.shape[0]
     iters = np.zeros(S, dtype=np.int32)
     res = np.full(S, np.inf)
+    best = np.full(S, np.inf)
+    prev = np.full(S, np.inf)
+    stall = np.zeros(S, dtype=np.int32)
     active = np.arange(S)
     step_cap = 0.5 * model.size
     for it in range(max_iter + 1):
@@ -103,8 +201,12 @@ def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter:
         F = model.phi(X, s[active])
         r = np.abs(F).max(axis=1) if F.shape[1] else np.zeros(len(active))
         res[active] = r
+        progress = (r < best[active]) | (r < 0.5 * prev[active])
+        stall[active] = np.where(progress, 0, stall[active] + 1)
+        best[active] = np.fmin(best[active], r)
+        prev[active] = r
         done = ~(r > tol_abs)  # NaN counts as not done
-        bad = ~np.isfinite(r)
+        bad = ~np.isfinite(r) | (stall[active] >= NEWTON_STALL)
         keep = ~done & ~bad
         if it == max_iter or not keep.any():
             break
@@ -120,23 +222,55 @@ def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter:
     return q, res, iters, converged
 
 
-def _classify_failure(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: float) -> int:
-    """Tell no_assembly (least-squares minimum of Phi above tolerance) from not_converged."""
-    if not np.all(np.isfinite(q_guess)):
-        return NO_ASSEMBLY
+def _lm_root(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: float,
+             max_iter: int = 100):
+    """Return (q, residual, iterations): Levenberg-Marquardt on |Phi|^2 from ``q_guess`` (n_q,).
 
+    Runs until the residual (max abs of Phi) is within ``tol_abs`` or stops falling: towards a
+    root it keeps shrinking by a large factor per step (quadratically, or by 4 at a double root,
+    where Newton's undamped steps may wander); towards a non-zero minimum (no assembly) its
+    decrease dies out at once.
+    """
     def fun(qq):
         return model.phi(model.positions(qq[None]), s_row[None])[0]
 
-    def jac(qq):
-        return model.jacobian(model.positions(qq[None]), s_row[None])[0]
+    q = np.array(q_guess, dtype=float)
+    if not np.all(np.isfinite(q)):
+        return q, np.inf, 0
+    F = fun(q)
+    r = float(np.abs(F).max()) if F.size else 0.0
+    mu = 1e-3
+    it = 0
+    slow = 0  # accepted steps in a row that shrank the residual by less than 1 %
+    while it < max_iter and r > tol_abs:
+        it += 1
+        J = model.jacobian(model.positions(q[None]), s_row[None])[0]
+        A = J.T @ J
+        scale = np.maximum(np.diag(A), 1e-12)
+        try:
+            dq = np.linalg.solve(A + mu * np.diag(scale), -(J.T @ F))
+        except np.linalg.LinAlgError:
+            mu *= 10.0
+            continue
+        Fn = fun(q + dq)
+        rn = float(np.abs(Fn).max())
+        if np.isfinite(rn) and Fn @ Fn < F @ F:
+            q, F, progress, r = q + dq, Fn, rn / r, rn
+            mu = max(mu / 3.0, 1e-12)
+            slow = slow + 1 if progress > 0.99 else 0
+            if slow == 2:
+                break
+        else:
+            mu *= 4.0
+            if mu > 1e12:
+                break
+    return q, r, it
 
-    try:
-        sol = least_squares(fun, q_guess, jac=jac, method="trf", xtol=1e-15, ftol=1e-15,
-                            gtol=1e-15, max_nfev=200)
-    except Exception:  # noqa: BLE001 - a classification helper must not kill the sweep
-        return NO_ASSEMBLY
-    solvable = np.abs(sol.fun).max() <= 10 * tol_abs and drivers_aligned(model, sol.x[None], s_row[None])[0]
+
+def _classify_failure(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: float) -> int:
+    """Tell no_assembly (least-squares minimum of Phi above tolerance) from not_converged."""
+    q, r, _ = _lm_root(model, q_guess, s_row, 10 * tol_abs)
+    solvable = r <= 10 * tol_abs and drivers_aligned(model, q[None], s_row[None])[0]
     return NOT_CONVERGED if solvable else NO_ASSEMBLY
 
 
@@ -153,17 +287,38 @@ def assemble_start(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) 
     def jac(qq):
         return model.jacobian(model.positions(qq[None]), s0[None])[0]
 
+    from scipy.optimize import least_squares  # here: importing scipy.optimize costs ~0.3 s
+
     sol = least_squares(fun, q0[0], jac=jac, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15,
                         max_nfev=500)
     if np.abs(sol.fun).max() <= tol_abs:
         qq, res2, _, conv2 = newton(model, sol.x[None], s0[None], tol_abs, max_iter)
         if conv2[0]:
             return qq[0]
+    path = model.scene.path
+    if model.n_q and not jacobian_condition(jac(sol.x)[None])[0] * effective_rcond(model) < 1.0:
+        # stuck on a singular shape (links in line): Newton and least squares cannot leave a
+        # mirror-symmetric guess; if either side of it assembles, the guess is just ambiguous
+        v, roots = _null_line_roots(model, sol.x[None], s0)
+        for t in roots:
+            _, _, _, conv3 = newton(model, (sol.x + t * v)[None], s0[None], tol_abs, max_iter)
+            if conv3[0]:
+                k = int(np.argmax(np.hypot(*v.reshape(-1, 2).T)))
+                name = model.point_names[model.moving[k]]
+                raise SceneError(path, "points", name,
+                                 "the start positions put links in line (a singular "
+                                 "configuration), so they do not say which of the mirror-image "
+                                 "assemblies is meant",
+                                 f"move {name} a little off the line, to the side of the "
+                                 "assembly you want")
     worst = float(np.abs(sol.fun).max())
-    raise SceneError(model.scene.path, "points", None,
-                     f"the start configuration cannot be assembled at the first driver value "
-                     f"(smallest constraint residual {worst:.3g} in scene length units, "
-                     f"tolerance {tol_abs:.3g})",
+    table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
+    length = dict(model.scene.units).get("length", "length units")
+    where = f"[{table}]" + (f" {key}" if key else "")
+    raise SceneError(path, "points", None,
+                     f"the start configuration cannot be assembled at the first driver value: "
+                     f"at the best fit the constraint of {where} is still off by {worst:.3g} "
+                     f"{length} (tolerance {tol_abs:.3g})",
                      "check the link lengths, the `local` coordinates and the drivers' `from`; "
                      "the points' x, y must be close to an assembled position")
 
@@ -201,12 +356,14 @@ def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
-                    jacobian: str | None = None):
+                    jacobian: str | None = None, q_start: np.ndarray | None = None):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
     steps, residual (S,), iterations (S,), status (S,) int8 (OK / NO_ASSEMBLY / NOT_CONVERGED).
     ``predictor`` is "none", "first" (q + dq/ds * ds) or "second" (adds the curvature term).
+    ``q_start`` (n_q,): continue from this assembled configuration instead of assembling the
+    scene's start (the vectorised general path re-runs single intervals of a sweep this way).
     """
     sc = model.scene.solver
     tol = sc.tol if tol is None else tol
@@ -221,12 +378,17 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     iterations = np.zeros(S, dtype=np.int32)
     status = np.zeros(S, dtype=np.int8)
 
-    q_start = assemble_start(model, s[0], tol_abs, max_iter)
+    if q_start is None:
+        q_start = assemble_start(model, s[0], tol_abs, max_iter)
     unit = np.ones((1, model.n_drivers))  # derivative along the sweep direction, per unit of s
     last_q = q_start
     last_s = s[0]
     last_dq = None  # dq/ds along the sweep (n_q, nd)
     last_d2q = None
+    rcond = effective_rcond(model)
+    square = model.n_rows == nq
+    last_sign = 0.0  # sign of det(Phi_q) at the last regular step: the assembly mode
+    gap = False  # a failed step since the last assembled one
     for i in range(S):
         ds = s[i] - last_s
         guess = last_q.copy()
@@ -236,21 +398,80 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 guess += 0.5 * np.einsum("qij,i,j->q", last_d2q, ds, ds)
         if last_dq is None:
             guess = aim_drivers(model, guess, s[i])
-        qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
-        residual[i] = res[0]
-        iterations[i] = it[0]
-        if conv[0] and not drivers_aligned(model, qi, s[i][None])[0]:
-            # the angle constraint's other root (vector pointing backwards): not this step's
-            # mechanism; retry with the driven point aimed along the driven direction
-            qi, res, it2, conv = newton(model, aim_drivers(model, guess, s[i])[None], s[i][None],
-                                        tol_abs, max_iter, jacobian)
-            iterations[i] += it2[0]
+        it_lm = 0
+        if gap and nq:
+            # after a failed step most steps fail too: damped least squares, which stops as soon
+            # as the residual stops falling, decides first (Newton only polishes a root it finds)
+            q_lm, r_lm, it_lm = _lm_root(model, guess, s[i], tol_abs)
+            if not r_lm <= 10 * tol_abs:
+                residual[i], iterations[i], status[i] = r_lm, it_lm, NO_ASSEMBLY
+                continue
+            guess = q_lm
+        conv = np.zeros(1, dtype=bool)
+        iterations[i] = it_lm
+        if last_dq is None and not gap and nq and np.any(s[i] != last_s):
+            # leaving a singular shape without a slope (a start at a dead centre or change
+            # point): which side Newton takes from it is up to rounding, so start on either side
+            # of it instead, the side nearer the start configuration as written first
+            Jg = model.jacobian(model.positions(last_q[None]), s[i][None])
+            if not jacobian_condition(Jg)[0] * rcond < 1.0:
+                v, roots = _null_line_roots(model, last_q[None], s[i])
+                written = model.q_of(model.start_position[None])[0]
+                for t in sorted(roots, key=lambda t: np.abs(last_q + t * v - written).max()):
+                    qc, res, itc, convc = newton(model, (last_q + t * v)[None], s[i][None], tol_abs,
+                                                 max_iter, jacobian)
+                    iterations[i] += itc[0]
+                    residual[i] = res[0]
+                    if convc[0] and drivers_aligned(model, qc, s[i][None])[0]:
+                        qi, conv = qc, convc
+                        break
+        if not conv[0]:
+            qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
             residual[i] = res[0]
-            conv = conv & drivers_aligned(model, qi, s[i][None])
+            iterations[i] += it[0]
+            if conv[0] and not drivers_aligned(model, qi, s[i][None])[0]:
+                # the angle constraint's other root (vector pointing backwards): not this step's
+                # mechanism; retry with the driven point aimed along the driven direction
+                qi, res, it2, conv = newton(model, aim_drivers(model, guess, s[i])[None],
+                                            s[i][None], tol_abs, max_iter, jacobian)
+                iterations[i] += it2[0]
+                residual[i] = res[0]
+                conv = conv & drivers_aligned(model, qi, s[i][None])
+        lm_residual = None
+        if not conv[0] and nq:
+            # Newton gave up: slow or wandering at a singular root, or no root at all. Damped
+            # least squares from the same guess tells which, and reaches a singular root.
+            q_lm, lm_residual, it_lm = _lm_root(model, guess, s[i], tol_abs)
+            iterations[i] += it_lm
+            if lm_residual <= tol_abs and drivers_aligned(model, q_lm[None], s[i][None])[0]:
+                qi, conv, residual[i] = q_lm[None], np.ones(1, dtype=bool), lm_residual
         if conv[0]:
-            q[i] = qi[0]
             X = model.positions(qi)
             J = model.jacobian(X, s[i][None])
+            if not jacobian_condition(J)[0] * rcond < 1e-3:
+                # may be singular (within the 1/sqrt(tol) margin of position accuracy) and
+                # Newton may have stopped at tol on a slow (linear) approach: go on
+                qi, residual[i], extra = _polish(model, qi, s[i], max_iter)
+                iterations[i] += extra
+                X = model.positions(qi)
+                J = model.jacobian(X, s[i][None])
+            regular = bool(jacobian_condition(J)[0] * rcond < 1.0)  # as derivatives() decides
+            if square and regular and gap and last_sign:
+                # re-entering after a gap: no path connects the two sides, so keep the assembly
+                # mode (sign of det Phi_q) of the last regular step, if it exists here
+                if np.linalg.slogdet(J[0])[0] != last_sign:
+                    alt, extra = _mirror_root(model, qi, s[i], tol_abs, max_iter, jacobian)
+                    iterations[i] += extra
+                    if alt is not None:
+                        Ja = model.jacobian(model.positions(alt), s[i][None])
+                        if (np.linalg.slogdet(Ja[0])[0] == last_sign
+                                and jacobian_condition(Ja)[0] * rcond < 1.0):
+                            qi, X, J = alt, model.positions(alt), Ja
+                            residual[i] = float(np.abs(model.phi(X, s[i][None])).max())
+            gap = False
+            if square and regular:
+                last_sign = np.linalg.slogdet(J[0])[0]
+            q[i] = qi[0]
             # influence coefficients dq/ds_j, one column per driver
             cols = []
             for j in range(model.n_drivers):
@@ -258,7 +479,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 e[0, j] = 1.0
                 cols.append(_velocity_one(model, X, s[i][None], e, J))
             dq = np.stack(cols, axis=1)
-            if np.all(np.isfinite(dq)) and np.abs(dq).max() < 1e8 * model.size:
+            if regular and np.all(np.isfinite(dq)) and np.abs(dq).max() < 1e8 * model.size:
                 if predictor == "second":
                     # curvature along the sweep: gamma with unit driver rate, zero acceleration
                     d2 = np.zeros((nq, model.n_drivers, model.n_drivers))
@@ -270,11 +491,13 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                         d2[:, j, j] = _lin_solve(J, g)[0]
                     last_d2q = d2
                 last_dq = dq
-            else:
-                last_dq, last_d2q = None, None  # a singular step: keep no slope from it
+            # else a singular step (change point, dead centre): its tangent is undefined, so keep
+            # the slope from before it; predicting across with that slope keeps the branch
             last_q, last_s = qi[0], s[i]
         else:
-            status[i] = _classify_failure(model, guess, s[i], tol_abs)
+            status[i] = (_classify_failure(model, guess, s[i], tol_abs) if lm_residual is None
+                         else NOT_CONVERGED if lm_residual <= 10 * tol_abs else NO_ASSEMBLY)
+            gap = True
             last_dq, last_d2q = None, None  # after a gap, restart from the last assembled shape
     return q, residual, iterations, status
 
@@ -307,7 +530,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
             inv, cond = _pinv_cond(J)
         condition[idx] = cond
         Jinv[idx] = inv
-        sing = ~(cond * model.scene.solver.singular_rcond < 1.0)
+        sing = ~(cond * effective_rcond(model) < 1.0)
         status[idx[sing]] = SINGULAR
         Jinv[idx[sing]] = np.nan
     good = status == OK

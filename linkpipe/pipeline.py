@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import batch
 from . import kinematics as kin
 from .model import build_model, check_mobility
 from .result import Result
@@ -54,29 +55,38 @@ def solve(scene: Scene | str, progress=None) -> Result:
     tell("positions")
     t0 = _time.perf_counter()
     value, s, s_dot, s_ddot = kin.driver_motion(model)
-    q, residual, iterations, status = kin.solve_positions(model, s)
-    X = model.positions(np.where(np.isfinite(q), q, 0.0))
-    X[~np.isfinite(q).all(axis=1)] = np.nan
-    X[:, model.fixed] = model.start_position[model.fixed]
+    # closed-form dyads or the general Newton path, as [solver] method says (see batch.stage1);
+    # the dyad path also gives velocities and accelerations here
+    order = 2 if plan.acceleration else 1 if plan.velocity else 0
+    k1 = batch.stage1(model, s, s_dot, s_ddot, order)
+    X, residual, iterations, status = k1["position"], k1["residual"], k1["iterations"], k1["status"]
     link_angle = kin.link_angles_unwrapped(model, X)
     seconds["positions"] = _time.perf_counter() - t0
 
     tell("jacobian")
     t0 = _time.perf_counter()
     Xz = np.where(np.isfinite(X), X, 0.0)
-    der = kin.derivatives(model, Xz, s, s_dot, s_ddot, status, plan.acceleration)
+    der = batch.derivatives(model, Xz, s, s_dot, s_ddot, status, plan.acceleration,
+                            velocity=k1["velocity"], acceleration=k1["acceleration"],
+                            need_inverse=plan.forces)
     status = der["status"]
     seconds["jacobian"] = _time.perf_counter() - t0
 
     res = Result(scene=scene, model=model, mobility=mob, driver_value=value,
                  time=_time_axis(scene, value), position=X, link_angle=link_angle,
                  status=status, residual=residual, iterations=iterations,
-                 condition=der["condition"])
+                 condition=der["condition"], solver_method_used=k1["method"],
+                 solver_note=k1["note"])
     if scene.solver.derivatives == "finite_difference" and plan.velocity:
+        t0 = _time.perf_counter()
         fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, plan.acceleration)
         der["velocity"] = np.where(status[:, None, None] == kin.OK, fdV, np.nan)
         if plan.acceleration:
             der["acceleration"] = np.where(status[:, None, None] == kin.OK, fdA, np.nan)
+        # the stored residuals describe the stored (finite-difference) derivatives
+        der.update(_residuals(model, Xz, s, s_dot, s_ddot, der["velocity"], der["acceleration"]
+                              if plan.acceleration else None))
+        seconds["fd_derivatives"] = _time.perf_counter() - t0
     if plan.velocity:
         res.velocity = der["velocity"]
         res.velocity_residual = der["velocity_residual"]
@@ -97,6 +107,26 @@ def solve(scene: Scene | str, progress=None) -> Result:
     res.seconds = seconds
     res.message = _message(res)
     return res
+
+
+def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
+    """Return the residuals of ``Phi_q qd = -Phi_t`` and ``Phi_q qdd = gamma`` for given V, A."""
+    S = X.shape[0]
+    out = {"velocity_residual": np.full(S, np.nan)}
+    good = np.isfinite(V).all(axis=(1, 2))
+    if A is not None:
+        out["acceleration_residual"] = np.full(S, np.nan)
+        good &= np.isfinite(A).all(axis=(1, 2))
+    if good.any():
+        J = model.jacobian(X[good], s[good])
+        qd = model.q_of(V[good])
+        out["velocity_residual"][good] = np.abs(np.einsum("sij,sj->si", J, qd) + model.phi_t(
+            X[good], s[good], s_dot[good])).max(axis=1)
+        if A is not None:
+            g = model.gamma(X[good], V[good], s[good], s_dot[good], s_ddot[good])
+            out["acceleration_residual"][good] = np.abs(
+                np.einsum("sij,sj->si", J, model.q_of(A[good])) - g).max(axis=1)
+    return out
 
 
 def _time_axis(scene: Scene, value: np.ndarray):

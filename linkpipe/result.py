@@ -62,6 +62,8 @@ class Result:
     forces: dict[str, tuple[tuple[str, ...], np.ndarray, str]] | None = None
     seconds: dict[str, float] = field(default_factory=dict)
     message: str = ""
+    solver_method_used: str = ""  # "dyads" (closed form) or "newton" (general path)
+    solver_note: str = ""  # the dyad chain, or why method = "auto" chose Newton
 
     # ------------------------------------------------------------------ summaries
     @property
@@ -92,6 +94,19 @@ class Result:
     @property
     def spring_names(self) -> tuple[str, ...]:
         return tuple(s.name for s in self.scene.springs) if "springs" in self.scene.effects else ()
+
+    def forces_not_unique(self) -> list[str]:
+        """Return the link and slider forces that redundant constraints leave undetermined.
+
+        Their values are the minimum-norm choice (HDF5 ``link_force_unique`` /
+        ``slider_force_unique`` = 0 for them).
+        """
+        out = []
+        for var, names in (("link_force_unique", self.link_names),
+                           ("slider_force_unique", tuple(s.name for s in self.scene.sliders))):
+            if self.forces and var in self.forces:
+                out += [f"{var.split('_')[0]} {n}" for n, u in zip(names, self.forces[var][1]) if not u]
+        return out
 
     def status_counts(self) -> dict[str, int]:
         return {name: int((self.status == code).sum()) for code, name in enumerate(FLAG_MEANINGS)
@@ -192,8 +207,16 @@ class Result:
             "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "solver_tol": sc.solver.tol,
             "solver_max_iter": sc.solver.max_iter,
+            "solver_method": sc.solver.method,
+            "solver_method_used": self.solver_method_used,
+            "solver_note": self.solver_note,
+            "solver_jacobian": sc.solver.jacobian,
+            "solver_derivatives": sc.solver.derivatives,
+            "solver_predictor": sc.solver.predictor,
+            "solver_singular_rcond": sc.solver.singular_rcond,
             "degrees_of_freedom": self.mobility.dof,
             "redundant_constraints": self.mobility.redundant,
+            "forces_not_unique": self.forces_not_unique(),
             "steps_ok": self.n_ok,
             "steps_failed": self.n_steps - self.n_ok,
             "max_residual": float(np.nanmax(self.residual)) if np.isfinite(self.residual).any() else np.nan,

@@ -103,7 +103,10 @@ class Solver:
     ``predictor``: start guess of each step (none / first order / second order).
     ``method``: ``auto`` (closed-form dyads where the scene decomposes, else Newton),
     ``newton`` (always the general path) or ``dyads`` (require the fast path).
-    ``singular_rcond``: 1/condition below which a step's Jacobian counts as singular.
+    ``singular_rcond``: 1/condition below which a step's Jacobian counts as singular. At a
+    change point or assembly limit even a fully converged solution has a smallest singular value
+    of about sqrt(machine eps) ~ 1e-8 (the root is double), so values much below 1e-6 stop
+    flagging exact singular configurations.
     """
 
     tol: float = 1e-12
@@ -112,7 +115,7 @@ class Solver:
     derivatives: str = "linear"
     predictor: str = "first"
     method: str = "auto"
-    singular_rcond: float = 1e-10
+    singular_rcond: float = 1e-6
 
 
 @dataclass(frozen=True)
@@ -235,7 +238,7 @@ KEYS: dict[str, dict[str, str]] = {
     "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]"},
     "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
                "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
-               "singular_rcond": "1e-10"},
+               "singular_rcond": "1e-6"},
     "analysis": {"effects": '["springs", "gravity"]'},
     "gravity": {"g": "[0.0, -9.81]"},
     "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",
@@ -781,7 +784,7 @@ class _Parser:
         rcond = table.number("singular_rcond", Solver.singular_rcond)
         if not 0 < rcond < 1:
             raise table.error("singular_rcond", f"must be between 0 and 1, got {rcond:g}",
-                              "write e.g. singular_rcond = 1e-10")
+                              "write e.g. singular_rcond = 1e-6")
         return Solver(tol, max_iter, singular_rcond=rcond, **choices)
 
     def gravity_table(self) -> tuple[float, float] | None:

@@ -5,7 +5,7 @@ import pytest
 import linkpipe
 from linkpipe.kinematics import NO_ASSEMBLY, OK
 
-from closed_forms import fourbar, slider_crank
+from linkpipe.closed_forms import fourbar, slider_crank
 
 
 def idx(result, name):

@@ -66,16 +66,32 @@ def write(result, path, spawn: bool = False, connect: str | None = None) -> None
 # ------------------------------------------------------------------------------ geometry
 def _bounds(result, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return the (lower, upper) corners of the finite rows of ``points`` (N, 2)."""
-    points = points[np.isfinite(points).all(axis=1)]
-    if not len(points):
+    # NaN rows (failed steps) drop out of nanmin/nanmax; no masked copy of (S * P, 2) points
+    with np.errstate(invalid="ignore"):
+        finite = _finite_rows(points)
+    if not finite.any():
         points = np.array([[p.x, p.y] for p in result.scene.points], dtype=float)
-    return points.min(axis=0), points.max(axis=0)
+        return points.min(axis=0), points.max(axis=0)
+    if finite.all():  # per coordinate: numpy's reductions over a length-2 axis are slow
+        x, y = points[:, 0], points[:, 1]
+        return np.array([x.min(), y.min()]), np.array([x.max(), y.max()])
+    return np.nanmin(points, axis=0), np.nanmax(points, axis=0)
+
+
+def _finite_rows(a: np.ndarray) -> np.ndarray:
+    """Return ``np.isfinite(a).all(axis=-1)``: a NaN or inf survives the row's sum."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return np.isfinite(a.sum(axis=-1)) if a.shape[-1] > 2 else np.isfinite(a[..., 0] + a[..., -1])
 
 
 def mechanism_size(result) -> float:
     """Return the diagonal of the bounding box of every position of the sweep (1 if none)."""
-    lo, hi = _bounds(result, result.position.reshape(-1, 2))
-    return float(np.hypot(*(hi - lo))) or 1.0
+    cached = result.__dict__.get("_rrd_mechanism_size")  # asked for several times per write
+    if cached is None or cached[0] is not result.position:
+        lo, hi = _bounds(result, result.position.reshape(-1, 2))
+        cached = (result.position, float(np.hypot(*(hi - lo))) or 1.0)
+        result.__dict__["_rrd_mechanism_size"] = cached
+    return cached[1]
 
 
 def arrow_scales(result) -> dict[str, float]:
@@ -130,7 +146,7 @@ def log_result(stream: rr.RecordingStream, result) -> None:
 def _log_points(stream, send, result) -> None:
     X = result.position
     names = np.array(result.point_names, dtype=str)
-    ok = np.isfinite(X).all(axis=-1)                      # (S, P)
+    ok = _finite_rows(X)                                  # (S, P)
     stream.log("mechanism/points", rr.Points2D.from_fields(
         radii=rr.components.Radius.ui_points(4.0), colors=_POINT, show_labels=True,
         draw_order=30.0), static=True)
@@ -158,10 +174,26 @@ def _log_links(stream, send, result) -> None:
 
 def _send_strips(stream, send, entity: str, strips: np.ndarray, **style) -> None:
     """Log one strip per step from ``strips`` (S, n, 2); steps with a NaN get none (cleared)."""
-    ok = np.isfinite(strips).all(axis=(1, 2))
+    ok = _finite_rows(strips.reshape(len(strips), -1))
     stream.log(entity, rr.LineStrips2D.from_fields(**style), static=True)
     if ok.any():
-        send(entity, rr.LineStrips2D.columns(strips=strips[ok]).partition(ok.astype(int)))
+        send(entity, rr.LineStrips2D.columns(strips=_strips_arrow(strips[ok])).partition(ok.astype(int)))
+
+
+def _strips_arrow(strips: np.ndarray):
+    """Return strips (N, k, 2) as the Arrow array of LineStrip2D components, built whole.
+
+    rerun's own conversion walks the N strips in Python to find their offsets; with N the
+    number of steps (100k and more) that dominated writing a recording.
+    """
+    import pyarrow as pa
+    from rerun.components import LineStrip2DBatch
+    from rerun.encodings.vec2d import Vec2DBatch
+
+    n, k = strips.shape[:2]
+    inner = Vec2DBatch(np.ascontiguousarray(strips.reshape(-1, 2), dtype=np.float32)).as_arrow_array()
+    offsets = pa.array(np.arange(0, (n + 1) * k, k, dtype=np.int32))
+    return pa.ListArray.from_arrays(offsets, inner, type=LineStrip2DBatch._ARROW_DATATYPE)
 
 
 def _log_guides(stream, send, result) -> None:
@@ -218,7 +250,7 @@ def _log_vectors(stream, send, result) -> None:
         for name in result.scene.outputs.vectors:
             (k,) = _point_index(result, [name])
             origins, vectors = result.position[:, k], data[:, k]
-            ok = np.isfinite(origins).all(axis=1) & np.isfinite(vectors).all(axis=1)
+            ok = _finite_rows(origins) & _finite_rows(vectors)
             entity = f"mechanism/{quantity}/{name}"
             label = f"{quantity[0]} {name} (1 {length_unit} = {1 / scale:.3g} {units[quantity]})"
             stream.log(entity, rr.Arrows2D.from_fields(

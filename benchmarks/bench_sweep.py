@@ -1,0 +1,446 @@
+"""Sweep speed of linkpipe against a hand-written closed form and pylinkage+numba, in one run.
+
+    .venv/bin/python benchmarks/bench_sweep.py            # everything (about a minute)
+    .venv/bin/python benchmarks/bench_sweep.py --quick    # 36k steps only, no pipeline runs
+
+Part 1, the crank-rocker of ``configs/fourbar_crank_rocker.toml`` (crank 1, coupler 3.5, rocker
+3, ground 4, coupler point P), one crank turn at 10 rad/s in 36k and 360k steps; every tool
+returns positions, velocities and accelerations of all five points, arrays (S, 5, 2):
+
+* linkpipe fast path: ``linkpipe.batch.stage1`` with ``method = "auto"`` (what the pipeline's
+  stage 1 runs: the dyad chain, the start assembly, the branch check, the residuals, the
+  statuses, and the dyads' velocities and accelerations);
+* linkpipe general path: ``linkpipe.batch.solve_newton`` (coarse sequential continuation, then
+  batched Newton from Hermite predictions, velocities and accelerations by sparse solves);
+* the closed form: Norton's four-bar written out in plain numpy for this one mechanism (circle
+  intersection, then the 2x2 velocity and acceleration systems by Cramer's rule), whole arrays;
+* pylinkage 1.3 ``step_fast_with_kinematics`` (numba), when installed (``pip install -e .[bench]``).
+
+Times are the best of several calls after a warm-up; errors are the largest deviation from the
+closed form (itself exact to rounding), relative to the largest magnitude of that quantity.
+
+Part 2, the whole pipeline in a fresh process per case (seconds per stage after the imports,
+peak resident memory): the crank-rocker with 100,000 steps and every effect on, and the Jansen
+linkage (``configs/jansen.toml`` when present), each written to .h5 and .rrd; and
+``python -m linkpipe run configs/*.toml`` from a cold process.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import pathlib
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+A_, B_, C_, D_ = 1.0, 3.5, 3.0, 4.0  # crank, coupler, rocker, ground
+U_, V_ = 1.5, 0.8  # coupler point in the coupler's frame
+OMEGA = 10.0
+POINTS = ("O2", "A", "B", "O4", "P")  # the scene's point order
+
+
+# ------------------------------------------------------------------------------------ tools
+def closed_form(theta: np.ndarray, omega: float = OMEGA, alpha: float = 0.0):
+    """Return X, V, A (S, 5, 2) of the crank-rocker at crank angles theta: plain numpy."""
+    a, b, c, d, u, v = A_, B_, C_, D_, U_, V_
+    S = len(theta)
+    ct, st = np.cos(theta), np.sin(theta)
+    Ax, Ay = a * ct, a * st
+    VAx, VAy = -a * omega * st, a * omega * ct
+    AAx, AAy = -a * omega**2 * ct - a * alpha * st, -a * omega**2 * st + a * alpha * ct
+    # B: circle(A, b) and circle(O4, c), on the left of A -> O4
+    dx, dy = d - Ax, -Ay
+    d2 = dx * dx + dy * dy
+    k = 0.5 + 0.5 * (b * b - c * c) / d2
+    h = np.sqrt(b * b / d2 - k * k)
+    Bx, By = Ax + k * dx - h * dy, Ay + k * dy + h * dx
+    # velocity: (B - A).(VB - VA) = 0, (B - O4).VB = 0
+    e1x, e1y, e2x, e2y = Bx - Ax, By - Ay, Bx - d, By
+    det = e1x * e2y - e1y * e2x
+    b1 = e1x * VAx + e1y * VAy
+    VBx, VBy = b1 * e2y / det, -b1 * e2x / det
+    rvx, rvy = VBx - VAx, VBy - VAy
+    g1 = e1x * AAx + e1y * AAy - (rvx * rvx + rvy * rvy)
+    g2 = -(VBx * VBx + VBy * VBy)
+    ABx, ABy = (g1 * e2y - g2 * e1y) / det, (e1x * g2 - e2x * g1) / det
+    # P on the coupler
+    al, be = u / b, v / b
+    Px, Py = Ax + al * e1x - be * e1y, Ay + al * e1y + be * e1x
+    VPx, VPy = VAx + al * rvx - be * rvy, VAy + al * rvy + be * rvx
+    rax, ray = ABx - AAx, ABy - AAy
+    APx, APy = AAx + al * rax - be * ray, AAy + al * ray + be * rax
+    X = np.zeros((S, 5, 2))
+    V = np.zeros((S, 5, 2))
+    A = np.zeros((S, 5, 2))
+    X[:, 3, 0] = d
+    for arr, cols in ((X, (Ax, Ay, Bx, By, Px, Py)), (V, (VAx, VAy, VBx, VBy, VPx, VPy)),
+                      (A, (AAx, AAy, ABx, ABy, APx, APy))):
+        for n, (i, j) in enumerate(((1, 0), (1, 1), (2, 0), (2, 1), (4, 0), (4, 1))):
+            arr[:, i, j] = cols[n]
+    return X, V, A
+
+
+def closed_form_chunked(theta, chunk=8192):
+    """The same closed form in cache-sized chunks (what linkpipe's fast path does)."""
+    S = len(theta)
+    X, V, A = (np.empty((S, 5, 2)) for _ in range(3))
+    for lo in range(0, S, chunk):
+        x, v, a = closed_form(theta[lo:lo + chunk])
+        X[lo:lo + chunk], V[lo:lo + chunk], A[lo:lo + chunk] = x, v, a
+    return X, V, A
+
+
+def linkpipe_model(S: int, method: str = "auto"):
+    import dataclasses as dc
+
+    import linkpipe
+    from linkpipe.model import build_model
+
+    scene = linkpipe.load_scene(str(ROOT / "configs" / "fourbar_crank_rocker.toml"))
+    scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=S, step=None) for d in scene.drivers),
+                       solver=dc.replace(scene.solver, method=method))
+    model = build_model(scene)
+    assert model.point_names == POINTS
+    return model
+
+
+def linkpipe_fast(model, theta):
+    from linkpipe import batch
+
+    S = len(theta)
+    out = batch.stage1(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
+    assert out["method"] == "dyads"
+    return out["position"], out["velocity"], out["acceleration"]
+
+
+def linkpipe_newton(model, theta):
+    from linkpipe import batch
+
+    S = len(theta)
+    out = batch.solve_newton(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
+    return model.positions(out["q"]), out["velocity"], out["acceleration"]
+
+
+def pylinkage_available() -> str:
+    try:
+        import numba  # noqa: F401
+        import pylinkage
+    except ImportError as err:
+        return f"not installed ({err.name}); pip install -e '.[bench]'"
+    return f"pylinkage {pylinkage.__version__}, numba {numba.__version__}"
+
+
+def pylinkage_run(S: int):
+    """Return X, V, A (S, 5, 2) from pylinkage's numba solver, in the scene's point order."""
+    import pylinkage as pl
+
+    dth = 2 * math.pi / (S - 1)
+    O2 = pl.Ground(0.0, 0.0, name="O2")
+    O4 = pl.Ground(D_, 0.0, name="O4")
+    # the crank advances before each step: start one increment early so step 0 is at 0 rad
+    crank = pl.Crank(anchor=O2, radius=A_, angular_velocity=dth, initial_angle=-dth, name="A")
+    B = pl.RRRDyad(anchor1=crank.output, anchor2=O4, distance1=B_, distance2=C_,
+                   x=3.0417, y=2.8428, name="B")
+    P = pl.FixedDyad(anchor1=crank.output, anchor2=B, distance=math.hypot(U_, V_),
+                     angle=math.atan2(V_, U_), name="P")
+    lk = pl.Linkage([O2, O4, crank, B, P])
+    lk.set_input_velocity(crank, omega=OMEGA, alpha=0.0)
+    lk.compile()
+    t0 = time.perf_counter()
+    pos, vel, acc = lk.step_fast_with_kinematics(iterations=S)
+    seconds = time.perf_counter() - t0
+    order = [0, 2, 3, 1, 4]  # pylinkage's (O2, O4, A, B, P) -> (O2, A, B, O4, P)
+    return pos[:, order], vel[:, order], acc[:, order], seconds
+
+
+def best_of(fn, repeats: int):
+    """Return (best seconds, last result) of ``repeats`` calls after one warm-up call."""
+    result = fn()
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, result
+
+
+def rel_errors(got, ref):
+    return [float(np.nanmax(np.abs(g - r)) / np.abs(r).max()) for g, r in zip(got, ref)]
+
+
+# ------------------------------------------------------------------------------------ part 1
+def part1(sizes, repeats):
+    rows = []
+    pyl = pylinkage_available()
+    first_call = None
+    if pyl.startswith("pylinkage"):
+        t0 = time.perf_counter()
+        pylinkage_run(1000)  # numba: compile, or load the on-disk cache
+        first_call = time.perf_counter() - t0
+    for S in sizes:
+        theta = np.linspace(0.0, 2 * math.pi, S)
+        ref = closed_form(theta)
+        t_cf, _ = best_of(lambda: closed_form(theta), repeats)
+        t_cfc, _ = best_of(lambda: closed_form_chunked(theta), repeats)
+        m_fast = linkpipe_model(S)
+        t_fast, got_fast = best_of(lambda: linkpipe_fast(m_fast, theta), repeats)
+        m_newton = linkpipe_model(S, "newton")
+        t_newton, got_newton = best_of(lambda: linkpipe_newton(m_newton, theta), repeats)
+        row = dict(steps=S, closed_form=t_cf, closed_form_chunked=t_cfc, fast=t_fast, newton=t_newton,
+                   err_fast=rel_errors(got_fast, ref), err_newton=rel_errors(got_newton, ref))
+        if pyl.startswith("pylinkage"):
+            best, got = math.inf, None
+            for _ in range(repeats):
+                *got, sec = pylinkage_run(S)
+                best = min(best, sec)
+            row["pylinkage"] = best
+            row["err_pylinkage"] = rel_errors(got, ref)
+        rows.append(row)
+    return rows, pyl, first_call
+
+
+def print_part1(rows, pyl, first_call):
+    lines = []
+    lines.append("Crank-rocker sweep, positions + velocities + accelerations of all 5 points "
+                 "(configurations/s, best of several; errors relative to the closed form: "
+                 "position / velocity / acceleration)")
+    lines.append("")
+    lines.append("| tool | steps | seconds | configurations/s | max error (x / v / a) |")
+    lines.append("|---|---:|---:|---:|---|")
+    for r in rows:
+        S = r["steps"]
+        items = [("linkpipe fast path (dyads, stage 1)", r["fast"], r["err_fast"]),
+                 ("linkpipe general path (Newton, vectorised)", r["newton"], r["err_newton"]),
+                 ("closed form, plain numpy (reference)", r["closed_form"], [0.0, 0.0, 0.0]),
+                 ("closed form, numpy in cache-sized chunks", r["closed_form_chunked"], None)]
+        if "pylinkage" in r:
+            items.append(("pylinkage + numba (step_fast_with_kinematics)", r["pylinkage"], r["err_pylinkage"]))
+        for name, sec, err in items:
+            e = " / ".join(f"{x:.1e}" for x in err) if err is not None else "same as above"
+            lines.append(f"| {name} | {S:,} | {sec:.4f} | {S / sec / 1e6:.2f} M | {e} |")
+    lines.append("")
+    lines.append(f"pylinkage: {pyl}" + (f"; first call (numba JIT or cache load): {first_call:.2f} s"
+                                         if first_call is not None else ""))
+    lines.append("")
+    lines.append("Targets at 360k steps (same run):")
+    big = max(rows, key=lambda r: r["steps"])
+    S = big["steps"]
+    cps = {k: S / big[k] for k in ("fast", "newton", "closed_form", "closed_form_chunked", "pylinkage") if k in big}
+    def verdict(ok):
+        return "met" if ok else "MISSED"
+    if "pylinkage" in cps:
+        x = cps["fast"] / cps["pylinkage"]
+        lines.append(f"- fast path / pylinkage+numba = {x:.2f}x (target >= 2x): {verdict(x >= 2)}")
+    else:
+        lines.append("- fast path / pylinkage+numba: pylinkage not installed, not measured")
+    x = cps["fast"] / cps["closed_form"]
+    lines.append(f"- fast path / closed form = {x:.2f}x (target >= 0.8x): {verdict(x >= 0.8)}"
+                 f" (against the chunked closed form: {cps['fast'] / cps['closed_form_chunked']:.2f}x)")
+    e = max(big["err_fast"])
+    lines.append(f"- fast path max relative error {e:.1e} (target <= 1e-12): {verdict(e <= 1e-12)}")
+    x = cps["newton"]
+    lines.append(f"- general path {x / 1e6:.2f} M configurations/s (target >= 1 M): {verdict(x >= 1e6)};"
+                 f" max relative error {max(big['err_newton']):.1e}: {verdict(max(big['err_newton']) <= 1e-12)}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------ part 2
+EFFECTS = '''
+[analysis]
+effects = ["springs", "gravity", "inertia", "damping", "loads"]
+
+[gravity]
+g = [0.0, -9.81]
+
+[[masses]]
+link = "crank"
+mass = 1.0
+center = [0.5, 0.0]
+inertia = 0.1
+
+[[masses]]
+link = "coupler"
+mass = 3.0
+center = "P"
+inertia = 3.2
+
+[[masses]]
+link = "rocker"
+mass = 2.5
+center = [1.5, 0.0]
+inertia = 1.9
+
+[[springs]]
+name = "return"
+between = ["P", "O4"]
+k = 200.0
+free_length = 2.0
+damping = 5.0
+
+[[loads]]
+name = "tool"
+point = "B"
+force = [-50.0, 20.0]
+
+[[loads]]
+name = "brake"
+link = "rocker"
+torque = -15.0
+
+'''
+
+
+def scene_text(case: str) -> tuple[str, str]:
+    """Return (file name, TOML text) of a pipeline case."""
+    if case == "crank_rocker_100k":
+        text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+        text = text.replace("steps = 361", "steps = 100000")
+        text = text.replace("[outputs]", EFFECTS + "[outputs]")
+        text = text.replace('name = "fourbar_crank_rocker"', 'name = "crank_rocker_100k"')
+        return "crank_rocker_100k.toml", text
+    path = ROOT / "configs" / "jansen.toml"
+    if not path.exists():
+        raise SystemExit("configs/jansen.toml is missing")
+    text = path.read_text()
+    if case == "jansen_100k":
+        import re
+
+        text = re.sub(r"\nsteps = \d+", "\nsteps = 100000", text, count=1)
+        text = re.sub(r"\nstep = [0-9.]+", "\nsteps = 100000", text, count=1)
+        text = text.replace('name = "jansen"', 'name = "jansen_100k"', 1)
+    return f"{case}.toml", text
+
+
+def peak_rss_mb() -> float:
+    """Return this process's peak resident memory (VmHWM; ru_maxrss survives exec on Linux)."""
+    try:
+        for line in pathlib.Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return float(line.split()[1]) / 1024
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def pipeline_child(case: str) -> None:
+    """Run one case in this (fresh) process and print a JSON line."""
+    import tracemalloc
+
+    t0 = time.perf_counter()
+    import linkpipe
+    from linkpipe.stores import hdf5, rrd
+
+    imports = time.perf_counter() - t0
+    rss0 = peak_rss_mb()
+    name, text = scene_text(case)
+    out = pathlib.Path(tempfile.mkdtemp(prefix="linkpipe_bench_"))
+    trace = os.environ.get("BENCH_TRACEMALLOC") == "1"
+    if trace:
+        tracemalloc.start()
+    t0 = time.perf_counter()
+    scene = linkpipe.parse_scene(text, str(out / name))
+    result = linkpipe.solve(scene)
+    seconds = dict(result.seconds)
+    t1 = time.perf_counter()
+    hdf5.write(result, out / f"{scene.name}.h5")
+    seconds["hdf5"] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    rrd.write(result, out / f"{scene.name}.rrd")
+    seconds["rrd"] = time.perf_counter() - t1
+    total = time.perf_counter() - t0
+    peak_traced = tracemalloc.get_traced_memory()[1] / 2**20 if trace else None
+    rss = peak_rss_mb()
+    sizes = {p.suffix: p.stat().st_size / 2**20 for p in out.iterdir()}
+    print(json.dumps(dict(case=case, steps=result.n_steps, method=result.solver_method_used,
+                          message=result.message, imports=imports, seconds=seconds, total=total,
+                          rss_after_imports_mb=rss0, peak_rss_mb=rss, peak_traced_mb=peak_traced,
+                          file_mb=sizes)))
+
+
+def run_child(case: str) -> dict:
+    proc = subprocess.run([sys.executable, __file__, "--child", case], capture_output=True, text=True,
+                          cwd=ROOT)
+    if proc.returncode:
+        raise SystemExit(proc.stderr)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def cli_cold() -> float:
+    out = tempfile.mkdtemp(prefix="linkpipe_cli_")
+    configs = sorted(str(p) for p in (ROOT / "configs").glob("*.toml"))
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "linkpipe", "run", *configs, "--out", out, "--quiet"],
+                          capture_output=True, text=True, cwd=ROOT)
+    wall = time.perf_counter() - t0
+    if proc.returncode:
+        raise SystemExit(proc.stderr)
+    return wall, len(configs)
+
+
+def print_part2(runs, cli):
+    lines = ["Whole pipeline, one fresh process per case (seconds after the imports; peak RSS of "
+             "the process, interpreter and imports included)", ""]
+    stages = ["model", "positions", "jacobian", "forces", "hdf5", "rrd"]
+    lines.append("| case | steps | path | " + " | ".join(stages) + " | total | imports | peak RSS |")
+    lines.append("|---|---:|---|" + "---:|" * (len(stages) + 3))
+    for r in runs:
+        sec = r["seconds"]
+        cells = [f"{sec[s]:.3f}" if s in sec else "–" for s in stages]
+        lines.append(f"| {r['case']} | {r['steps']:,} | {r['method']} | " + " | ".join(cells)
+                     + f" | **{r['total']:.2f} s** | {r['imports']:.2f} s | {r['peak_rss_mb']:.0f} MB |")
+    lines.append("")
+    for r in runs:
+        if r["case"] == "crank_rocker_100k":
+            ok = r["total"] <= 1.5
+            mem = r["peak_rss_mb"] <= 1024
+            lines.append(f"- crank-rocker 100k with forces, .h5 and .rrd: {r['total']:.2f} s "
+                         f"(target <= 1.5 s): {'met' if ok else 'MISSED'}; peak memory "
+                         f"{r['peak_rss_mb']:.0f} MB (target <= 1 GB): {'met' if mem else 'MISSED'}")
+    if cli is not None:
+        wall, n = cli
+        lines.append(f"- `python -m linkpipe run configs/*.toml` ({n} scenes) from a cold process: "
+                     f"{wall:.2f} s wall (target <= 3 s): {'met' if wall <= 3 else 'MISSED'}")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--quick", action="store_true", help="36k steps only, no pipeline runs")
+    p.add_argument("--child", help=argparse.SUPPRESS)
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args(argv)
+    if args.child:
+        return pipeline_child(args.child)
+    print(f"linkpipe sweep benchmark, {datetime.date.today()}, {platform.python_version()}, "
+          f"numpy {np.__version__}, {os.cpu_count()} cores, {platform.machine()}")
+    print()
+    sizes = (36_000,) if args.quick else (36_000, 360_000)
+    rows, pyl, first = part1(sizes, args.repeats)
+    print(print_part1(rows, pyl, first))
+    if args.quick:
+        return 0
+    print()
+    cases = ["crank_rocker_100k"]
+    if (ROOT / "configs" / "jansen.toml").exists():
+        cases += ["jansen", "jansen_100k"]
+    else:
+        print("(configs/jansen.toml is missing: no Jansen case)")
+    runs = [run_child(c) for c in cases]
+    print(print_part2(runs, cli_cold()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

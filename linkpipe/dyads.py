@@ -1,0 +1,662 @@
+"""Stage 1's fast path: the mechanism as an ordered chain of closed-form dyads, all steps at once.
+
+A scene *decomposes* when its moving points can be found one after another, each from points
+already known, by one of these closed forms (found once, from the scene's graph):
+
+``angle``     a body pinned at a known point and turned by an angle driver on two of its points:
+              every point of it is ``c + R(theta) w`` (the driver fixes the direction).
+``linear``    a body with two known points: its other points by their local coordinates
+              (two linear equations each, as the model's ``local`` rows).
+``circles``   a point shared by two bodies, each pinned at one known point: circle-circle
+              intersection (the RRR dyad).
+``circle_line`` a point of a pinned body that also lies on a known line (a fixed guide, a guide
+              through two known points, or ``x = s`` / ``y = s`` of a coordinate driver):
+              circle-line intersection (the RRP dyad).
+``lines``     a point on two known lines: their intersection.
+
+The two roots of ``circles`` and ``circle_line`` are the dyad's branches; each dyad keeps the
+branch (sign) it has in the assembled start configuration at every step. Steps where a dyad has
+no real root give NaN (``no_assembly``).
+
+Consequence of the fixed sign: where a dyad passes *through* its singular configuration (the
+two roots meet: a parallelogram's change point, a toggle at the end of an assembly range), the
+fixed-sign solution turns a corner onto the other geometric branch, whereas Newton continuation
+may carry on smoothly. :func:`branch_check` finds the steps where that can happen (a dyad's two
+roots closer than a few steps' motion) and ``method = "auto"`` then uses the general Newton
+path for the scene (also when any step has no assembly, since Newton's re-entry after a gap
+follows its own rules).
+
+Velocities and accelerations come from the dyads' own derivatives: each point's two
+constraint rows differentiated once (``g1 . v = b1, g2 . v = b2``) and twice, solved by
+Cramer's rule; the same linear algebra as ``Phi_q qd = -Phi_t`` in block-triangular order.
+All arithmetic runs on contiguous per-coordinate arrays in cache-sized chunks of steps.
+numpy only.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .model import Model
+
+CHUNK = 8192  # steps per chunk: the working set stays in cache
+BRANCH_MARGIN = 2.0  # a dyad's roots must stay this many steps' motion apart (see branch_check)
+
+
+# --------------------------------------------------------------------------------------------
+# The decomposition (once per model)
+
+
+@dataclass
+class Body:
+    """One link as a rigid body: its point indices and their local coordinates (n, 2)."""
+
+    name: str
+    points: list[int]
+    local: np.ndarray
+
+
+@dataclass
+class Line:
+    """A line a point lies on: ``fixed`` (o, t), ``moving`` through points d, e, or ``coord``.
+
+    ``coord``: the line ``x = s_j`` (axis 0) or ``y = s_j`` (axis 1) of coordinate driver j.
+    """
+
+    kind: str
+    o: tuple[float, float] = (0.0, 0.0)
+    t: tuple[float, float] = (1.0, 0.0)
+    d: int = -1
+    e: int = -1
+    driver: int = -1
+    axis: int = -1
+
+
+@dataclass
+class Step:
+    """One closed-form step. ``kind`` as in the module docstring; ``targets`` the new points."""
+
+    kind: str
+    targets: list[int]
+    # angle: pin c, driver j, local vectors w (one per target) in the driver's frame
+    c: int = -1
+    driver: int = -1
+    w: list[tuple[float, float]] = field(default_factory=list)
+    # linear: frame points i, j and (alpha, beta) per target: p = xi + alpha d + beta perp(d)
+    i: int = -1
+    j: int = -1
+    ab: list[tuple[float, float]] = field(default_factory=list)
+    # circles: centres c1, c2 and radii; circle_line: centre c1, radius r1 and line1;
+    # lines: line1, line2. sign: the branch (+1/-1)
+    c1: int = -1
+    r1: float = 0.0
+    c2: int = -1
+    r2: float = 0.0
+    line1: Line | None = None
+    line2: Line | None = None
+    sign: float = 1.0
+    ambiguous: bool = False
+
+    def describe(self, names) -> str:
+        tg = ",".join(names[p] for p in self.targets)
+        if self.kind == "angle":
+            return f"angle({tg} about {names[self.c]}, driver {self.driver})"
+        if self.kind == "linear":
+            return f"linear({tg} from {names[self.i]},{names[self.j]})"
+        if self.kind == "circles":
+            return f"circles({tg}: {names[self.c1]} r{self.r1:g}, {names[self.c2]} r{self.r2:g})"
+        if self.kind == "circle_line":
+            return f"circle_line({tg}: {names[self.c1]} r{self.r1:g}, {self.line1.kind} line)"
+        return f"lines({tg})"
+
+
+@dataclass
+class Plan:
+    """A scene's dyad decomposition: ``steps`` in order, or ``reason`` why there is none."""
+
+    model: Model
+    steps: list[Step]
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not self.reason
+
+    def describe(self) -> str:
+        if not self.ok:
+            return f"does not decompose: {self.reason}"
+        return " -> ".join(st.describe(self.model.point_names) for st in self.steps)
+
+
+def bodies_of(model: Model) -> list[Body]:
+    """Return every link as a body with local coordinates (a at 0, b at (L, 0), others (u, v))."""
+    scene = model.scene
+    names = model.point_names
+    index = {n: i for i, n in enumerate(names)}
+    X0 = model.start_position
+    loc = {(int(a), int(b), int(p)): (float(u), float(v)) for a, b, p, u, v in zip(
+        model.loc_a, model.loc_b, model.loc_p, model.loc_u, model.loc_v)}
+    out = []
+    for link in scene.links:
+        pts = [index[p] for p in link.points]
+        ia, ib = pts[0], pts[1]
+        d0 = X0[ib] - X0[ia]
+        L0 = float(np.hypot(*d0))
+        L = float(link.length) if link.length is not None else L0
+        e = d0 / L0
+        ep = np.array([-e[1], e[0]])
+        local = [(0.0, 0.0), (L, 0.0)]
+        for ip in pts[2:]:
+            if (ia, ib, ip) in loc:
+                local.append(loc[(ia, ib, ip)])
+            elif link.points[pts.index(ip)] in link.local:
+                u, v = link.local[link.points[pts.index(ip)]]
+                local.append((float(u), float(v)))
+            else:
+                r = X0[ip] - X0[ia]
+                local.append((float(r @ e), float(r @ ep)))
+        out.append(Body(link.name, pts, np.array(local, dtype=float)))
+    return out
+
+
+def decompose(model: Model) -> Plan:
+    """Return the scene's closed-form plan (``Plan.ok`` False with a reason when none exists).
+
+    Greedy: repeatedly place whatever can be placed (bodies with two known points, bodies
+    turned by an angle driver, points with two usable constraints) until every moving point is
+    known. Branch signs are left at +1; :func:`set_branches` takes them from a configuration.
+    """
+    P = model.n_points
+    known = np.array(model.fixed, dtype=bool).copy()
+    bodies = [b for b in bodies_of(model) if not all(known[p] for p in b.points)]
+    sliders_fixed = [(int(p), Line("fixed", o=tuple(map(float, c)), t=(float(n[1]), float(-n[0]))))
+                     for p, c, n in zip(model.sfix_p, model.sfix_c, model.sfix_n)]
+    sliders_moving = [(int(p), int(d), int(e)) for p, d, e in zip(model.smov_p, model.smov_d, model.smov_e)]
+    used_fixed = [False] * len(sliders_fixed)
+    used_moving = [False] * len(sliders_moving)
+    nd = model.n_drivers
+    used_driver = [False] * nd
+    steps: list[Step] = []
+
+    def known_of(b: Body):
+        return [k for k, p in enumerate(b.points) if known[p]]
+
+    progress = True
+    while progress and not known.all():
+        progress = False
+        # 1. bodies with two known points: the rest by local coordinates
+        for b in bodies:
+            kk = known_of(b)
+            if len(kk) >= 2 and len(kk) < len(b.points):
+                if 0 in kk and 1 in kk:
+                    i, j = 0, 1
+                else:  # the known pair farthest apart in the body
+                    pairs = [(np.hypot(*(b.local[x] - b.local[y])), x, y) for x in kk for y in kk if x < y]
+                    _, i, j = max(pairs)
+                li, lj = b.local[i], b.local[j]
+                dl = complex(*(lj - li))
+                if abs(dl) == 0.0:
+                    continue
+                tg, ab = [], []
+                for k, p in enumerate(b.points):
+                    if not known[p]:
+                        z = complex(*(b.local[k] - li)) / dl
+                        tg.append(p)
+                        ab.append((z.real, z.imag))
+                steps.append(Step("linear", tg, i=b.points[i], j=b.points[j], ab=ab))
+                known[tg] = True
+                progress = True
+        if progress:
+            continue
+        # 2. angle drivers turning a pinned body
+        for jd in range(nd):
+            if used_driver[jd] or not model.drv_angle[jd]:
+                continue
+            a, bpt = int(model.drv_a[jd]), int(model.drv_b[jd])
+            for b in bodies:
+                if a in b.points and bpt in b.points:
+                    kk = known_of(b)
+                    if len(kk) != 1:
+                        continue
+                    la, lb = b.local[b.points.index(a)], b.local[b.points.index(bpt)]
+                    phi0 = np.arctan2(*(lb - la)[::-1])
+                    c0, s0 = np.cos(-phi0), np.sin(-phi0)
+                    ck = kk[0]
+                    tg, ws = [], []
+                    for k, p in enumerate(b.points):
+                        if not known[p]:
+                            r = b.local[k] - b.local[ck]
+                            tg.append(p)
+                            ws.append((float(c0 * r[0] - s0 * r[1]), float(s0 * r[0] + c0 * r[1])))
+                    steps.append(Step("angle", tg, c=b.points[ck], driver=jd, w=ws))
+                    known[tg] = True
+                    used_driver[jd] = True
+                    progress = True
+                    break
+        if progress:
+            continue
+        # 3. a point with two usable constraints: circles from pinned bodies, known lines
+        for p in range(P):
+            if known[p]:
+                continue
+            circles = []
+            for b in bodies:
+                if p in b.points:
+                    kk = known_of(b)
+                    if len(kk) == 1:
+                        c = b.points[kk[0]]
+                        r = float(np.hypot(*(b.local[b.points.index(p)] - b.local[kk[0]])))
+                        if r > 0 and all(c != cc for cc, _ in circles):
+                            circles.append((c, r))
+            lines = []  # (line, kind, index) to mark as used
+            for k, (pp, ln) in enumerate(sliders_fixed):
+                if pp == p and not used_fixed[k]:
+                    lines.append((ln, "f", k))
+            for k, (pp, d, e) in enumerate(sliders_moving):
+                if pp == p and not used_moving[k] and known[d] and known[e]:
+                    lines.append((Line("moving", d=d, e=e), "m", k))
+            for jd in range(nd):
+                if not used_driver[jd] and not model.drv_angle[jd] and int(model.drv_a[jd]) == p:
+                    ax = int(model.drv_axis[jd])
+                    lines.append((Line("coord", t=(0.0, 1.0) if ax == 0 else (1.0, 0.0), driver=jd, axis=ax),
+                                  "d", jd))
+            if len(lines) >= 2:
+                st = Step("lines", [p], line1=lines[0][0], line2=lines[1][0])
+                use = lines[:2]
+            elif len(lines) == 1 and circles:
+                st = Step("circle_line", [p], c1=circles[0][0], r1=circles[0][1], line1=lines[0][0])
+                use = lines[:1]
+            elif len(circles) >= 2:
+                st = Step("circles", [p], c1=circles[0][0], r1=circles[0][1], c2=circles[1][0],
+                          r2=circles[1][1])
+                use = []
+            else:
+                continue
+            for _, kind, k in use:
+                if kind == "f":
+                    used_fixed[k] = True
+                elif kind == "m":
+                    used_moving[k] = True
+                else:
+                    used_driver[k] = True
+            steps.append(st)
+            known[p] = True
+            progress = True
+            break  # bodies may now have two known points: back to rule 1
+    if not known.all():
+        left = [model.point_names[p] for p in range(P) if not known[p]]
+        return Plan(model, steps, f"no closed-form dyad places point(s) {', '.join(left)} "
+                                  "(a loop that needs simultaneous solution)")
+    if not all(used_driver):
+        left = [model.scene.drivers[j].name for j in range(nd) if not used_driver[j]]
+        return Plan(model, steps, f"driver(s) {', '.join(left)} do not fit a closed-form dyad")
+    return Plan(model, steps)
+
+
+def set_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray) -> None:
+    """Take each dyad's branch (sign) from the configuration ``X0`` (n_points, 2) at driver values s0."""
+    size = plan.model.size
+    for st in plan.steps:
+        p = st.targets[0]
+        if st.kind == "circles":
+            d = X0[st.c2] - X0[st.c1]
+            r = X0[p] - X0[st.c1]
+            val = (d[0] * r[1] - d[1] * r[0]) / max(np.hypot(*d), 1e-300)
+        elif st.kind == "circle_line":
+            _, t = _line_at(st.line1, X0, s0)
+            val = (X0[p] - X0[st.c1]) @ t
+        else:
+            continue
+        st.sign = 1.0 if val >= 0 else -1.0
+        st.ambiguous = bool(abs(val) <= 1e-9 * size)
+
+
+def _line_at(line: Line, X: np.ndarray, s: np.ndarray):
+    """Return (point on the line, unit direction) at one configuration."""
+    if line.kind == "fixed":
+        return np.array(line.o), np.array(line.t)
+    if line.kind == "coord":
+        o = np.zeros(2)
+        o[line.axis] = s[line.driver]
+        return o, np.array(line.t)
+    d = X[line.e] - X[line.d]
+    return X[line.d], d / np.hypot(*d)
+
+
+# --------------------------------------------------------------------------------------------
+# The vectorised evaluation
+
+
+class _Chunk:
+    """Per-coordinate arrays of one chunk of steps: x[p], y[p] (float for fixed points)."""
+
+    __slots__ = ("px", "py", "vx", "vy", "ax", "ay", "s", "sd", "sdd", "_target", "gap2", "trig")
+
+
+def _rows_line(line: Line, px, py, ch, order):
+    """Return the line row of point p: gradient (gx, gy) and the velocity or acceleration RHS.
+
+    ``order`` 0: (gx, gy) only; 1: (gx, gy, b_v); 2: (gx, gy, b_a) (needs the point's velocity).
+    """
+    if line.kind == "fixed":
+        nx, ny = -line.t[1], line.t[0]
+        return nx, ny, 0.0
+    if line.kind == "coord":
+        gx, gy = (1.0, 0.0) if line.axis == 0 else (0.0, 1.0)
+        if order == 0:
+            return gx, gy, None
+        return gx, gy, (ch.sd if order == 1 else ch.sdd)[line.driver]
+    d, e = line.d, line.e
+    wx, wy = ch.px[e] - ch.px[d], ch.py[e] - ch.py[d]
+    gx, gy = -wy, wx
+    if order == 0:
+        return gx, gy, None
+    fx, fy = px - ch.px[d], py - ch.py[d]
+    vdx, vdy = ch.vx[d], ch.vy[d]
+    wdx, wdy = _sub(ch.vx[e], vdx), _sub(ch.vy[e], vdy)
+    if order == 1:
+        # cross(w, v_p) = cross(w, v_d) - cross(w', f)
+        return gx, gy, _crs(wx, wy, vdx, vdy) - _crs(wdx, wdy, fx, fy)
+    p = ch._target
+    vpx, vpy = ch.vx[p], ch.vy[p]
+    adx, ady = ch.ax[d], ch.ay[d]
+    wddx, wddy = _sub(ch.ax[e], adx), _sub(ch.ay[e], ady)
+    # cross(w, a_p) = cross(w, a_d) - cross(w'', f) - 2 cross(w', v_p - v_d)
+    return gx, gy, (_crs(wx, wy, adx, ady) - _crs(wddx, wddy, fx, fy)
+                    - 2.0 * _crs(wdx, wdy, _sub(vpx, vdx), _sub(vpy, vdy)))
+
+
+def _sub(a, b):
+    if b is None:
+        return a
+    if a is None:
+        return -b
+    return a - b
+
+
+def _crs(ax, ay, bx, by):
+    if ax is None or bx is None:
+        return 0.0
+    return ax * by - ay * bx
+
+
+def _dot(ax, ay, bx, by):
+    if bx is None:
+        return 0.0
+    return ax * bx + ay * by
+
+
+def _position(st: Step, ch: _Chunk) -> None:
+    px, py = ch.px, ch.py
+    if st.kind == "angle":
+        th = ch.s[st.driver]
+        c, s = np.cos(th), np.sin(th)
+        ch.trig[st.driver] = (c, s)
+        cx, cy = px[st.c], py[st.c]
+        for p, (wx, wy) in zip(st.targets, st.w):
+            px[p] = cx + (c * wx - s * wy)
+            py[p] = cy + (s * wx + c * wy)
+        return
+    if st.kind == "linear":
+        ix, iy = px[st.i], py[st.i]
+        dx, dy = px[st.j] - ix, py[st.j] - iy
+        for p, (al, be) in zip(st.targets, st.ab):
+            px[p] = ix + (al * dx - be * dy)
+            py[p] = iy + (al * dy + be * dx)
+        return
+    p = st.targets[0]
+    if st.kind == "circles":
+        c1x, c1y = px[st.c1], py[st.c1]
+        dx, dy = px[st.c2] - c1x, py[st.c2] - c1y
+        inv = 1.0 / (dx * dx + dy * dy)
+        k = 0.5 + (0.5 * (st.r1 * st.r1 - st.r2 * st.r2)) * inv
+        h = (st.r1 * st.r1) * inv - k * k
+        if ch.gap2 is not None:  # squared distance between the two roots: (2 h |d|)^2
+            ch.gap2.append((p, 4.0 * h / inv))
+        h = np.sqrt(h) if st.sign > 0 else -np.sqrt(h)
+        px[p] = c1x + (k * dx - h * dy)
+        py[p] = c1y + (k * dy + h * dx)
+        return
+    if st.kind == "circle_line":
+        cx, cy = px[st.c1], py[st.c1]
+        ox, oy, tx, ty = _line_geometry(st.line1, ch)
+        # signed distance of the centre from the line along n = perp(t), then the half chord
+        m = (cx - ox) * (-ty) + (cy - oy) * tx
+        h = st.r1 * st.r1 - m * m
+        if ch.gap2 is not None:  # squared distance between the two roots: (2 half-chord)^2
+            ch.gap2.append((p, 4.0 * h))
+        h = np.sqrt(h) if st.sign > 0 else -np.sqrt(h)
+        px[p] = cx + m * ty + h * tx
+        py[p] = cy - m * tx + h * ty
+        return
+    # lines: n1 . p = n1 . o1, n2 . p = n2 . o2
+    o1x, o1y, t1x, t1y = _line_geometry(st.line1, ch)
+    o2x, o2y, t2x, t2y = _line_geometry(st.line2, ch)
+    b1 = -t1y * o1x + t1x * o1y
+    b2 = -t2y * o2x + t2x * o2y
+    det = (-t1y) * t2x - t1x * (-t2y)
+    px[p] = (b1 * t2x - b2 * t1x) / det
+    py[p] = ((-t1y) * b2 - (-t2y) * b1) / det
+
+
+def _line_geometry(line: Line, ch: _Chunk):
+    """Return (ox, oy, tx, ty): a point on the line and its unit direction, chunk-wise."""
+    if line.kind == "fixed":
+        return line.o[0], line.o[1], line.t[0], line.t[1]
+    if line.kind == "coord":
+        s = ch.s[line.driver]
+        return (s, 0.0, 0.0, 1.0) if line.axis == 0 else (0.0, s, 1.0, 0.0)
+    dx, dy = ch.px[line.d], ch.py[line.d]
+    wx, wy = ch.px[line.e] - dx, ch.py[line.e] - dy
+    n = 1.0 / np.sqrt(wx * wx + wy * wy)
+    return dx, dy, wx * n, wy * n
+
+
+def _derivative(st: Step, ch: _Chunk, order: int) -> None:
+    """Velocities (order 1) or accelerations (order 2) of the step's targets."""
+    px, py = ch.px, ch.py
+    if order == 1:
+        ox, oy = ch.vx, ch.vy
+    else:
+        ox, oy = ch.ax, ch.ay
+    if st.kind == "angle":
+        w = ch.sd[st.driver]
+        cx, cy = px[st.c], py[st.c]
+        bx, by = ox[st.c], oy[st.c]
+        if order == 1:
+            for p in st.targets:
+                rx, ry = px[p] - cx, py[p] - cy
+                ox[p] = _add(bx, -w * ry)
+                oy[p] = _add(by, w * rx)
+        else:
+            al = ch.sdd[st.driver]
+            w2 = w * w
+            for p in st.targets:
+                rx, ry = px[p] - cx, py[p] - cy
+                ox[p] = _add(bx, -al * ry - w2 * rx)
+                oy[p] = _add(by, al * rx - w2 * ry)
+        return
+    if st.kind == "linear":
+        bx, by = ox[st.i], oy[st.i]
+        dx, dy = _sub(ox[st.j], bx), _sub(oy[st.j], by)
+        for p, (al, be) in zip(st.targets, st.ab):
+            if dx is None:
+                ox[p], oy[p] = bx, by
+            else:
+                ox[p] = _add(bx, al * dx - be * dy)
+                oy[p] = _add(by, al * dy + be * dx)
+        return
+    p = st.targets[0]
+    ch._target = p
+    rows = []
+    for kind, c, line in (("c", st.c1, None), ("c", st.c2, None)) if st.kind == "circles" else (
+            (("c", st.c1, None), ("l", -1, st.line1)) if st.kind == "circle_line"
+            else (("l", -1, st.line1), ("l", -1, st.line2))):
+        if kind == "c":
+            gx, gy = px[p] - px[c], py[p] - py[c]
+            b = _dot(gx, gy, ox[c], oy[c])
+            if order == 2:
+                rvx, rvy = _sub(ch.vx[p], ch.vx[c]), _sub(ch.vy[p], ch.vy[c])
+                if rvx is not None:
+                    b = b - (rvx * rvx + rvy * rvy)
+            rows.append((gx, gy, b))
+        else:
+            rows.append(_rows_line(line, px[p], py[p], ch, order))
+    (g1x, g1y, b1), (g2x, g2y, b2) = rows
+    idet = 1.0 / (g1x * g2y - g1y * g2x)
+    ox[p] = (b1 * g2y - b2 * g1y) * idet
+    oy[p] = (g1x * b2 - g2x * b1) * idet
+
+
+def _val(a):
+    return 0.0 if a is None else a
+
+
+def _add(a, b):
+    return b if a is None else a + b
+
+
+@dataclass
+class Sweep:
+    """What :func:`solve` returns. Arrays step-axis first; velocity/acceleration None when not asked.
+
+    ``ok`` (S,) every point finite; ``residual`` (S,) max |Phi| when a ``phi`` was given;
+    ``gap`` (S,) with ``gaps=True``: the smallest over the dyads and the step pairs (i-1, i)
+    and (i, i+1) of ``d^2 - (BRANCH_MARGIN m)^2``, d the distance between a dyad's two roots,
+    m its point's move (|dx| + |dy|) between the two steps (positive: safe; see branch_check).
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray | None
+    acceleration: np.ndarray | None
+    ok: np.ndarray
+    residual: np.ndarray | None = None
+    gap: np.ndarray | None = None
+
+
+def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
+          order: int = 2, gaps: bool = False, phi=None, chunk: int = CHUNK) -> Sweep:
+    """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
+
+    ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
+    root are NaN in every moving point. ``gaps=True`` also returns each step's smallest
+    distance between a dyad's two roots and its motion (for :func:`branch_check`). ``phi``:
+    an optional ``phi(X2 (P, 2, n), s (nd, n), trig) -> (m, n)`` for the residual at every
+    step (``trig``: {driver: (cos, sin)} of the angle drivers, already computed).
+    """
+    model = plan.model
+    S = s.shape[0]
+    P = model.n_points
+    X0 = model.start_position
+    fixed = model.fixed
+    X = np.empty((S, P, 2))
+    V = np.empty((S, P, 2)) if order >= 1 else None
+    A = np.empty((S, P, 2)) if order >= 2 else None
+    X[:, fixed] = X0[fixed]
+    if V is not None:
+        V[:, fixed] = 0.0
+    if A is not None:
+        A[:, fixed] = 0.0
+    ok = np.ones(S, dtype=bool)
+    gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
+    residual = np.empty(S) if phi is not None else None
+    X2 = None
+    moving = [int(p) for p in model.moving]
+    nd = model.n_drivers
+    cols = [np.ascontiguousarray(s[:, j]) for j in range(nd)]
+    dcols = [np.ascontiguousarray(s_dot[:, j]) for j in range(nd)] if order >= 1 else None
+    ddcols = [np.ascontiguousarray(s_ddot[:, j]) for j in range(nd)] if order >= 2 else None
+    if dcols is not None:  # constant rates (the usual sweep) stay scalars
+        dcols = [float(c[0]) if c.size and (c == c[0]).all() else c for c in dcols]
+    if ddcols is not None:
+        ddcols = [float(c[0]) if c.size and (c == c[0]).all() else c for c in ddcols]
+    ch = _Chunk()
+    ch.gap2 = [] if gaps else None
+    prev = {}  # dyad point -> (x, y, gap^2) at the last step of the chunk before
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for lo in range(0, S, chunk):
+            hi = min(S, lo + chunk)
+            n = hi - lo
+            ch.px = [float(X0[p, 0]) if fixed[p] else None for p in range(P)]
+            ch.py = [float(X0[p, 1]) if fixed[p] else None for p in range(P)]
+            ch.s = [c[lo:hi] for c in cols]
+            ch.trig = {}
+            for st in plan.steps:
+                _position(st, ch)
+            total = 0.0
+            for p in moving:
+                X[lo:hi, p, 0] = ch.px[p]
+                X[lo:hi, p, 1] = ch.py[p]
+                total = total + ch.px[p] + ch.py[p]  # NaN anywhere stays NaN
+            if moving:
+                ok[lo:hi] = np.isfinite(total)
+            if gaps:
+                # a step pair (i-1, i) is safe when both steps' roots are farther apart than
+                # BRANCH_MARGIN times the dyad point's move between them (|dx| + |dy| >= the move)
+                for p, g2 in ch.gap2:
+                    x, y = ch.px[p], ch.py[p]
+                    mv = np.abs(x[1:] - x[:-1]) + np.abs(y[1:] - y[:-1])
+                    g = np.minimum(g2[1:], g2[:-1])
+                    np.minimum(gap[lo + 1:hi], g - (BRANCH_MARGIN * mv) ** 2, out=gap[lo + 1:hi])
+                    if p in prev:
+                        x0, y0, g0 = prev[p]
+                        m0 = abs(x[0] - x0) + abs(y[0] - y0)
+                        gap[lo] = min(gap[lo], min(g0, g2[0]) - (BRANCH_MARGIN * m0) ** 2)
+                    prev[p] = (x[-1], y[-1], g2[-1])
+                ch.gap2 = []
+            if phi is not None:
+                if X2 is None or X2.shape[2] != n:
+                    X2 = np.empty((P, 2, n))
+                    X2[fixed] = X0[fixed][:, :, None]
+                for p in moving:
+                    X2[p, 0] = ch.px[p]
+                    X2[p, 1] = ch.py[p]
+                F = phi(X2, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
+                residual[lo:hi] = np.abs(F).max(axis=0) if F.shape[0] else 0.0
+            if order >= 1:
+                ch.sd = [c if isinstance(c, float) else c[lo:hi] for c in dcols]
+                ch.vx = [None] * P
+                ch.vy = [None] * P
+                for st in plan.steps:
+                    _derivative(st, ch, 1)
+                for p in moving:
+                    V[lo:hi, p, 0] = _val(ch.vx[p])
+                    V[lo:hi, p, 1] = _val(ch.vy[p])
+            if order >= 2:
+                ch.sdd = [c if isinstance(c, float) else c[lo:hi] for c in ddcols]
+                ch.ax = [None] * P
+                ch.ay = [None] * P
+                for st in plan.steps:
+                    _derivative(st, ch, 2)
+                for p in moving:
+                    A[lo:hi, p, 0] = _val(ch.ax[p])
+                    A[lo:hi, p, 1] = _val(ch.ay[p])
+    bad = ~ok
+    if bad.any():
+        X[np.ix_(bad, moving)] = np.nan
+        if V is not None:
+            V[np.ix_(bad, moving)] = np.nan
+        if A is not None:
+            A[np.ix_(bad, moving)] = np.nan
+        if residual is not None:
+            residual[bad] = np.nan
+    return Sweep(X, V, A, ok, residual, gap)
+
+
+def branch_check(plan: Plan, sweep: Sweep) -> bool:
+    """Return True when fixed-sign dyads surely follow the same branch as Newton continuation.
+
+    Newton continuation from step i-1 lands in the basin of the root on its side of the dyad's
+    centre line (half the roots' distance from either root); a guess less than one step's motion
+    from the root (even without a predictor) stays there as long as the two roots are farther
+    apart than ``BRANCH_MARGIN`` steps' motion. A step without assembly also returns False
+    (Newton's re-entry after a gap follows its own rules). Needs ``solve(..., gaps=True)``.
+    """
+    if not sweep.ok.all():
+        return False
+    if any(st.ambiguous for st in plan.steps):
+        return False
+    if sweep.gap is None:
+        return True
+    return bool((sweep.gap > 0).all())

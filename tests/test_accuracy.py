@@ -1,0 +1,300 @@
+"""The accuracy ladder (issue 6): honest errors against closed forms, and readable outputs.
+
+Speed is measured, not tested: no assertion here looks at a time.
+"""
+import dataclasses as dc
+import math
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+import linkpipe
+from linkpipe import accuracy, closed_forms
+from linkpipe.__main__ import main
+from linkpipe.kinematics import OK
+from linkpipe.stores import accuracy as store
+
+CONFIGS = pathlib.Path(__file__).resolve().parent.parent / "configs"
+SEEDS = ("shear_press", "basketball_goal")
+KINEMATIC = ("position", "velocity", "acceleration")
+
+
+def coarse(name: str, steps: int = 37) -> linkpipe.Scene:
+    """A shipped scene over the same range with fewer steps (the tests' ladders stay small)."""
+    return accuracy._with_steps(linkpipe.load_scene(str(CONFIGS / f"{name}.toml")), steps)
+
+
+@pytest.fixture(scope="module")
+def tol_ladders():
+    """The tolerance ladder (and the tightest analytic setting) of the two closed-form scenes."""
+    return {name: accuracy.measure(coarse(name), repeats=1, knobs=("tol", "jacobian"))
+            for name in ("fourbar_crank_rocker", "slider_crank")}
+
+
+def rows(ladder, knob, value=None):
+    return [r for r in ladder.rows if r.knob == knob and (value is None or r.value == value)]
+
+
+# ------------------------------------------------------------------ the reference
+@pytest.mark.parametrize("name, kind", [("fourbar_crank_rocker", "fourbar"),
+                                        ("slider_crank", "slider_crank"),
+                                        ("basketball_goal", "fourbar"),
+                                        ("shear_press", None)])
+def test_closed_forms_are_detected_structurally(name, kind):
+    scene = linkpipe.load_scene(str(CONFIGS / f"{name}.toml"))
+    form = closed_forms.detect(scene)
+    assert (form.kind if form else None) == kind
+    refs = accuracy.References(scene)
+    assert refs.kind.startswith("closed form") == (kind is not None)
+    assert "closed_form_rejected" not in refs.checks
+
+
+FOURBAR_MOVED = """
+[points]
+P2 = { x = 1.0, y = 2.0, fixed = true }
+Q  = { x = 0.5, y = 2.8660254037844386 }
+R  = { x = 0.0, y = 0.0 }
+P4 = { x = 3.0, y = 5.464101615137754, fixed = true }
+T  = { x = 1.0, y = 1.0 }
+[[links]]
+name = "crank"
+points = ["P2", "Q"]
+[[links]]
+name = "coupler"
+points = ["Q", "R", "T"]
+lengths = { "Q-R" = 3.5 }
+local = { T = [1.5, -0.8] }
+[[links]]
+name = "rocker"
+points = ["R", "P4"]
+lengths = { "R-P4" = 3.0 }
+[[drivers]]
+name = "crank"
+angle = ["Q", "P2"]
+from = 0.0
+to = 360.0
+steps = 73
+rate = 300.0
+acceleration = 50.0
+"""
+
+SLIDER_TILTED = """
+[points]
+O = { x = 1.0, y = -1.0, fixed = true }
+A = { x = 2.0, y = -1.0 }
+B = { x = -1.5, y = -2.0 }
+G = { x = 0.0, y = 0.0 }
+[[links]]
+name = "crank"
+points = ["O", "A"]
+[[links]]
+name = "rod"
+points = ["A", "B", "G"]
+lengths = { "A-B" = 3.5 }
+local = { G = [1.0, 0.3] }
+[[sliders]]
+name = "guide"
+point = "B"
+along = { through = [0.0, -1.5], direction = [2.0, 0.5] }
+[[drivers]]
+name = "crank"
+angle = ["O", "A"]
+from = 10.0
+to = 370.0
+steps = 73
+rate = -200.0
+"""
+
+
+@pytest.mark.parametrize("text", [FOURBAR_MOVED, SLIDER_TILTED], ids=["fourbar", "slider_crank"])
+def test_closed_forms_anywhere_in_the_plane(tmp_path, text):
+    # moved pivots, a tilted ground line or guide, the other assembly branch, a reversed or
+    # accelerating driver, further points on the coupler: the closed form still matches
+    path = tmp_path / "moved.toml"
+    path.write_text(text)
+    scene = linkpipe.load_scene(str(path))
+    scene = dc.replace(scene, solver=dc.replace(scene.solver, tol=1e-15), outputs=dc.replace(
+        scene.outputs, kinematics=("velocity", "acceleration")))
+    r = linkpipe.solve(scene)
+    assert (r.status == OK).all()
+    form = closed_forms.detect(scene, r.position[0])
+    assert form is not None
+    from linkpipe.kinematics import driver_motion
+
+    _, s, sd, sdd = driver_motion(r.model)
+    X, V, A = closed_forms.evaluate(form, scene, s[:, 0], sd[:, 0], sdd[:, 0])
+    size = r.model.size
+    assert np.abs(X - r.position).max() <= 1e-12 * size
+    assert np.abs(V - r.velocity).max() <= 1e-12 * np.abs(V).max()
+    assert np.abs(A - r.acceleration).max() <= 1e-11 * np.abs(A).max()
+
+
+# ------------------------------------------------------------------ the tolerance ladder
+@pytest.mark.parametrize("name", ["fourbar_crank_rocker", "slider_crank"])
+def test_errors_fall_as_the_tolerance_tightens(tol_ladders, name):
+    ladder = tol_ladders[name]
+    assert ladder.reference.startswith("closed form")
+    tol = sorted(rows(ladder, "tol"), key=lambda r: -float(r.value))  # loose -> tight
+    assert [float(r.value) for r in tol] == sorted(accuracy.FULL["tol"], reverse=True)
+    solved = [r for r in tol if r.steps_failed == 0]
+    assert solved and solved[-1].value == "1e-14"
+    floor = 1e-14  # rounding noise, relative
+    for q in KINEMATIC:
+        errors = [r.relative_error[q] for r in solved]
+        for looser, tighter in zip(errors, errors[1:]):
+            assert tighter <= 2 * looser + floor, (q, errors)
+        for r in solved:  # and every error is within what its tolerance allows
+            assert r.relative_error[q] <= max(1e3 * float(r.value), floor), (q, r.label)
+
+
+@pytest.mark.parametrize("name", ["fourbar_crank_rocker", "slider_crank"])
+def test_tightest_analytic_setting_matches_the_closed_form(tol_ladders, name):
+    ladder = tol_ladders[name]
+    (tight,) = rows(ladder, "tol", "1e-14")
+    assert tight.solver["jacobian"] == "analytic" and tight.solver["derivatives"] == "linear"
+    assert tight.steps_failed == 0 and tight.branch_kept
+    for q in KINEMATIC:
+        assert tight.relative_error[q] <= 1e-12, (q, tight.relative_error)
+    # the finite-difference Jacobian converges to the same answer
+    (fd,) = rows(ladder, "jacobian", "finite_difference")
+    assert fd.steps_failed == 0 and fd.relative_error["position"] <= 1e-10
+
+
+# ------------------------------------------------------------------ finite differences
+def test_finite_difference_velocities_converge_at_second_order():
+    scene = coarse("fourbar_crank_rocker", 37)
+    ladder = accuracy.measure(scene, repeats=1, knobs=("derivatives",))
+    fd = sorted(rows(ladder, "derivatives", "finite_difference"), key=lambda r: r.steps)
+    assert [r.steps for r in fd] == [10, 19, 37, 73, 145]
+    (linear,) = rows(ladder, "derivatives", "linear")
+    assert linear.relative_error["velocity"] <= 1e-12
+    # the order measured from two step counts, each against the reference at its own values
+    e1, e2 = fd[-2].error["velocity"], fd[-1].error["velocity"]
+    h1, h2 = 1 / (fd[-2].steps - 1), 1 / (fd[-1].steps - 1)
+    order = math.log(e1 / e2) / math.log(h1 / h2)
+    assert 1.8 <= order <= 2.2, order
+    assert fd[-1].observed_order["velocity"] == pytest.approx(order)
+    # central differences: the velocity error falls ~4x per doubling on the fine end
+    assert fd[-1].relative_error["velocity"] < fd[-2].relative_error["velocity"] / 3
+    # and the shortcut is far from the linear solves at the scene's own resolution
+    (same,) = [r for r in fd if r.steps == scene.n_steps]
+    assert same.relative_error["velocity"] > 1e3 * linear.relative_error["velocity"]
+
+
+# ------------------------------------------------------------------ the command and its files
+def rerun_exe():
+    exe = pathlib.Path(sys.executable).with_name("rerun")
+    return str(exe) if exe.exists() else shutil.which("rerun")
+
+
+@pytest.mark.parametrize("name", SEEDS)
+def test_accuracy_command_on_the_seeds(tmp_path, capsys, name):
+    out = tmp_path / "out"
+    assert main(["accuracy", str(CONFIGS / f"{name}.toml"), "--quick", "--repeats", "1",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "reference:" in printed and "tol" in printed and "dyads" in printed
+    h5, rrd = out / f"{name}_accuracy.h5", out / f"{name}_accuracy.rrd"
+    assert h5.exists() and rrd.exists()
+    # errors do not depend on timing: a fresh measurement gives the same numbers
+    ladder = accuracy.measure(str(CONFIGS / f"{name}.toml"), quick=True, repeats=1)
+    data = store.read_h5(h5)
+    assert list(data["row"]) == [r.label for r in ladder.rows]
+    assert list(data["quantity"]) == list(ladder.quantities)
+    want = np.array([[r.relative_error[q] for q in ladder.quantities] for r in ladder.rows])
+    np.testing.assert_array_equal(data["relative_error"], want)
+    np.testing.assert_array_equal(data["steps_failed"], [r.steps_failed for r in ladder.rows])
+    exe = rerun_exe()
+    if exe is None:
+        pytest.skip("no rerun executable")
+    done = subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
+def test_h5_holds_what_measure_returned(tmp_path):
+    ladder = accuracy.measure(str(CONFIGS / "shear_press.toml"), quick=True, repeats=2)
+    path = tmp_path / "ladder.h5"
+    store.write_h5(ladder, path)
+    with h5py.File(path, "r") as f:
+        assert f.attrs["scene_name"] == "shear_press"
+        assert f.attrs["repeats"] == 2
+        labels = [x.decode() if isinstance(x, bytes) else x for x in f["row"][()]]
+        assert labels == [r.label for r in ladder.rows]
+        for name in ("seconds", "seconds_solve", "seconds_positions", "iterations_mean"):
+            np.testing.assert_array_equal(f[name][()], [getattr(r, name) for r in ladder.rows])
+            assert f[name].dims[0][0].name == "/row"
+        np.testing.assert_array_equal(
+            f["error"][()], [[r.error[q] for q in ladder.quantities] for r in ladder.rows])
+        assert f["seconds"].attrs["units"] == "s"
+        np.testing.assert_array_equal(f["branch_kept"][()], [r.branch_kept for r in ladder.rows])
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("h5netcdf")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        assert ds["relative_error"].dims == ("row", "quantity")
+        sel = ds["seconds_solve"].sel(row="tol=1e-12").item()
+        (row,) = [r for r in ladder.rows if r.label == "tol=1e-12"]
+        assert sel == row.seconds_solve
+        assert list(ds["quantity"].values) == ["position", "velocity", "acceleration",
+                                               "input_force"]
+
+
+def test_every_knob_has_rows_and_dyads_never_crash():
+    ladder = accuracy.measure(str(CONFIGS / "shear_press.toml"), quick=True, repeats=1)
+    knobs = {r.knob for r in ladder.rows}
+    assert knobs == set(accuracy.KNOBS)
+    methods = {r.value: r for r in rows(ladder, "method")}
+    assert set(methods) == {"auto", "newton", "dyads"}
+    assert methods["auto"].available and methods["newton"].available
+    dy = methods["dyads"]
+    assert dy.available or dy.note.startswith("not available")
+    for r in rows(ladder, "predictor"):  # iterations and the branch are reported
+        assert r.iterations_max >= 1 and isinstance(r.branch_kept, bool)
+    text = accuracy.table(ladder)
+    assert len(text.splitlines()) == len(ladder.rows) + 2
+    assert any(r.base for r in ladder.rows) and any(r.front for r in ladder.rows)
+
+
+def test_a_lost_branch_is_reported():
+    # the crank-rocker's other assembly (B mirrored across A-O4) is a different mechanism state:
+    # a row that lands there is flagged, however small its residual
+    scene = coarse("fourbar_crank_rocker", 37)
+    refs = accuracy.References(scene)
+    ref = refs.at(scene.n_steps)
+    r = linkpipe.solve(accuracy._all_orders(scene))
+    row = accuracy.Row("predictor", "none", scene.n_steps, "kinematics", {})
+    accuracy._measure_errors(row, r, ref, accuracy._scales(ref))
+    assert row.branch_kept and row.steps_failed == 0
+    other = dc.replace(refs.form, branch=-refs.form.branch)
+    from linkpipe.kinematics import driver_motion
+
+    _, s, sd, sdd = driver_motion(r.model)
+    X, V, A = closed_forms.evaluate(other, r.scene, s[:, 0], sd[:, 0], sdd[:, 0])
+    flipped = dc.replace(r, position=np.where(np.arange(len(X))[:, None, None] == 20, X, r.position))
+    row = accuracy.Row("predictor", "none", scene.n_steps, "kinematics", {})
+    accuracy._measure_errors(row, flipped, ref, accuracy._scales(ref))
+    assert not row.branch_kept
+
+
+def test_method_rows_say_which_path_ran():
+    class Old:  # a result from a build without the fast path
+        pass
+
+    assert accuracy.method_available(Old(), "dyads") == (
+        False, "not available: no dyads fast path in this build")
+    assert accuracy.method_available(Old(), "newton")[0]
+    ladder = accuracy.measure(coarse("fourbar_crank_rocker", 37), repeats=1, knobs=("method",))
+    methods = {r.value: r for r in rows(ladder, "method")}
+    assert methods["newton"].path == "newton"
+    dy = methods["dyads"]
+    if dy.available:  # the closed-form fast path: as exact as the closed form
+        assert dy.path == "dyads" and dy.iterations_max == 0
+        for q in KINEMATIC:
+            assert dy.relative_error[q] <= 1e-12
+    else:
+        assert dy.note.startswith("not available")

@@ -1,0 +1,233 @@
+"""The closed-form dyad path and the vectorised general path against the sequential Newton path.
+
+Every shipped config: ``method = "dyads"`` and ``method = "newton"`` give the same positions,
+velocities, accelerations and statuses to 1e-12 relative (Newton run at a tight tolerance, so
+that the comparison measures the fast path, not Newton's stopping point). A mechanism that does
+not decompose runs Newton under ``auto`` and is a SceneError under ``dyads``.
+"""
+import dataclasses as dc
+
+import numpy as np
+import pytest
+
+import linkpipe
+from linkpipe import batch, dyads
+from linkpipe import kinematics as kin
+from linkpipe.errors import SceneError
+from linkpipe.model import build_model
+
+from closed_forms import fourbar
+from conftest import CONFIG_DIR, CONFIGS
+
+REL = 1e-12
+
+
+def with_solver(scene, **kw):
+    return dc.replace(scene, solver=dc.replace(scene.solver, **kw))
+
+
+def with_steps(scene, steps):
+    return dc.replace(scene, drivers=tuple(dc.replace(d, steps=steps, step=None) for d in scene.drivers))
+
+
+def rel_err(a, b):
+    """Largest difference relative to the largest magnitude (NaN where both are NaN is equal)."""
+    assert np.array_equal(np.isnan(a), np.isnan(b))
+    scale = max(np.nanmax(np.abs(b)), 1e-300) if np.isfinite(b).any() else 1.0
+    d = np.abs(a - b)
+    return float(np.nanmax(d) / scale) if np.isfinite(d).any() else 0.0
+
+
+@pytest.fixture(scope="module", params=[p.stem for p in CONFIGS])
+def pair(request):
+    scene = linkpipe.load_scene(str(CONFIG_DIR / f"{request.param}.toml"))
+    scene = dc.replace(scene, outputs=dc.replace(scene.outputs, kinematics=("velocity", "acceleration")))
+    fast = linkpipe.solve(with_solver(scene, method="dyads"))
+    slow = linkpipe.solve(with_solver(scene, method="newton", tol=1e-14))
+    return fast, slow
+
+
+def test_every_shipped_config_decomposes_and_auto_takes_dyads(pair):
+    fast, slow = pair
+    assert fast.solver_method_used == "dyads" and slow.solver_method_used == "newton"
+    assert linkpipe.solve(fast.scene.path).solver_method_used == "dyads"
+    assert fast.attributes()["solver_method_used"] == "dyads"
+
+
+def test_dyads_agree_with_newton(pair):
+    fast, slow = pair
+    np.testing.assert_array_equal(fast.status, slow.status)
+    assert rel_err(fast.position, slow.position) <= REL
+    assert rel_err(fast.velocity, slow.velocity) <= REL
+    assert rel_err(fast.acceleration, slow.acceleration) <= REL
+    assert rel_err(fast.link_angle, slow.link_angle) <= REL
+    np.testing.assert_allclose(fast.condition, slow.condition, rtol=1e-9)
+    assert np.nanmax(fast.residual) <= 1e-14 * fast.model.size
+    if fast.forces:
+        for name, (_, data, _) in fast.forces.items():
+            if not name.startswith("__"):
+                assert rel_err(data, slow.forces[name][1]) <= 1e-10, name
+
+
+def test_engine_derivatives_match_the_dense_ones(pair):
+    """batch.derivatives (block-triangular sparse solves) == kinematics.derivatives (dense)."""
+    _, r = pair
+    model = r.model
+    value, s, sd, sdd = kin.driver_motion(model)
+    X = np.where(np.isfinite(r.position), r.position, 0.0)
+    status = np.where(np.isfinite(r.position).all(axis=(1, 2)), kin.OK, kin.NO_ASSEMBLY).astype(np.int8)
+    a = batch.derivatives(model, X, s, sd, sdd, status, True)
+    b = kin.derivatives(model, X, s, sd, sdd, status, True)
+    np.testing.assert_array_equal(a["status"], b["status"])
+    for key in ("velocity", "acceleration", "jacobian_inverse"):
+        assert rel_err(a[key], b[key]) <= REL, key
+    np.testing.assert_allclose(a["condition"], b["condition"], rtol=1e-9)
+
+
+def test_vectorised_general_path_on_a_long_sweep():
+    """Coarse continuation + batched Newton from Hermite predictions == the closed form."""
+    scene = with_steps(linkpipe.load_scene(str(CONFIG_DIR / "fourbar_crank_rocker.toml")), 3001)
+    model = build_model(scene)
+    value, s, sd, sdd = kin.driver_motion(model)
+    out = batch.solve_newton(model, s, sd, sdd, order=2)
+    assert (out["status"] == kin.OK).all()
+    assert out["sequential"].sum() < 200  # the coarse nodes only: the rest went vectorised
+    cf = fourbar(1.0, 3.5, 3.0, 4.0, s[:, 0], 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
+    X = model.positions(out["q"])
+    names = model.point_names
+    for p in ("A", "B", "P"):
+        i = names.index(p)
+        np.testing.assert_allclose(X[:, i], cf[p], atol=1e-12 * 4.0)
+        np.testing.assert_allclose(out["velocity"][:, i], cf["V" + p], atol=1e-12 * 40.0)
+        np.testing.assert_allclose(out["acceleration"][:, i], cf["A" + p], atol=1e-11 * 400.0)
+    # and the dyads on the same sweep
+    plan = dyads.decompose(model)
+    dyads.set_branches(plan, X[0], s[0])
+    sw = dyads.solve(plan, s, sd, sdd)
+    assert rel_err(sw.position, X) <= REL
+    assert rel_err(sw.acceleration, out["acceleration"]) <= REL
+
+
+STEPHENSON = """
+# A crank driving a triad (a ternary link held by three binary links): an Assur group of
+# class III, which closes only by solving its loops together.
+[points]
+O1 = { x = 0.0, y = 0.0, fixed = true }
+O2 = { x = 4.0, y = 0.5, fixed = true }
+O3 = { x = 0.0, y = 3.5, fixed = true }
+A = { x = 1.0, y = 0.0 }
+B = { x = 1.5, y = 2.0 }
+C = { x = 3.0, y = 2.5 }
+D = { x = 2.5, y = 1.2 }
+[[links]]
+name = "crank"
+points = ["O1", "A"]
+[[links]]
+name = "ab"
+points = ["A", "B"]
+[[links]]
+name = "o2c"
+points = ["O2", "C"]
+[[links]]
+name = "o3d"
+points = ["O3", "D"]
+[[links]]
+name = "triad"
+points = ["B", "C", "D"]
+[[drivers]]
+name = "crank"
+angle = ["O1", "A"]
+from = 0.0
+to = 20.0
+steps = 21
+rate = 57.29577951308232
+[outputs]
+kinematics = ["velocity", "acceleration"]
+"""
+
+
+def test_a_triad_does_not_decompose_and_auto_runs_newton():
+    scene = linkpipe.parse_scene(STEPHENSON, "triad.toml")
+    plan = dyads.decompose(build_model(scene))
+    assert not plan.ok and "B" in plan.reason
+    r = linkpipe.solve(scene)
+    assert r.solver_method_used == "newton" and "no closed-form dyad" in r.solver_note
+    assert (r.status == kin.OK).all()
+    # the loops close: every link keeps its start length
+    X = r.position
+    for a, b in (("O1", "A"), ("A", "B"), ("O2", "C"), ("O3", "D"), ("B", "C")):
+        ia, ib = r.point_names.index(a), r.point_names.index(b)
+        L = np.linalg.norm(X[:, ib] - X[:, ia], axis=1)
+        np.testing.assert_allclose(L, L[0], atol=1e-12)
+
+
+def test_method_dyads_on_a_scene_that_does_not_decompose_is_a_scene_error():
+    scene = with_solver(linkpipe.parse_scene(STEPHENSON, "triad.toml"), method="dyads")
+    with pytest.raises(SceneError) as err:
+        linkpipe.solve(scene)
+    msg = str(err.value)
+    assert "[solver] method" in msg and '"auto"' in msg and "decompose" in msg
+
+
+def test_auto_leaves_dyads_that_pass_a_change_point_to_newton():
+    """The basketball parallelogram swept through its change point (links collinear at 90 deg).
+
+    The fixed-sign dyad would turn onto the anti-parallelogram there; Newton continuation goes
+    on smoothly. ``auto`` must give Newton's answer.
+    """
+    scene = linkpipe.load_scene(str(CONFIG_DIR / "basketball_goal.toml"))
+    scene = dc.replace(scene, drivers=tuple(dc.replace(d, to_value=120.0) for d in scene.drivers),
+                       effects=(), outputs=dc.replace(scene.outputs, vectors=()))
+    scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=37) for d in scene.drivers))
+    auto = linkpipe.solve(scene)
+    newton = linkpipe.solve(with_solver(scene, method="newton"))
+    assert auto.solver_method_used == "newton"
+    np.testing.assert_array_equal(auto.status, newton.status)
+    np.testing.assert_allclose(auto.position, newton.position, atol=1e-12, equal_nan=True)
+    # forced, the fixed-sign dyads run and keep their sign on every step they assemble
+    forced = linkpipe.solve(with_solver(scene, method="dyads"))
+    assert forced.solver_method_used == "dyads"
+    ok = forced.status == kin.OK
+    assert ok.sum() >= 35
+    P = forced.position
+    i = {n: forced.point_names.index(n) for n in ("O2", "B", "C")}
+    d, r = P[ok][:, i["C"]] - P[ok][:, i["O2"]], P[ok][:, i["B"]] - P[ok][:, i["O2"]]
+    side = np.sign(d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0])
+    assert (side == side[0]).all()
+
+
+def test_dyads_without_assembly_give_nan_and_no_assembly():
+    text = """
+[points]
+O2 = { x = 0.0, y = 0.0, fixed = true }
+A = { x = 2.0, y = 0.0 }
+B = { x = 3.0, y = 1.9 }
+O4 = { x = 3.5, y = 0.0, fixed = true }
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+[[links]]
+name = "coupler"
+points = ["A", "B"]
+lengths = { "A-B" = 2.0 }
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = { "O4-B" = 2.0 }
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = 0.0
+to = 360.0
+steps = 73
+[solver]
+method = "dyads"
+"""
+    r = linkpipe.solve(linkpipe.parse_scene(text, "triple_rocker.toml"))
+    th = np.deg2rad(r.driver_value[:, 0])
+    dist = np.hypot(2 * np.cos(th) - 3.5, 2 * np.sin(th))
+    outside, inside = dist > 4 + 1e-6, dist < 4 - 1e-6
+    assert (r.status[outside] == kin.NO_ASSEMBLY).all() and outside.any()
+    assert (r.status[inside] == kin.OK).all()
+    assert np.isnan(r.position[outside][:, r.point_names.index("B")]).all()
+    np.testing.assert_array_equal(r.position[outside][:, r.point_names.index("O4")], [[3.5, 0.0]] * outside.sum())
