@@ -146,8 +146,10 @@ def summary(result, written=(), seconds_total=None) -> str:
     from .scene import Solver
 
     changed = {k: v for k, v in vars(sc.solver).items() if v != getattr(Solver, k)}
-    if changed:  # the [solver] knobs this run did not leave at linkpipe's defaults
-        lines.append("  solver: " + ", ".join(f"{k} {v}" for k, v in changed.items()))
+    used = getattr(result, "solver_method_used", "")
+    path = [f"path {used}"] if used else []
+    if changed or path:  # the path taken, and the [solver] knobs not at linkpipe's defaults
+        lines.append("  solver: " + ", ".join(path + [f"{k} {v}" for k, v in changed.items()]))
     if result.mobility.redundant:
         line = (f"  redundant constraints: {result.mobility.redundant} (solved by least squares; "
                 f"'singular' only beyond them)")

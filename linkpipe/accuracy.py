@@ -19,6 +19,13 @@ at every step. The input force always comes from that extended run (no closed fo
 forces). Every row asks for velocities and accelerations, so all three kinematic orders are
 measured even where the scene itself would not compute them.
 
+The knobs ``tol``, ``max_iter``, ``jacobian``, ``derivatives`` and ``predictor`` are varied on
+the general Newton path (``method = "newton"``): the closed-form dyads that ``method = "auto"``
+takes where the scene decomposes do not iterate. The ``method`` rows compare the paths from the
+scene's own settings; a ``dyads`` row the build cannot run says "not available". The Pareto
+front (:meth:`Ladder.front`) is found among rows at the scene's own step count, over all paths
+and over the Newton path alone.
+
 numpy only: the files are written by :mod:`linkpipe.stores.accuracy`.
 """
 from __future__ import annotations

@@ -21,6 +21,20 @@ import numpy as np
 __all__ = ["fourbar", "slider_crank", "ClosedForm", "detect", "evaluate"]
 
 
+def _nan_quietly(fn):
+    """Run ``fn`` with numpy's invalid/divide warnings off: out of range or at a singular
+    configuration the formulas give NaN (or inf) on purpose, step by step."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+@_nan_quietly
 def fourbar(a, b, c, d, theta2, omega2, alpha2, branch=+1, coupler_uv=(0.0, 0.0)):
     """Return dict of A, B, P positions/velocities/accelerations (S, 2) and theta3/theta4/omegas."""
     t2 = np.asarray(theta2, float)
@@ -30,8 +44,7 @@ def fourbar(a, b, c, d, theta2, omega2, alpha2, branch=+1, coupler_uv=(0.0, 0.0)
     v = O4 - A
     dist = np.linalg.norm(v, axis=-1)
     along = (b**2 - c**2 + dist**2) / (2 * dist)
-    with np.errstate(invalid="ignore"):  # out of the assembly range: NaN
-        h = np.sqrt(b**2 - along**2)
+    h = np.sqrt(b**2 - along**2)  # out of the assembly range: NaN
     e = v / dist[:, None]
     ep = np.stack([-e[:, 1], e[:, 0]], -1)
     B = A + along[:, None] * e + branch * h[:, None] * ep
@@ -67,6 +80,7 @@ def fourbar(a, b, c, d, theta2, omega2, alpha2, branch=+1, coupler_uv=(0.0, 0.0)
                 theta3=t3, theta4=t4, omega3=w3, omega4=w4, alpha3=al3, alpha4=al4)
 
 
+@_nan_quietly
 def slider_crank(a, b, e, theta, omega, alpha, branch=+1):
     """Return A, B positions, velocities, accelerations (S, 2) of an offset slider-crank.
 
@@ -75,8 +89,7 @@ def slider_crank(a, b, e, theta, omega, alpha, branch=+1):
     t = np.asarray(theta, float)
     s, c = np.sin(t), np.cos(t)
     h = a * s - e
-    with np.errstate(invalid="ignore"):  # out of the assembly range: NaN
-        r = np.sqrt(b**2 - h**2)
+    r = np.sqrt(b**2 - h**2)  # out of the assembly range: NaN
     x = a * c + branch * r
     hd = a * c * omega
     hdd = -a * s * omega**2 + a * c * alpha

@@ -138,20 +138,67 @@ def _null_line_roots(model: Model, q: np.ndarray, s_row: np.ndarray):
 
 
 def _mirror_root(model: Model, q: np.ndarray, s_row: np.ndarray, tol_abs: float, max_iter: int,
-                 jacobian: str):
-    """Return (q, iterations) of the root across the nearest fold from the root ``q`` (1, n_q).
+                 jacobian: str, accept, guesses=()):
+    """Return (q, iterations): another root than ``q`` (1, n_q) for which ``accept(q)`` holds.
 
-    The other root of :func:`_null_line_roots` (one is ``t = 0``: q itself), polished by Newton.
-    Returns (None, iterations) when there is none.
+    First the other root of :func:`_null_line_roots` (one is ``t = 0``: q itself), polished by
+    Newton: the root across a nearby fold. Then deflated Newton (Farrell et al. 2015: Newton on
+    ``Phi / |x - q|^2 + Phi``, which cannot converge to q again) from ``guesses`` and from q
+    moved along each right singular vector of the Jacobian. Returns (None, iterations) when
+    none is found.
     """
+    s1 = s_row[None]
+    total = 0
     v, roots = _null_line_roots(model, q, s_row)
-    if not roots:
-        return None, 0
-    t = max(roots, key=abs)
-    qn, _, it, conv = newton(model, q + t * v, s_row[None], tol_abs, max_iter, jacobian)
-    if conv[0] and drivers_aligned(model, qn, s_row[None])[0]:
-        return qn, int(it[0])
-    return None, int(it[0])
+    if roots:
+        qn, _, it, conv = newton(model, q + max(roots, key=abs) * v, s1, tol_abs, max_iter, jacobian)
+        total += int(it[0])
+        if conv[0] and drivers_aligned(model, qn, s1)[0] and accept(qn):
+            return qn, total
+    Vt = np.linalg.svd(model.jacobian(model.positions(q), s1)[0])[2]
+    starts = [np.asarray(g, dtype=float).reshape(1, -1) for g in guesses]
+    starts += [q + sign * 0.1 * model.size * w for w in Vt[::-1] for sign in (1.0, -1.0)]
+    for x in starts:
+        qn, it, ok = _deflated_newton(model, x, s_row, q, tol_abs, max_iter)
+        total += it
+        if ok and drivers_aligned(model, qn, s1)[0] and accept(qn):
+            return qn, total
+    return None, total
+
+
+def _deflated_newton(model: Model, x: np.ndarray, s_row: np.ndarray, q_known: np.ndarray,
+                     tol_abs: float, max_iter: int):
+    """Newton on ``G = m(x) Phi(x)``, ``m = size^2 / |x - q_known|^2 + 1``: roots other than q_known.
+
+    The step is Newton's scaled by ``1 / (1 - g . dx)`` with ``g = grad m / m`` (Sherman-Morrison),
+    capped at half the size. Returns (x (1, n_q), iterations, converged).
+    """
+    s1 = s_row[None]
+    x = np.array(x, dtype=float)
+    cap = 0.5 * model.size
+    for it in range(1, 2 * max_iter + 1):
+        F = model.phi(model.positions(x), s1)[0]
+        if np.abs(F).max() <= tol_abs:
+            near = np.abs(x - q_known).max() <= 1e-6 * model.size
+            return x, it - 1, not near
+        J = model.jacobian(model.positions(x), s1)[0]
+        dx = _lin_solve(J[None], -F[None])[0]
+        r = (x - q_known)[0] / model.size  # scale-free: the same deflation in m and in mm
+        r2 = float(r @ r)
+        if r2 == 0.0:
+            return x, it, False
+        m = 1.0 / r2 + 1.0
+        g = (-2.0 * r / r2**2) / m / model.size
+        denom = 1.0 - float(g @ dx)
+        if abs(denom) > 1e-12:
+            dx = dx / denom
+        big = np.abs(dx).max()
+        if not np.isfinite(big):
+            return x, it, False
+        if big > cap:
+            dx *= cap / big
+        x = x + dx
+    return x, 2 * max_iter, False
 
 
 def _lin_solve(J, b):
@@ -229,8 +276,21 @@ def _lm_root(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: floa
     Runs until the residual (max abs of Phi) is within ``tol_abs`` or stops falling: towards a
     root it keeps shrinking by a large factor per step (quadratically, or by 4 at a double root,
     where Newton's undamped steps may wander); towards a non-zero minimum (no assembly) its
-    decrease dies out at once.
+    decrease dies out at once. A root with an angle driver's vector pointing backwards (the
+    angle row's other root) is not this step's mechanism: from there it tries once more with the
+    driven point aimed, and reports an infinite residual if that fails too.
     """
+    q, r, it = _lm_loop(model, q_guess, s_row, tol_abs, max_iter)
+    if r <= tol_abs and not drivers_aligned(model, q[None], s_row[None])[0]:
+        q, r, it2 = _lm_loop(model, aim_drivers(model, q, s_row), s_row, tol_abs, max_iter)
+        it += it2
+        if r <= tol_abs and not drivers_aligned(model, q[None], s_row[None])[0]:
+            r = np.inf
+    return q, r, it
+
+
+def _lm_loop(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: float, max_iter: int):
+    """The Levenberg-Marquardt iteration of :func:`_lm_root`."""
     def fun(qq):
         return model.phi(model.positions(qq[None]), s_row[None])[0]
 
@@ -389,6 +449,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     square = model.n_rows == nq
     last_sign = 0.0  # sign of det(Phi_q) at the last regular step: the assembly mode
     gap = False  # a failed step since the last assembled one
+    gap_shape = None  # least-squares shape of the last failed step
     for i in range(S):
         ds = s[i] - last_s
         guess = last_q.copy()
@@ -401,8 +462,13 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
         it_lm = 0
         if gap and nq:
             # after a failed step most steps fail too: damped least squares, which stops as soon
-            # as the residual stops falling, decides first (Newton only polishes a root it finds)
-            q_lm, r_lm, it_lm = _lm_root(model, guess, s[i], tol_abs)
+            # as the residual stops falling, decides first (Newton only polishes a root it finds).
+            # It starts from the previous step's least-squares shape: that shape moves on
+            # continuously through the gap and becomes a root where the sweep re-enters the range
+            start = guess if gap_shape is None else aim_drivers(model, gap_shape, s[i])
+            q_lm, r_lm, it_lm = _lm_root(model, start, s[i], tol_abs)
+            if np.all(np.isfinite(q_lm)):
+                gap_shape = q_lm
             if not r_lm <= 10 * tol_abs:
                 residual[i], iterations[i], status[i] = r_lm, it_lm, NO_ASSEMBLY
                 continue
@@ -460,15 +526,19 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 # re-entering after a gap: no path connects the two sides, so keep the assembly
                 # mode (sign of det Phi_q) of the last regular step, if it exists here
                 if np.linalg.slogdet(J[0])[0] != last_sign:
-                    alt, extra = _mirror_root(model, qi, s[i], tol_abs, max_iter, jacobian)
+                    def same_mode(qq, si=s[i]):
+                        Jq = model.jacobian(model.positions(qq), si[None])
+                        return bool(np.linalg.slogdet(Jq[0])[0] == last_sign
+                                    and jacobian_condition(Jq)[0] * rcond < 1.0)
+
+                    alt, extra = _mirror_root(model, qi, s[i], tol_abs, max_iter, jacobian,
+                                              same_mode, guesses=(guess,))
                     iterations[i] += extra
                     if alt is not None:
-                        Ja = model.jacobian(model.positions(alt), s[i][None])
-                        if (np.linalg.slogdet(Ja[0])[0] == last_sign
-                                and jacobian_condition(Ja)[0] * rcond < 1.0):
-                            qi, X, J = alt, model.positions(alt), Ja
-                            residual[i] = float(np.abs(model.phi(X, s[i][None])).max())
-            gap = False
+                        qi, X = alt, model.positions(alt)
+                        J = model.jacobian(X, s[i][None])
+                        residual[i] = float(np.abs(model.phi(X, s[i][None])).max())
+            gap, gap_shape = False, None
             if square and regular:
                 last_sign = np.linalg.slogdet(J[0])[0]
             q[i] = qi[0]
@@ -498,6 +568,8 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
             status[i] = (_classify_failure(model, guess, s[i], tol_abs) if lm_residual is None
                          else NOT_CONVERGED if lm_residual <= 10 * tol_abs else NO_ASSEMBLY)
             gap = True
+            if lm_residual is not None and np.all(np.isfinite(q_lm)):
+                gap_shape = q_lm
             last_dq, last_d2q = None, None  # after a gap, restart from the last assembled shape
     return q, residual, iterations, status
 

@@ -290,6 +290,18 @@ def build_model(scene: Scene) -> Model:
             else:
                 r = X0[ip] - X0[ia]
                 u, v = float(r @ e), float(r @ ep)
+            reach = float(np.hypot(u, v)) / L
+            if reach**2 * scene.solver.singular_rcond >= 1.0:
+                # the Jacobian's condition grows as reach^2: every step would count as singular
+                raise SceneError(
+                    scene.path, f'links "{link.name}"', "local" if pname in link.local else "points",
+                    f'point "{pname}" is {reach:.3g} times farther from "{link.points[0]}" than '
+                    f'the link\'s second point "{link.points[1]}": a frame that short cannot hold '
+                    f"it (the constraint Jacobian's condition grows as the square of that ratio, "
+                    f"about {reach**2:.1g} here, and every step would count as singular)",
+                    f'list a far point second so that the frame is long, e.g. points = '
+                    f'["{link.points[0]}", "{pname}", ...] (lengths and local refer to the first '
+                    f"two points)")
             for key, val in zip(("a", "b", "p", "u", "v", "len"), (ia, ib, ip, u, v, L)):
                 loc[key].append(val)
 

@@ -322,3 +322,108 @@ def method(request):
     has no conftest.py of its own, so that ``from conftest import ...`` in tests/ stays unique.
     """
     return request.param
+
+
+def slider_crank_text(a, b, e, start_deg, to_deg, steps, branch=+1, scale=1.0,
+                      rate_deg=572.9577951308232, name="slider_crank"):
+    """Return a crank-driven offset slider-crank: crank a, rod b, guide y = e; slider B ahead of
+    A along +x (branch +1) or behind it (-1), assembled at ``start_deg``."""
+    t = np.deg2rad(start_deg)
+    A = np.array([a * np.cos(t), a * np.sin(t)])
+    x = A[0] + branch * np.sqrt(b**2 - (A[1] - e) ** 2)
+    a, b, e, x = (scale * v for v in (a, b, e, x))
+    A = scale * A
+    return f"""
+[scene]
+name = "{name}"
+
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+A  = {{ x = {f(A[0])}, y = {f(A[1])} }}
+B  = {{ x = {f(x)}, y = {f(e)} }}
+
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = {{ "O2-A" = {f(a)} }}
+
+[[links]]
+name = "rod"
+points = ["A", "B"]
+lengths = {{ "A-B" = {f(b)} }}
+
+[[sliders]]
+name = "piston"
+point = "B"
+along = {{ through = [0.0, {f(e)}], direction = [1.0, 0.0] }}
+
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = {f(start_deg)}
+to = {f(to_deg)}
+steps = {int(steps)}
+rate = {f(rate_deg)}
+
+[outputs]
+kinematics = ["velocity", "acceleration"]
+"""
+
+
+def six_bar_text(a, b, c, d, uv, O6, Q, start_deg, to_deg, steps, rate_deg=572.9577951308232,
+                 branch=+1):
+    """Return a Watt six-bar: the four-bar (a, b, c, d) with coupler point P at ``uv`` in the
+    coupler's frame, and a dyad P-Q, O6-Q (lengths taken from the start configuration)."""
+    th = np.deg2rad(start_deg)
+    A = np.array([a * np.cos(th), a * np.sin(th)])
+    B = fourbar_B(a, b, c, d, th, branch)
+    e = (B - A) / np.hypot(*(B - A))
+    P = A + uv[0] * e + uv[1] * np.array([-e[1], e[0]])
+    return f"""
+[scene]
+name = "six_bar"
+
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+O4 = {{ x = {f(d)}, y = 0.0, fixed = true }}
+O6 = {{ x = {f(O6[0])}, y = {f(O6[1])}, fixed = true }}
+A  = {{ x = {f(A[0])}, y = {f(A[1])} }}
+B  = {{ x = {f(B[0])}, y = {f(B[1])} }}
+P  = {{ x = {f(P[0])}, y = {f(P[1])} }}
+Q  = {{ x = {f(Q[0])}, y = {f(Q[1])} }}
+
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = {{ "O2-A" = {f(a)} }}
+
+[[links]]
+name = "coupler"
+points = ["A", "B", "P"]
+lengths = {{ "A-B" = {f(b)} }}
+local = {{ P = [{f(uv[0])}, {f(uv[1])}] }}
+
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = {{ "O4-B" = {f(c)} }}
+
+[[links]]
+name = "link5"
+points = ["P", "Q"]
+
+[[links]]
+name = "link6"
+points = ["O6", "Q"]
+
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = {f(start_deg)}
+to = {f(to_deg)}
+steps = {int(steps)}
+rate = {f(rate_deg)}
+
+[outputs]
+kinematics = ["velocity", "acceleration"]
+"""

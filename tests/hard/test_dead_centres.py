@@ -28,11 +28,11 @@ def exact(x, e, v=V):
     rB = np.hypot(x, e)
     phi = np.arctan2(e, x)
     t = phi + np.arccos(np.clip((A_**2 + rB**2 - B_**2) / (2 * A_ * rB), -1, 1))
-    dxdt = slider_crank(A_, B_, e, t, 1.0, 0.0)["VB"][:, 0]  # dx/dtheta
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):  # infinite crank speed on the dead centres
+        dxdt = slider_crank(A_, B_, e, t, 1.0, 0.0)["VB"][:, 0]  # dx/dtheta
         w = v / dxdt
         al = -slider_crank(A_, B_, e, t, w, 0.0)["AB"][:, 0] / dxdt  # makes the slider's xdd 0
-    cf = slider_crank(A_, B_, e, t, w, al)
+        cf = slider_crank(A_, B_, e, t, w, al)
     return cf["A"], cf["VA"], cf["AA"], w, al
 
 

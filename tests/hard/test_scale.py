@@ -95,5 +95,6 @@ def test_slider_driven_coordinate_driver(method):
     np.testing.assert_allclose(mm.position[ok] / K, m.position[ok], rtol=0, atol=REL * 4.5)
     # velocities are relative to the local crank-pin speed, unbounded near the dead centres
     vs = np.abs(m.velocity[ok]).max(axis=(1, 2))[:, None, None]
-    np.testing.assert_allclose(mm.velocity[ok] / K, m.velocity[ok], rtol=0, atol=None or 0) if False else None
-    assert (np.abs(mm.velocity[ok] / K - m.velocity[ok]) <= REL * 10 * vs).all()
+    assert (np.abs(mm.velocity[ok] / K - m.velocity[ok]) <= REL * vs).all()
+    # and the crank leaves the inner dead centre on the same side in both (the start guess's)
+    np.testing.assert_array_equal(np.sign(m.position[ok, 1, 1]), np.sign(mm.position[ok, 1, 1]))

@@ -1,0 +1,138 @@
+"""Hard case 7: near-degenerate input either solves correctly or fails with a clear message.
+
+* very short links next to long ones (ratio 1e-4);
+* start guesses with links (nearly) in line;
+* start guesses on the other branch's side, or far from any assembly;
+* start positions that cannot be assembled at all.
+
+A clear message is a SceneError that names the file, the table and the key, says what is wrong
+and what to do (exit status 2 from the CLI, no traceback).
+"""
+import numpy as np
+import pytest
+
+from closed_forms import fourbar, slider_crank
+from hard_scenes import (fourbar_text, point, solve_text, velocity, acceleration,
+                         method)  # noqa: F401 - a fixture
+import linkpipe
+from linkpipe.__main__ import main
+from linkpipe.kinematics import OK
+
+W = 10.0  # crank speed, rad/s (the builders' default rate)
+
+
+def test_tiny_crank_next_to_long_links(method):
+    """Crank 1e-4 m, coupler, rocker and ground 1 m (Grashof: 1e-4 + 1 < 1 + 1)."""
+    a = 1e-4
+    r = solve_text(fourbar_text(a, 1.0, 1.0, 1.0, 0.0, 360.0, 73), method)
+    assert (r.status == OK).all()
+    cf = fourbar(a, 1.0, 1.0, 1.0, np.deg2rad(r.driver_value[:, 0]), W, 0.0)
+    # The solver's tolerance is relative to the mechanism's size (1.4 m), so the crank pin is
+    # exact to ~1e-12 m, i.e. to 1e-8 of the crank's own length; velocities and accelerations
+    # in the crank's scale a W, a W^2 (the rocker barely moves: its scale is a W too).
+    for name in ("A", "B"):
+        np.testing.assert_allclose(point(r, name), cf[name], rtol=0, atol=1e-11)
+        np.testing.assert_allclose(velocity(r, name), cf["V" + name], rtol=0, atol=1e-6 * a * W)
+        np.testing.assert_allclose(acceleration(r, name), cf["A" + name], rtol=0,
+                                   atol=1e-6 * a * W**2)
+    crank = np.linalg.norm(point(r, "A"), axis=1)
+    np.testing.assert_allclose(crank, a, rtol=1e-8)
+
+
+def test_tiny_crank_of_a_slider_crank(method):
+    text = fourbar_text(1e-4, 1.0, 1.0, 1.0, 0.0, 360.0, 37)  # reuse the crank; replace the rocker
+    text = text.replace('[[links]]\nname = "rocker"\npoints = ["O4", "B"]\nlengths = { "O4-B" = 1.0 }',
+                        '[[sliders]]\nname = "piston"\npoint = "B"\n'
+                        'along = { through = [0.0, 0.0], direction = [1.0, 0.0] }')
+    text = text.replace("O4 = { x = 1.0, y = 0.0, fixed = true }", "")
+    text = text.replace("B  = { x = 0.5000500000000001, y = 0.8660254037844386 }",
+                        "B  = { x = 1.0001, y = 0.0 }")
+    r = solve_text(text, method)
+    assert (r.status == OK).all()
+    cf = slider_crank(1e-4, 1.0, 0.0, np.deg2rad(r.driver_value[:, 0]), W, 0.0)
+    np.testing.assert_allclose(point(r, "B"), cf["B"], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(velocity(r, "B"), cf["VB"], rtol=0, atol=1e-6 * 1e-4 * W)
+
+
+def far_point_text(a, first_two):
+    """A tiny crank O2-A (a) carrying a point P 1 m away; the link's frame is its first two points."""
+    text = fourbar_text(a, 1.0, 1.0, 1.0, 0.0, 360.0, 37)
+    if first_two == "O2-A":
+        link = (f'points = ["O2", "A", "P"]\nlengths = {{ "O2-A" = {a!r} }}\n'
+                'local = { P = [1.0, 0.2] }')
+    else:  # the long pair spans the frame, A is the further point
+        link = ('points = ["O2", "P", "A"]\nlengths = { "O2-P" = 1.019803902718557 }\n'
+                f'local = {{ A = [{a / 1.019803902718557!r}, {-0.2 * a / 1.019803902718557!r}] }}')
+    text = text.replace(f'points = ["O2", "A"]\nlengths = {{ "O2-A" = {a!r} }}', link)
+    return text.replace("O4 = { x = 1.0, y = 0.0, fixed = true }",
+                        "O4 = { x = 1.0, y = 0.0, fixed = true }\nP = { x = 1.0, y = 0.2 }")
+
+
+def test_far_point_on_a_tiny_frame_is_refused_clearly():
+    """P 1e4 times farther out than the frame is long: the Jacobian's condition is ~1e8."""
+    with pytest.raises(linkpipe.SceneError) as err:
+        solve_text(far_point_text(1e-4, "O2-A"), name="far_point.toml")
+    e = err.value
+    assert (e.path, e.table, e.key) == ("far_point.toml", 'links "crank"', "local")
+    assert "1.02e+04 times farther" in str(e) and 'points = ["O2", "P", ...]' in str(e)
+
+
+def test_far_point_with_the_long_pair_as_frame_solves(method):
+    """The same body with the frame on O2-P, as the message says: solves, P exact."""
+    r = solve_text(far_point_text(1e-4, "O2-P"), method)
+    assert (r.status == OK).all()
+    t = np.deg2rad(r.driver_value[:, 0])
+    P = np.stack([np.cos(t) - 0.2 * np.sin(t), np.sin(t) + 0.2 * np.cos(t)], 1)
+    VP = W * np.stack([-np.sin(t) - 0.2 * np.cos(t), np.cos(t) - 0.2 * np.sin(t)], 1)
+    # P's position follows the 1e-4 crank's direction, known to ~1e-12 / 1e-4 rad: 1e-8 m
+    np.testing.assert_allclose(point(r, "P"), P, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(velocity(r, "P"), VP, rtol=0, atol=1e-7 * W)
+
+
+@pytest.mark.parametrize("B_guess, branch", [((2.5, 1e-9), +1), ((2.5, -1e-9), -1),
+                                             ((4.0, 3.0), +1), ((4.0, -3.0), -1),
+                                             ((100.0, 100.0), +1), ((3.0, -1e-3), -1)])
+def test_start_guess_picks_the_branch_on_its_side(method, B_guess, branch):
+    """Crank-rocker 1, 3.5, 3, 4 at crank 0 deg: A = (1, 0), O4 = (4, 0). B's guess on either side
+    of the line A-O4, even 1e-9 m from it, gives the assembly on that side for the whole turn."""
+    r = solve_text(fourbar_text(1.0, 3.5, 3.0, 4.0, 0.0, 360.0, 37, B_guess=B_guess), method)
+    assert (r.status == OK).all()
+    cf = fourbar(1.0, 3.5, 3.0, 4.0, np.deg2rad(r.driver_value[:, 0]), W, 0.0, branch=branch)
+    np.testing.assert_allclose(point(r, "B"), cf["B"], rtol=0, atol=1e-10 * 4.0)
+    np.testing.assert_allclose(velocity(r, "B"), cf["VB"], rtol=0, atol=1e-10 * 4.0 * W)
+
+
+@pytest.mark.parametrize("B_guess", [(2.5, 0.0), (5.0, 0.0)])
+def test_start_guess_exactly_in_line_is_refused_clearly(B_guess, tmp_path, capsys):
+    """B's guess exactly on the line A-O4: it does not say which mirror image is meant."""
+    text = fourbar_text(1.0, 3.5, 3.0, 4.0, 0.0, 360.0, 37, B_guess=B_guess)
+    with pytest.raises(linkpipe.SceneError) as err:
+        solve_text(text, name="in_line.toml")
+    e = err.value
+    assert (e.path, e.table, e.key) == ("in_line.toml", "points", "B")
+    assert "in line" in e.message and "move B a little off the line" in e.hint
+    # the CLI: one line, exit status 2, no traceback
+    path = tmp_path / "in_line.toml"
+    path.write_text(text)
+    assert main(["run", str(path), "--out", str(tmp_path), "--no-rrd"]) == 2
+    err_text = capsys.readouterr().err
+    assert "in_line.toml: [points] B:" in err_text and "Traceback" not in err_text
+
+
+def test_start_that_cannot_be_assembled_names_the_constraint():
+    """Coupler 1 + rocker 1 cannot reach across a ground of 4 from a crank of 1."""
+    with pytest.raises(linkpipe.SceneError) as err:
+        solve_text(fourbar_text(1.0, 1.0, 1.0, 4.0, 0.0, 360.0, 37, B_guess=(2.0, 1.0)),
+                   name="too_short.toml")
+    e = err.value
+    assert (e.path, e.table) == ("too_short.toml", "points")
+    assert "cannot be assembled" in e.message and '[links "' in e.message
+    assert "check the link lengths" in e.hint
+
+
+def test_start_from_a_sloppy_guess_far_from_the_sweep_start(method):
+    """All moving points guessed at the origin's side, far off: still assembles (branch +1)."""
+    r = solve_text(fourbar_text(1.0, 3.5, 3.0, 4.0, 30.0, 390.0, 37, B_guess=(0.5, 8.0)), method)
+    assert (r.status == OK).all()
+    cf = fourbar(1.0, 3.5, 3.0, 4.0, np.deg2rad(r.driver_value[:, 0]), W, 0.0, branch=+1)
+    np.testing.assert_allclose(point(r, "B"), cf["B"], rtol=0, atol=1e-10 * 4.0)
