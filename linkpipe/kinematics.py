@@ -463,10 +463,15 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
         if gap and nq:
             # after a failed step most steps fail too: damped least squares, which stops as soon
             # as the residual stops falling, decides first (Newton only polishes a root it finds).
-            # It starts from the previous step's least-squares shape: that shape moves on
-            # continuously through the gap and becomes a root where the sweep re-enters the range
-            start = guess if gap_shape is None else aim_drivers(model, gap_shape, s[i])
-            q_lm, r_lm, it_lm = _lm_root(model, start, s[i], tol_abs)
+            # It starts from the last assembled shape and, failing that, from the previous
+            # step's least-squares shape, which moves on through the gap and may become a root
+            # where the sweep re-enters the range (either can sit in a local minimum alone)
+            q_lm, r_lm, it_lm = _lm_root(model, guess, s[i], tol_abs)
+            if not r_lm <= 10 * tol_abs and gap_shape is not None:
+                q2, r2, it2 = _lm_root(model, aim_drivers(model, gap_shape, s[i]), s[i], tol_abs)
+                it_lm += it2
+                if r2 < r_lm or not np.all(np.isfinite(q_lm)):
+                    q_lm, r_lm = q2, r2
             if np.all(np.isfinite(q_lm)):
                 gap_shape = q_lm
             if not r_lm <= 10 * tol_abs:
@@ -515,8 +520,9 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
             X = model.positions(qi)
             J = model.jacobian(X, s[i][None])
             if not jacobian_condition(J)[0] * rcond < 1e-3:
-                # may be singular (within the 1/sqrt(tol) margin of position accuracy) and
-                # Newton may have stopped at tol on a slow (linear) approach: go on
+                # within 1000 of the singular threshold: at a double root Newton stops at tol on
+                # a slow (linear) approach, with the Jacobian less singular than at the root;
+                # iterate on to rounding level before deciding
                 qi, residual[i], extra = _polish(model, qi, s[i], max_iter)
                 iterations[i] += extra
                 X = model.positions(qi)

@@ -6,7 +6,6 @@ velocities and accelerations by 1000 to relative 1e-12, leave statuses, iteratio
 condition numbers alone, keep forces and scale torques by 1000.
 """
 import numpy as np
-import pytest
 
 from hard_scenes import (fourbar_text, slider_driven_text, solve_text,
                          method)  # noqa: F401 - a fixture
