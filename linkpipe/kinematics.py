@@ -8,8 +8,6 @@ gets NaN and a status; the sweep goes on.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .errors import SceneError
@@ -18,38 +16,6 @@ from .model import Model, constraint_source, driver_scale, driver_values
 OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED = 0, 1, 2, 3
 NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
 STATUS_NAMES = ("ok", "no_assembly", "singular", "not_converged")
-
-
-
-@dataclass
-class Kinematics:
-    """Stage-1 arrays, step axis first. Derivative arrays are None when not computed.
-
-    driver_value (S, n_drivers) scene units; s, s_dot, s_ddot (S, n_drivers) internal units
-    (rad, rad/s, rad/s^2 for angle drivers); position/velocity/acceleration (S, n_points, 2);
-    status (S,) int8; residual (S,) constraint norm (max abs, lengths); iterations (S,) int;
-    condition (S,) 1-norm condition estimate of the square (or SVD for redundant) Jacobian;
-    velocity_residual, acceleration_residual (S,) norms of the linear equations' residuals.
-    """
-
-    driver_value: np.ndarray
-    s: np.ndarray
-    s_dot: np.ndarray
-    s_ddot: np.ndarray
-    position: np.ndarray
-    status: np.ndarray
-    residual: np.ndarray
-    iterations: np.ndarray
-    condition: np.ndarray
-    velocity: np.ndarray | None = None
-    acceleration: np.ndarray | None = None
-    velocity_residual: np.ndarray | None = None
-    acceleration_residual: np.ndarray | None = None
-    jacobian_inverse: np.ndarray | None = None  # (S, n_q, n_rows): pseudo-inverse where used
-
-    @property
-    def n_steps(self) -> int:
-        return self.position.shape[0]
 
 
 def driver_motion(model: Model):

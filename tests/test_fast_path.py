@@ -16,8 +16,10 @@ from linkpipe import kinematics as kin
 from linkpipe.errors import SceneError
 from linkpipe.model import build_model
 
-from closed_forms import fourbar
+from linkpipe.closed_forms import fourbar
 from conftest import CONFIG_DIR, CONFIGS
+
+DATA = CONFIG_DIR.parent / "tests" / "data"
 
 REL = 1e-12
 
@@ -197,32 +199,8 @@ def test_auto_leaves_dyads_that_pass_a_change_point_to_newton():
 
 
 def test_dyads_without_assembly_give_nan_and_no_assembly():
-    text = """
-[points]
-O2 = { x = 0.0, y = 0.0, fixed = true }
-A = { x = 2.0, y = 0.0 }
-B = { x = 3.0, y = 1.9 }
-O4 = { x = 3.5, y = 0.0, fixed = true }
-[[links]]
-name = "crank"
-points = ["O2", "A"]
-[[links]]
-name = "coupler"
-points = ["A", "B"]
-lengths = { "A-B" = 2.0 }
-[[links]]
-name = "rocker"
-points = ["O4", "B"]
-lengths = { "O4-B" = 2.0 }
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-from = 0.0
-to = 360.0
-steps = 73
-[solver]
-method = "dyads"
-"""
+    text = (DATA / "triple_rocker.toml").read_text().replace("steps = 361", "steps = 73")
+    text += '\n[solver]\nmethod = "dyads"\n'
     r = linkpipe.solve(linkpipe.parse_scene(text, "triple_rocker.toml"))
     th = np.deg2rad(r.driver_value[:, 0])
     dist = np.hypot(2 * np.cos(th) - 3.5, 2 * np.sin(th))

@@ -1,4 +1,6 @@
 """Stage 1 against exact answers: closed forms, the shear-press seed's table, the parallelogram."""
+import pathlib
+
 import numpy as np
 import pytest
 
@@ -6,6 +8,8 @@ import linkpipe
 from linkpipe.kinematics import NO_ASSEMBLY, OK
 
 from linkpipe.closed_forms import fourbar, slider_crank
+
+DATA = pathlib.Path(__file__).parent / "data"
 
 
 def idx(result, name):
@@ -87,35 +91,7 @@ def test_basketball_backboard_translates():
 
 
 def test_sweep_out_of_assembly_range_gives_nan_and_recovers(tmp_path):
-    # A non-Grashof (triple-rocker) four-bar: crank 2, coupler 2, rocker 2, ground 3.5
-    # (2 + 3.5 > 2 + 2). Driven through a full turn it leaves the range and comes back.
-    text = """
-[points]
-O2 = { x = 0.0, y = 0.0, fixed = true }
-A = { x = 2.0, y = 0.0 }
-B = { x = 3.0, y = 1.9 }
-O4 = { x = 3.5, y = 0.0, fixed = true }
-[[links]]
-name = "crank"
-points = ["O2", "A"]
-[[links]]
-name = "coupler"
-points = ["A", "B"]
-lengths = { "A-B" = 2.0 }
-[[links]]
-name = "rocker"
-points = ["O4", "B"]
-lengths = { "O4-B" = 2.0 }
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-from = 0.0
-to = 360.0
-steps = 361
-"""
-    path = tmp_path / "triple_rocker.toml"
-    path.write_text(text)
-    r = linkpipe.solve(str(path))
+    r = linkpipe.solve(str(DATA / "triple_rocker.toml"))
     # assembly needs |A - O4| <= 4: 4 + 12.25 - 14 cos t <= 16 -> cos t >= 0.25/14
     th = np.deg2rad(r.driver_value[:, 0])
     dist = np.hypot(2 * np.cos(th) - 3.5, 2 * np.sin(th))

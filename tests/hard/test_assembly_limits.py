@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from closed_forms import fourbar
+from linkpipe.closed_forms import fourbar
 from hard_scenes import HARD_DIR, fourbar_text, point, solve_config, solve_text, method  # noqa: F401 - a fixture
 from linkpipe.__main__ import main
 from linkpipe.kinematics import NO_ASSEMBLY, OK, SINGULAR

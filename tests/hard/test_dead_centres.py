@@ -12,7 +12,7 @@ crank acceleration alpha that makes the slider's acceleration zero.
 import numpy as np
 import pytest
 
-from closed_forms import slider_crank
+from linkpipe.closed_forms import slider_crank
 from hard_scenes import (HARD_DIR, acceleration, point, slider_driven_text, solve_config,
                          solve_text, velocity, method)  # noqa: F401 - a fixture
 from linkpipe.kinematics import OK, SINGULAR

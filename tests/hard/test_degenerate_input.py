@@ -11,7 +11,7 @@ and what to do (exit status 2 from the CLI, no traceback).
 import numpy as np
 import pytest
 
-from closed_forms import fourbar, slider_crank
+from linkpipe.closed_forms import fourbar, slider_crank
 from hard_scenes import (fourbar_text, point, solve_text, velocity, acceleration,
                          method)  # noqa: F401 - a fixture
 import linkpipe

@@ -17,7 +17,7 @@ condition stays under ~1e4, so 1e-7 L covers it with room to spare.
 import numpy as np
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
-from closed_forms import fourbar, slider_crank
+from linkpipe.closed_forms import fourbar, slider_crank
 from hard_scenes import (acceleration, fourbar_B, fourbar_text, point, six_bar_text,
                          slider_crank_text, solve_text, velocity)
 from linkpipe.kinematics import NO_ASSEMBLY, OK

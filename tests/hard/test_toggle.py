@@ -6,7 +6,7 @@ be ok, and positions, velocities and accelerations must equal the closed form th
 """
 import numpy as np
 
-from closed_forms import fourbar
+from linkpipe.closed_forms import fourbar
 from hard_scenes import HARD_DIR, acceleration, fourbar_text, point, solve_config, solve_text, velocity, method  # noqa: F401 - a fixture
 from linkpipe.kinematics import OK
 
