@@ -270,6 +270,16 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
                 unique[i] = 0 if undetermined[r] else 1
             out["slider_force_unique"] = (("slider",), unique, "1")
         coords["slider"] = [x.name for x in scene.sliders]
+    fixed = np.flatnonzero(model.fixed)
+    if len(fixed):
+        R = ground_reactions(model, lam, lagr_point, lagr_couple, Xz, s, ok)
+        out["ground_reaction"] = (("step", "fixed_point", "xy"), R, Fu)
+        coords["fixed_point"] = [model.point_names[i] for i in fixed]
+        if undetermined.any() and ok.any():
+            i0 = np.flatnonzero(ok)[0]
+            Jp = model.jacobian_points(Xz[i0:i0 + 1], s[i0:i0 + 1])[0][:, fixed]  # (rows, nf, 2)
+            touched = np.abs(Jp[undetermined]).max(axis=(0, 2)) > 0
+            out["ground_reaction_unique"] = (("fixed_point",), (~touched).astype(np.int8), "1")
     out["__status__"] = (("step",), status, "1")
     out["__coords__"] = ((), coords, "")
     return out
@@ -312,12 +322,39 @@ def _add_at_center(fp, force, ia, ib, u, v, L):
         fp[:, idx, 1] += force[:, 0] * M[0, 1] + force[:, 1] * M[1, 1]
 
 
-def _generalized(model: Model, point_forces, couples, X):
-    """Return generalized forces (S, n_q) from point forces (S, P, 2) and link couples (S, n_l)."""
+def _point_forces(model: Model, point_forces, couples, X):
+    """Return forces at every point (S, P, 2): point forces plus link couples as force pairs."""
     fp = point_forces.copy()
     d = X[:, model.link_b] - X[:, model.link_a]
     n2 = np.einsum("slj,slj->sl", d, d)
     # a couple tau on a link = forces tau R d / L^2 on b and -tau R d / L^2 on a
     f = (couples / n2)[..., None] * _perp(d)
     _scatter(fp, model.link_b, model.link_a, f)
+    return fp
+
+
+def _generalized(model: Model, point_forces, couples, X):
+    """Return generalized forces (S, n_q) from point forces (S, P, 2) and link couples (S, n_l)."""
+    fp = _point_forces(model, point_forces, couples, X)
     return fp[:, model.moving].reshape(fp.shape[0], -1)
+
+
+def ground_reactions(model: Model, lam, point_forces, couples, X, s, ok):
+    """Return the force the ground exerts at each fixed point (S, n_fixed, 2).
+
+    In natural coordinates a fixed point is a coordinate held by one more constraint; its
+    multiplier mu follows from that coordinate's row of the equations of motion,
+    ``-mu = Phi_X^T lambda - (Q - M Xdd)`` at the fixed point (``point_forces`` already holds
+    ``Q - M Xdd`` at every point, fixed ones included). NaN at steps that are not ok.
+    """
+    fixed = np.flatnonzero(model.fixed)
+    S = X.shape[0]
+    R = np.full((S, len(fixed), 2), np.nan)
+    idx = np.flatnonzero(ok)
+    if len(fixed) and len(idx):
+        G = _point_forces(model, point_forces, couples, X)[:, fixed]
+        for lo in range(0, len(idx), 8192):
+            ii = idx[lo:lo + 8192]
+            Jp = model.jacobian_points(X[ii], s[ii])[:, :, fixed]  # (s, rows, n_fixed, 2)
+            R[ii] = np.einsum("sr,srfj->sfj", lam[ii], Jp) - G[ii]
+    return R

@@ -47,6 +47,44 @@ def basketball_closed_form(theta_deg, effects):
     return f
 
 
+EVERY_EFFECT = (CONFIGS / "fourbar_crank_rocker.toml").read_text() + """
+[analysis]
+effects = ["springs", "gravity", "inertia", "damping", "loads"]
+
+[gravity]
+g = [0.0, -9.81]
+
+[[springs]]
+name = "s"
+between = ["O4", "P"]
+k = 120.0
+free_length = 1.0
+damping = 3.5
+
+[[masses]]
+link = "coupler"
+mass = 2.0
+center = [1.2, 0.3]
+inertia = 0.4
+
+[[masses]]
+link = "rocker"
+mass = 1.0
+center = [1.5, 0.0]
+inertia = 0.75
+
+[[loads]]
+name = "push"
+point = "P"
+force = [10.0, -20.0]
+
+[[loads]]
+name = "brake"
+link = "rocker"
+torque = -2.0
+"""
+
+
 @pytest.mark.parametrize("effects", [["springs"], ["gravity"], ["springs", "gravity"],
                                      ["springs", "gravity", "inertia"]])
 def test_basketball_input_force_closed_form(tmp_path, effects):
@@ -133,42 +171,7 @@ def test_virtual_work_equals_lagrange(path):
 
 def test_virtual_work_equals_lagrange_with_every_effect(tmp_path):
     """Springs with damping, gravity, inertia with rotation, loads: a crank-rocker at speed."""
-    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text() + """
-[analysis]
-effects = ["springs", "gravity", "inertia", "damping", "loads"]
-
-[gravity]
-g = [0.0, -9.81]
-
-[[springs]]
-name = "s"
-between = ["O4", "P"]
-k = 120.0
-free_length = 1.0
-damping = 3.5
-
-[[masses]]
-link = "coupler"
-mass = 2.0
-center = [1.2, 0.3]
-inertia = 0.4
-
-[[masses]]
-link = "rocker"
-mass = 1.0
-center = [1.5, 0.0]
-inertia = 0.75
-
-[[loads]]
-name = "push"
-point = "P"
-force = [10.0, -20.0]
-
-[[loads]]
-name = "brake"
-link = "rocker"
-torque = -2.0
-"""
+    text = EVERY_EFFECT
     r = linkpipe.solve(scene_from(text, tmp_path))
     assert (r.status == OK).all()
     f = r.forces["input_force"][1][:, 0]
@@ -245,3 +248,35 @@ def test_present_but_off_is_reported_and_unused(tmp_path):
                                basketball_closed_form(r.driver_value[:, 0], ["springs"]), atol=1e-9)
     assert "gravity_energy" not in r.forces and "power" in r.forces
     assert r.forces["power"][1].shape[1] == 1  # springs only
+
+
+def test_ground_reactions_balance_the_mechanism(tmp_path):
+    """Sum of ground reactions = sum of m a_G - weights - applied loads (springs are internal)."""
+    r = linkpipe.solve(scene_from(EVERY_EFFECT, tmp_path))
+    R = r.forces["ground_reaction"][1]  # (S, n_fixed, 2)
+    X, A = r.position, r.acceleration
+    names = r.point_names
+    total = np.zeros((r.n_steps, 2))
+    from linkpipe.forces import _center, center_frame
+
+    for m in r.scene.masses:
+        ia, ib, u, v, L = center_frame(r.model, m.link, m.center)
+        aG = _center(A, ia, ib, u, v, L) - _center(np.zeros_like(A), ia, ib, u, v, L)
+        total += m.mass * aG - m.mass * np.array([0.0, -9.81])
+    total -= np.array([10.0, -20.0])  # the point load; the couple has no net force
+    scale = np.abs(total).max()
+    np.testing.assert_allclose(R.sum(axis=1), total, rtol=0, atol=1e-9 * scale)
+
+
+def test_shear_press_pivot_reaction_by_hand():
+    r = linkpipe.solve(str(CONFIGS / "shear_press.toml"))
+    names = r.point_names
+    P, B, C = (r.position[:, names.index(n)] for n in ("P", "B", "C"))
+    e_cb = (B - C) / np.linalg.norm(B - C, axis=1)[:, None]
+    T = -500.0 / e_cb[:, 1]
+    FB = -T[:, None] * e_cb  # force of the rod on the lever at B
+    fP = r.forces["input_force"][1][:, 0]
+    # the massless lever A-B-P: R_A + F_B + (0, f_P) = 0
+    expect = -(FB + np.stack([np.zeros_like(fP), fP], axis=1))
+    RA = r.forces["ground_reaction"][1][:, 0]
+    np.testing.assert_allclose(RA, expect, rtol=0, atol=1e-9 * np.abs(expect).max())
