@@ -218,26 +218,46 @@ def test_no_leverage_is_flagged_not_infinite(tmp_path):
     np.testing.assert_allclose(r.forces["input_force"][1][~dead, 0], 100.0, rtol=1e-9)
 
 
-def test_skipped_stages_do_not_run(monkeypatch):
-    """No effects: the force stage is never called; no inertia and no outputs: no gamma."""
+@pytest.mark.parametrize("method", ["auto", "newton"])
+def test_skipped_stages_do_not_run(monkeypatch, method):
+    """No effects: the force stage is never called; no inertia and no outputs: stage 1 is asked
+    for positions only (order 0) and gamma, the acceleration right-hand side, is never built."""
+    import dataclasses
+
     import linkpipe.forces
     import linkpipe.model
+    from linkpipe import batch
 
     def boom(*a, **k):
         raise AssertionError("this stage must not run")
 
+    orders = []
+    real_stage1 = batch.stage1
+
+    def recording_stage1(model, s, s_dot, s_ddot, order, *a, **k):
+        orders.append(order)
+        return real_stage1(model, s, s_dot, s_ddot, order, *a, **k)
+
+    def solve(scene):
+        scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, method=method))
+        return linkpipe.solve(scene)
+
+    monkeypatch.setattr(batch, "stage1", recording_stage1)
     monkeypatch.setattr(linkpipe.forces, "force_stage", boom)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
     text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
     text = text.split("[outputs]")[0]  # no extra kinematic orders asked for
-    r = linkpipe.solve(linkpipe.parse_scene(text, "crank_rocker_positions.toml"))
+    r = solve(linkpipe.parse_scene(text, "crank_rocker_positions.toml"))
     assert r.forces is None and r.velocity is None and r.acceleration is None
-    assert "forces" not in r.seconds
-    # the shear press asks for loads only: forces run, accelerations still do not
+    assert "forces" not in r.seconds and orders == [0]
+    assert r.solver_method_used == ("newton" if method == "newton" else "dyads")
+    # the shear press asks for loads only: forces run, velocities and accelerations still do not
     monkeypatch.undo()
+    monkeypatch.setattr(batch, "stage1", recording_stage1)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
-    r = linkpipe.solve(str(CONFIGS / "shear_press.toml"))
-    assert r.forces is not None and r.acceleration is None and "forces" in r.seconds
+    r = solve(linkpipe.load_scene(CONFIGS / "shear_press.toml"))
+    assert r.forces is not None and r.acceleration is None and r.velocity is None
+    assert "forces" in r.seconds and orders == [0, 0]
 
 
 def test_present_but_off_is_reported_and_unused(tmp_path):
