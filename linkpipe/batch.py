@@ -26,7 +26,7 @@ from . import kinematics as kin
 from .model import Model
 
 CHUNK = 8192
-COARSE_NODES = 64  # sequential continuation on at most about this many steps
+COARSE_NODES = 128  # sequential continuation on at most about this many steps
 VECTORISE_FROM = 1000  # shorter sweeps run the sequential continuation on every step
 NEWTON_ITERATIONS = 4  # per fine step before its interval goes back to the sequential path
 OFF_BRANCH = 0.01  # a fine step may move at most this part of its interval's motion (or
@@ -600,9 +600,9 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
 # The general path, vectorised
 
 
-def _hermite(q0, d0, q1, d1, t):
-    """Cubic Hermite on [0, 1]: q0, q1 (..., n) values, d0, d1 slopes per unit t; t (k,)."""
-    t = t[:, None]
+def _hermite_T(q0, d0, q1, d1, t):
+    """Cubic Hermite on [0, 1], coordinates first: q0, q1 values and d0, d1 slopes per unit t,
+    each (n, k); t (k,). Returns (n, k)."""
     t2 = t * t
     t3 = t2 * t
     h00 = 2 * t3 - 3 * t2 + 1
@@ -610,6 +610,14 @@ def _hermite(q0, d0, q1, d1, t):
     h01 = -2 * t3 + 3 * t2
     h11 = t3 - t2
     return h00 * q0 + h10 * d0 + h01 * q1 + h11 * d1
+
+
+def _colmax(a: np.ndarray) -> np.ndarray:
+    """Return ``a.max(axis=0)`` of a (m, k) array (NaN propagates) row by row: no strided reduce."""
+    out = a[0].copy()
+    for row in a[1:]:
+        np.maximum(out, row, out=out)
+    return out
 
 
 def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: int = 0,
@@ -672,20 +680,26 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
     V = np.full((S, model.n_points, 2), np.nan) if order >= 1 else None
     A = np.full((S, model.n_points, 2), np.nan) if order >= 2 else None
     done = np.zeros(S, dtype=bool)  # derivatives computed in the fused pass
+    # per interval, coordinates first (the chunks below work on contiguous (n_q, k) arrays):
+    # the Hermite data (values and slopes per unit t) and the largest motion of a coordinate
+    h_int = lengths[:, None].astype(float)
+    hermite_T = [np.ascontiguousarray(a.T) for a in (qn[:-1], slope[:-1] * h_int, qn[1:],
+                                                        slope[1:] * h_int)]
+    span_int = (np.abs(qn[1:] - qn[:-1]).max(axis=1) if model.n_q else np.zeros(len(lengths)))
     for lo in range(0, len(steps), chunk):
         ii = steps[lo:lo + chunk]
         g = seg[ii]
         t = (ii - nodes[g]) / lengths[g]
-        h = lengths[g][:, None]
-        pred = _hermite(qn[g], slope[g] * h, qn[g + 1], slope[g + 1] * h, t)
+        predT = _hermite_T(*(a[:, g] for a in hermite_T), t)
         sT = np.ascontiguousarray(s[ii].T)
-        qT, res, its, conv, E = _newton_soa(eng, np.ascontiguousarray(pred.T), sT, tol_abs)
-        moved = np.abs(qT - pred.T).max(axis=0) if qT.shape[0] else np.zeros(len(ii))
-        span = np.abs(qn[g + 1] - qn[g]).max(axis=1) if qT.shape[0] else np.zeros(len(ii))
+        qT, res, its, conv, E = _newton_soa(eng, predT.copy(), sT, tol_abs)
+        moved = _colmax(np.abs(qT - predT)) if qT.shape[0] else np.zeros(len(ii))
+        span = span_int[g]
         accept = conv & (moved <= np.maximum(OFF_BRANCH * span, OFF_BRANCH_ABS * model.size))
-        qi = qT.T
         accept &= _aligned(eng, qT, sT)
-        q[ii[accept]] = qi[accept]
+        ia = ii[accept]
+        for c in range(qT.shape[0]):  # one coordinate at a time: cheaper than a 2-D fancy write
+            q[ia, c] = qT[c, accept]
         residual[ii] = res
         iterations[ii] = its
         bad_interval[np.unique(g[~accept])] = True
@@ -755,7 +769,7 @@ def _newton_soa(eng, qT, sT, tol_abs):
     small = 1e-8 * eng.model.size  # (quadratic convergence: the next one is at rounding level)
     for it in range(NEWTON_ITERATIONS + 1):
         F = eng.phi(eng.points(qT), sT)
-        r = np.abs(F).max(axis=0) if F.shape[0] else np.zeros(k)
+        r = _colmax(np.abs(F)) if F.shape[0] else np.zeros(k)
         res = r
         keep = (r > tol_abs) | (step > small)  # NaN: not kept, not converged
         keep &= np.isfinite(r)
@@ -767,7 +781,7 @@ def _newton_soa(eng, qT, sT, tol_abs):
             qT += dq
         else:
             qT[:, keep] += dq[:, keep]
-        step = np.where(keep, np.abs(dq).max(axis=0) if dq.shape[0] else 0.0, 0.0)
+        step = np.where(keep, _colmax(np.abs(dq)) if dq.shape[0] else 0.0, 0.0)
         its[keep] += 1
     return qT, res, its, res <= tol_abs, eng.entries_T(qT, sT)
 
@@ -783,14 +797,19 @@ def _derivatives_soa(model, eng, qT, sT, s_dot, s_ddot, E, ii, V, A):
         rhs[m - nd + j] = -ps[j] * sdT[j]
     qd = np.stack(eng.solve(E, rhs))  # (n, k)
     mv = model.moving
-    V[ii[:, None], mv[None, :]] = qd.reshape(len(mv), 2, -1).transpose(2, 0, 1)
+    cols = model.q_columns  # one coordinate at a time: far cheaper than a 2-D fancy write
+    Vf = V.reshape(V.shape[0], -1)
+    for k, c in enumerate(cols):
+        Vf[ii, c] = qd[k]
     if A is None or s_ddot is None:
         return
     V2 = np.zeros_like(X2)
     V2[mv] = qd.reshape(len(mv), 2, -1)
     g = eng.gamma(X2, V2, sT, sdT, np.ascontiguousarray(s_ddot.T))
     qdd = np.stack(eng.solve(E, list(g)))
-    A[ii[:, None], mv[None, :]] = qdd.reshape(len(mv), 2, -1).transpose(2, 0, 1)
+    Af = A.reshape(A.shape[0], -1)
+    for k, c in enumerate(cols):
+        Af[ii, c] = qdd[k]
 
 
 def _polish(eng, q, s, ok, residual):

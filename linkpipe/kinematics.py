@@ -369,6 +369,217 @@ def aim_drivers(model: Model, q: np.ndarray, s_row: np.ndarray) -> np.ndarray:
     return model.q_of(X[None])[0]
 
 
+class _Step:
+    """One step's Phi, Phi_q and driver check with little overhead (sequential continuation).
+
+    Phi and Phi_q entry by entry on Python floats by the operations of :meth:`Model.phi` and
+    :meth:`Model.jacobian_points` (so the same values, checked at construction). Built once per
+    model.
+    """
+
+    def __init__(self, model: Model):
+        md = model
+        self.model = md
+        n, nd, m = md.n_q, md.n_drivers, md.n_rows
+        self.n, self.m = n, m
+        self.nc = md.n_constraints
+        self.x0 = md.start_position.reshape(-1).tolist()
+        self.qpos = [int(2 * p + c) for p in md.moving for c in (0, 1)]
+        self.col = [-1] * (2 * md.n_points)  # point coordinate -> column of q (-1: fixed)
+        for k, pc in enumerate(self.qpos):
+            self.col[pc] = k
+        self.dist = [(2 * int(a), 2 * int(b), float(L) * float(L), 2 * float(L))
+                     for a, b, L in zip(md.dist_a, md.dist_b, md.dist_len)]
+        self.loc = [(2 * int(a), 2 * int(b), 2 * int(p), float(u), float(v), float(L))
+                    for a, b, p, u, v, L in zip(md.loc_a, md.loc_b, md.loc_p, md.loc_u, md.loc_v, md.loc_len)]
+        self.sfix = [(2 * int(p), float(c[0]), float(c[1]), float(nn[0]), float(nn[1]))
+                     for p, c, nn in zip(md.sfix_p, md.sfix_c, md.sfix_n)]
+        self.smov = [(2 * int(p), 2 * int(d), 2 * int(e), float(L))
+                     for p, d, e, L in zip(md.smov_p, md.smov_d, md.smov_e, md.smov_len)]
+        self.drv = [(bool(md.drv_angle[j]), 2 * int(md.drv_a[j]), 2 * int(md.drv_b[j]),
+                     int(md.drv_axis[j])) for j in range(nd)]
+        self.angle = np.flatnonzero(md.drv_angle)
+        self.exact = self._check()  # False: the caller uses the model's own functions
+
+    def _check(self) -> bool:
+        """Return whether Phi and Phi_q here equal the model's, to the last bit, at a few shapes."""
+        md = self.model
+        rng = np.random.default_rng(11)
+        for _ in range(3):
+            q = rng.normal(size=md.n_q) * md.size
+            s = rng.uniform(-4, 4, size=md.n_drivers)
+            X = md.positions(q[None])
+            if not (np.array_equal(self.jac(q, s), md.jacobian(X, s[None])[0])
+                    and np.array_equal(self.phi(q, s), md.phi(X, s[None])[0])):
+                return False
+        return True
+
+    def jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi_q (m, n) at q (n,) and s (nd,), as :meth:`Model.jacobian` computes it.
+
+        Entry by entry with the same operations (Newton near a double root is sensitive to the
+        last bit: the continuation's branch choices there must not change).
+        """
+        X = self.points(q)
+        n = self.n
+        J = [0.0] * (self.m * n)
+        col = self.col
+
+        def add(r, p, vx, vy):
+            c = col[p]
+            if c >= 0:
+                J[r * n + c] += vx
+            c = col[p + 1]
+            if c >= 0:
+                J[r * n + c] += vy
+
+        r = 0
+        for a, b, L2, L2x in self.dist:
+            L = L2x / 2
+            dx, dy = (X[b] - X[a]) / L, (X[b + 1] - X[a + 1]) / L
+            add(r, b, dx, dy)
+            add(r, a, -dx, -dy)
+            r += 1
+        for a, b, p, u, v, L in self.loc:
+            m00, m01, m10, m11 = (u * 1.0 + v * 0.0) / L, (u * 0.0 + v * -1.0) / L, \
+                (u * 0.0 + v * 1.0) / L, (u * 1.0 + v * 0.0) / L
+            add(r, p, 1.0, 0.0)
+            add(r, a, -1.0 + m00, -0.0 + m01)
+            add(r, b, -m00, -m01)
+            add(r + 1, p, 0.0, 1.0)
+            add(r + 1, a, -0.0 + m10, -1.0 + m11)
+            add(r + 1, b, -m10, -m11)
+            r += 2
+        for p, cx, cy, nx, ny in self.sfix:
+            add(r, p, nx, ny)
+            r += 1
+        for p, d, e, L in self.smov:
+            ex, ey = X[e] - X[d], X[e + 1] - X[d + 1]
+            fx, fy = X[p] - X[d], X[p + 1] - X[d + 1]
+            dex, dey = fy / L, -fx / L
+            dfx, dfy = -ey / L, ex / L
+            add(r, e, dex, dey)
+            add(r, p, dfx, dfy)
+            add(r, d, -dex - dfx, -dey - dfy)
+            r += 1
+        if self.drv:
+            cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+            for j, (ang, a, b, axis) in enumerate(self.drv):
+                if ang:
+                    add(r + j, b, -sn[j], cs[j])
+                    add(r + j, a, -(-sn[j]), -cs[j])
+                else:
+                    c = col[a + axis]
+                    if c >= 0:
+                        J[(r + j) * n + c] += 1.0
+        return np.array(J, dtype=float).reshape(self.m, n)
+
+    def points(self, q) -> list:
+        X = list(self.x0)
+        for k, v in zip(self.qpos, q.tolist()):
+            X[k] = v
+        return X
+
+    def phi(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi (m,) at q (n,) and s (nd,), as :meth:`Model.phi` computes it."""
+        X = self.points(q)
+        out = []
+        for a, b, L2, L2x in self.dist:
+            dx, dy = X[b] - X[a], X[b + 1] - X[a + 1]
+            out.append((dx * dx + dy * dy - L2) / L2x)
+        for a, b, p, u, v, L in self.loc:
+            dx, dy = X[b] - X[a], X[b + 1] - X[a + 1]
+            out.append(X[p] - X[a] - (u * dx + v * -dy) / L)
+            out.append(X[p + 1] - X[a + 1] - (u * dy + v * dx) / L)
+        for p, cx, cy, nx, ny in self.sfix:
+            out.append((X[p] - cx) * nx + (X[p + 1] - cy) * ny)
+        for p, d, e, L in self.smov:
+            ex, ey = X[e] - X[d], X[e + 1] - X[d + 1]
+            fx, fy = X[p] - X[d], X[p + 1] - X[d + 1]
+            out.append((ex * fy - ey * fx) / L)
+        if self.drv:
+            cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+            sl = s.tolist()
+            for j, (ang, a, b, axis) in enumerate(self.drv):
+                if ang:
+                    out.append(cs[j] * (X[b + 1] - X[a + 1]) - sn[j] * (X[b] - X[a]))
+                else:
+                    out.append(X[a + axis] - sl[j])
+        return np.array(out, dtype=float)
+
+    def aligned(self, q: np.ndarray, s: np.ndarray) -> bool:
+        """:func:`drivers_aligned` at one step."""
+        if not len(self.angle):
+            return True
+        X = self.points(q)
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        for j, (ang, a, b, _) in enumerate(self.drv):
+            if ang and not (X[b] - X[a]) * cs[j] + (X[b + 1] - X[a + 1]) * sn[j] > 0:
+                return False
+        return True
+
+    def phi_s(self, q: np.ndarray, s: np.ndarray) -> list:
+        """:meth:`Model.phi_s` at one step, as a list (nd,)."""
+        X = self.points(q)
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        out = []
+        for j, (ang, a, b, _) in enumerate(self.drv):
+            out.append(-(cs[j] * (X[b] - X[a]) + sn[j] * (X[b + 1] - X[a + 1])) if ang else -1.0)
+        return out
+
+    def newton(self, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int):
+        """:func:`newton` (analytic Jacobian) at one step; same returns, shapes (1, n), (1,)."""
+        q = np.array(q, dtype=float).reshape(-1)
+        best = prev = np.inf
+        stall = 0
+        it_done = 0
+        res = np.inf
+        step_cap = 0.5 * self.model.size
+        for it in range(max_iter + 1):
+            F = self.phi(q, s)
+            r = float(np.abs(F).max()) if F.shape[0] else 0.0
+            res = r
+            progress = (r < best) or (r < 0.5 * prev)
+            stall = 0 if progress else stall + 1
+            best = min(best, r) if r == r else best  # np.fmin: NaN does not replace a number
+            prev = r
+            done = not (r > tol_abs)
+            bad = not np.isfinite(r) or stall >= NEWTON_STALL
+            if it == max_iter or done or bad:
+                break
+            dq = _lin_solve(self.jac(q, s)[None], -F[None])[0]
+            big = np.abs(dq).max()
+            if big > step_cap:
+                dq = dq * (step_cap / big)
+            q = q + dq
+            it_done += 1
+        conv = res <= tol_abs
+        return (q[None], np.array([res]), np.array([it_done], dtype=np.int32),
+                np.array([conv]))
+
+
+def _step_kernels(model: Model) -> _Step | None:
+    """Return the model's one-step kernels (cached on the model), None where they do not match."""
+    cache = model.__dict__.get("_linkpipe_step", False)
+    if cache is False:
+        cache = _Step(model)
+        cache = cache if cache.exact else None
+        object.__setattr__(model, "_linkpipe_step", cache)
+    return cache
+
+
+def _cond_inverse(J: np.ndarray):
+    """Return (1-norm condition as :func:`jacobian_condition`, inverse or None) of square J (n, n)."""
+    try:
+        inv = np.linalg.inv(J)
+    except np.linalg.LinAlgError:
+        return (np.nan if np.isnan(J).any() else np.inf), None
+    c = float(np.abs(J).sum(axis=0).max() * np.abs(inv).sum(axis=0).max())
+    if c != c and not np.isnan(J).any():
+        c = np.inf
+    return c, inv
+
+
 def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Return (S,) True where every angle driver's vector points along (not against) its angle."""
     ang = model.drv_angle
@@ -413,6 +624,8 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     last_d2q = None
     rcond = effective_rcond(model)
     square = model.n_rows == nq
+    # one-step kernels: the same Newton, Phi and checks with less overhead per step
+    fast = _step_kernels(model) if jacobian == "analytic" and nq else None
     last_sign = 0.0  # sign of det(Phi_q) at the last regular step: the assembly mode
     gap = False  # a failed step since the last assembled one
     gap_shape = None  # least-squares shape of the last failed step
@@ -463,10 +676,14 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                         qi, conv = qc, convc
                         break
         if not conv[0]:
-            qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
+            if fast is not None:
+                qi, res, it, conv = fast.newton(guess, s[i], tol_abs, max_iter)
+            else:
+                qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
             residual[i] = res[0]
             iterations[i] += it[0]
-            if conv[0] and not drivers_aligned(model, qi, s[i][None])[0]:
+            if conv[0] and not (fast.aligned(qi[0], s[i]) if fast is not None
+                                else drivers_aligned(model, qi, s[i][None])[0]):
                 # the angle constraint's other root (vector pointing backwards): not this step's
                 # mechanism; retry with the driven point aimed along the driven direction
                 qi, res, it2, conv = newton(model, aim_drivers(model, guess, s[i])[None],
@@ -483,9 +700,14 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
             if lm_residual <= tol_abs and drivers_aligned(model, q_lm[None], s[i][None])[0]:
                 qi, conv, residual[i] = q_lm[None], np.ones(1, dtype=bool), lm_residual
         if conv[0]:
-            X = model.positions(qi)
-            J = model.jacobian(X, s[i][None])
-            if not jacobian_condition(J)[0] * rcond < 1e-3:
+            X = None if fast is not None else model.positions(qi)
+            J = fast.jac(qi[0], s[i])[None] if fast is not None else model.jacobian(X, s[i][None])
+            inv = None
+            if fast is not None and square:
+                cond, inv = _cond_inverse(J[0])
+            else:
+                cond = jacobian_condition(J)[0]
+            if not cond * rcond < 1e-3:
                 # within 1000 of the singular threshold: at a double root Newton stops at tol on
                 # a slow (linear) approach, with the Jacobian less singular than at the root;
                 # iterate on to rounding level before deciding
@@ -493,7 +715,8 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 iterations[i] += extra
                 X = model.positions(qi)
                 J = model.jacobian(X, s[i][None])
-            regular = bool(jacobian_condition(J)[0] * rcond < 1.0)  # as derivatives() decides
+                cond, inv = jacobian_condition(J)[0], None
+            regular = bool(cond * rcond < 1.0)  # as derivatives() decides
             if square and regular and gap and last_sign:
                 # re-entering after a gap: no path connects the two sides, so keep the assembly
                 # mode (sign of det Phi_q) of the last regular step, if it exists here
@@ -509,21 +732,31 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     if alt is not None:
                         qi, X = alt, model.positions(alt)
                         J = model.jacobian(X, s[i][None])
+                        inv = None
                         residual[i] = float(np.abs(model.phi(X, s[i][None])).max())
             gap, gap_shape = False, None
             if square and regular:
                 last_sign = np.linalg.slogdet(J[0])[0]
             q[i] = qi[0]
             # influence coefficients dq/ds_j, one column per driver
-            cols = []
-            for j in range(model.n_drivers):
-                e = np.zeros((1, model.n_drivers))
-                e[0, j] = 1.0
-                cols.append(_velocity_one(model, X, s[i][None], e, J))
-            dq = np.stack(cols, axis=1)
+            if inv is not None:
+                # Phi_q dq_j = -Phi_t with unit rate of driver j: only driver row j is non-zero
+                ps = fast.phi_s(qi[0], s[i])
+                dq = inv[:, fast.nc:] * -np.array(ps)[None, :]
+            else:
+                if X is None:
+                    X = model.positions(qi)
+                cols = []
+                for j in range(model.n_drivers):
+                    e = np.zeros((1, model.n_drivers))
+                    e[0, j] = 1.0
+                    cols.append(_velocity_one(model, X, s[i][None], e, J))
+                dq = np.stack(cols, axis=1)
             if regular and np.all(np.isfinite(dq)) and np.abs(dq).max() < 1e8 * model.size:
                 if predictor == "second":
                     # curvature along the sweep: gamma with unit driver rate, zero acceleration
+                    if X is None:
+                        X = model.positions(qi)
                     d2 = np.zeros((nq, model.n_drivers, model.n_drivers))
                     for j in range(model.n_drivers):
                         e = np.zeros((1, model.n_drivers))

@@ -100,8 +100,17 @@ class Model:
     def positions(self, q: np.ndarray) -> np.ndarray:
         """Return all point positions ``(S, n_points, 2)`` from ``q`` ``(S, n_q)``."""
         q = np.asarray(q, dtype=float)
-        X = np.broadcast_to(self.start_position, (q.shape[0], self.n_points, 2)).copy()
-        X[:, self.moving] = q.reshape(q.shape[0], -1, 2)
+        S, mv = q.shape[0], self.moving
+        X = np.empty((S, self.n_points, 2))
+        X[:] = self.start_position
+        q3 = q.reshape(S, -1, 2)
+        if len(mv) > 8:
+            X[:, mv] = q3
+            return X
+        # runs of consecutive moving points as slices: cheaper than a fancy-index write
+        cut = [0] + [k for k in range(1, len(mv)) if mv[k] != mv[k - 1] + 1] + [len(mv)]
+        for k0, k1 in zip(cut[:-1], cut[1:]):
+            X[:, mv[k0]:mv[k0] + (k1 - k0)] = q3[:, k0:k1]
         return X
 
     def q_of(self, X: np.ndarray) -> np.ndarray:

@@ -96,6 +96,9 @@ def mechanism_size(result) -> float:
 
 def arrow_scales(result) -> dict[str, float]:
     """Return the length per unit of each vector quantity: its longest arrow is 25 % of the size."""
+    cached = result.__dict__.get("_rrd_arrow_scales")  # asked for by the blueprint and the log
+    if cached is not None and cached[0] is result.position:
+        return dict(cached[1])
     k = _point_index(result, result.scene.outputs.vectors)
     scales = {}
     for name in ("velocity", "acceleration"):
@@ -105,6 +108,7 @@ def arrow_scales(result) -> dict[str, float]:
         norm = np.linalg.norm(data[:, k], axis=-1)
         vmax = np.nanmax(norm) if np.isfinite(norm).any() else 0.0
         scales[name] = ARROW_FRACTION * mechanism_size(result) / vmax if vmax > 0 else 1.0
+    result.__dict__["_rrd_arrow_scales"] = (result.position, dict(scales))
     return scales
 
 
@@ -150,16 +154,41 @@ def _log_points(stream, send, result) -> None:
     stream.log("mechanism/points", rr.Points2D.from_fields(
         radii=rr.components.Radius.ui_points(4.0), colors=_POINT, show_labels=True,
         draw_order=30.0), static=True)
-    labels = np.broadcast_to(names, ok.shape)[ok]
     if ok.any():
+        pos = X.reshape(-1, 2) if ok.all() else X[ok]  # all finite: no masked copy
         send("mechanism/points",
-             rr.Points2D.columns(positions=X[ok], labels=labels).partition(ok.sum(axis=1)))
+             rr.Points2D.columns(positions=np.asarray(pos, dtype=np.float32),
+                                 labels=_labels_arrow(result.point_names, ok))
+             .partition(ok.sum(axis=1)))
     fixed = [i for i, p in enumerate(result.scene.points) if p.fixed]
     if fixed:
         ground = np.array([[result.scene.points[i].x, result.scene.points[i].y] for i in fixed])
         stream.log("mechanism/ground", rr.Points2D(
             ground, radii=rr.components.Radius.ui_points(8.0), colors=_GROUND, draw_order=25.0),
             static=True)
+
+
+def _labels_arrow(names, ok: np.ndarray):
+    """Return the labels ``names[p]`` of every finite (step, point) of ``ok`` (S, P), row-major,
+    as one Arrow string array built from its buffers (not from 100k's of Python strings)."""
+    import pyarrow as pa
+
+    enc = [str(n).encode() for n in names]
+    lens = np.array([len(b) for b in enc], dtype=np.int64)
+    blob = np.frombuffer(b"".join(enc), dtype=np.uint8)
+    pidx = np.broadcast_to(np.arange(len(enc)), ok.shape)[ok]
+    L = lens[pidx]
+    offsets = np.zeros(len(pidx) + 1, dtype=np.int64)
+    np.cumsum(L, out=offsets[1:])
+    if offsets[-1] >= 2**31:
+        return np.broadcast_to(np.array(names, dtype=str), ok.shape)[ok]
+    if ok.all():
+        data = np.tile(blob, ok.shape[0])
+    else:
+        starts = np.r_[0, np.cumsum(lens)[:-1]]
+        data = blob[np.repeat(starts[pidx] - offsets[:-1], L) + np.arange(offsets[-1])]
+    return pa.StringArray.from_buffers(len(pidx), pa.py_buffer(offsets.astype(np.int32)),
+                                       pa.py_buffer(np.ascontiguousarray(data)))
 
 
 def _log_links(stream, send, result) -> None:
@@ -177,7 +206,8 @@ def _send_strips(stream, send, entity: str, strips: np.ndarray, **style) -> None
     ok = _finite_rows(strips.reshape(len(strips), -1))
     stream.log(entity, rr.LineStrips2D.from_fields(**style), static=True)
     if ok.any():
-        send(entity, rr.LineStrips2D.columns(strips=_strips_arrow(strips[ok])).partition(ok.astype(int)))
+        send(entity, rr.LineStrips2D.columns(strips=_strips_arrow(strips if ok.all() else strips[ok]))
+             .partition(ok.astype(int)))
 
 
 def _strips_arrow(strips: np.ndarray):
@@ -191,7 +221,7 @@ def _strips_arrow(strips: np.ndarray):
     from rerun.encodings.vec2d import Vec2DBatch
 
     n, k = strips.shape[:2]
-    inner = Vec2DBatch(np.ascontiguousarray(strips.reshape(-1, 2), dtype=np.float32)).as_arrow_array()
+    inner = Vec2DBatch(np.asarray(strips, dtype=np.float32).reshape(-1, 2)).as_arrow_array()
     offsets = pa.array(np.arange(0, (n + 1) * k, k, dtype=np.int32))
     return pa.ListArray.from_arrays(offsets, inner, type=LineStrip2DBatch._ARROW_DATATYPE)
 
@@ -257,7 +287,10 @@ def _log_vectors(stream, send, result) -> None:
                 labels=[label], colors=_VECTOR_COLORS[quantity],
                 radii=rr.components.Radius.ui_points(1.5), draw_order=40.0), static=True)
             if ok.any():
-                send(entity, rr.Arrows2D.columns(origins=origins[ok], vectors=vectors[ok] * scale)
+                if not ok.all():
+                    origins, vectors = origins[ok], vectors[ok]
+                send(entity, rr.Arrows2D.columns(origins=np.asarray(origins, dtype=np.float32),
+                                                 vectors=np.asarray(vectors * scale, dtype=np.float32))
                      .partition(ok.astype(int)))
 
 
