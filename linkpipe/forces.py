@@ -186,7 +186,8 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
     coords["effect"] = list(effects)
 
     # ---- Lagrange multipliers: J^T lambda = Q - M qdd (an independent solve)
-    Qg = _generalized(model, lagr_point, lagr_couple, Xz)  # (S, n_q)
+    Q_points = _point_forces(model, lagr_point, lagr_couple, Xz)  # Q - M Xdd at every point
+    Qg = Q_points[:, model.moving].reshape(S, -1)  # (S, n_q) generalized
     lam = np.full((S, model.n_rows), np.nan)
     ok = res.status == OK
     eng = engine(model)  # square and structurally regular: sparse block solves
@@ -272,7 +273,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
         coords["slider"] = [x.name for x in scene.sliders]
     fixed = np.flatnonzero(model.fixed)
     if len(fixed):
-        R = ground_reactions(model, lam, lagr_point, lagr_couple, Xz, s, ok)
+        R = ground_reactions(model, lam, Q_points, Xz, s, ok)
         out["ground_reaction"] = (("step", "fixed_point", "xy"), R, Fu)
         coords["fixed_point"] = [model.point_names[i] for i in fixed]
         if undetermined.any() and ok.any():
@@ -333,26 +334,20 @@ def _point_forces(model: Model, point_forces, couples, X):
     return fp
 
 
-def _generalized(model: Model, point_forces, couples, X):
-    """Return generalized forces (S, n_q) from point forces (S, P, 2) and link couples (S, n_l)."""
-    fp = _point_forces(model, point_forces, couples, X)
-    return fp[:, model.moving].reshape(fp.shape[0], -1)
-
-
-def ground_reactions(model: Model, lam, point_forces, couples, X, s, ok):
+def ground_reactions(model: Model, lam, point_forces, X, s, ok):
     """Return the force the ground exerts at each fixed point (S, n_fixed, 2).
 
     In natural coordinates a fixed point is a coordinate held by one more constraint; its
     multiplier mu follows from that coordinate's row of the equations of motion,
-    ``-mu = Phi_X^T lambda - (Q - M Xdd)`` at the fixed point (``point_forces`` already holds
-    ``Q - M Xdd`` at every point, fixed ones included). NaN at steps that are not ok.
+    ``-mu = Phi_X^T lambda - (Q - M Xdd)`` at the fixed point; ``point_forces`` (S, P, 2) holds
+    ``Q - M Xdd`` at every point, fixed ones included. NaN at steps that are not ok.
     """
     fixed = np.flatnonzero(model.fixed)
     S = X.shape[0]
     R = np.full((S, len(fixed), 2), np.nan)
     idx = np.flatnonzero(ok)
     if len(fixed) and len(idx):
-        G = _point_forces(model, point_forces, couples, X)[:, fixed]
+        G = point_forces[:, fixed]
         for lo in range(0, len(idx), 8192):
             ii = idx[lo:lo + 8192]
             Jp = model.jacobian_points(X[ii], s[ii])[:, :, fixed]  # (s, rows, n_fixed, 2)
