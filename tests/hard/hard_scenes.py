@@ -88,42 +88,51 @@ kinematics = ["velocity", "acceleration"]
 """
 
 
+def _slider_crank_body(a, b, e, theta_deg, branch, scale, name, units=True):
+    """Return the [scene], [points], links and slider of an offset slider-crank (crank a, rod b,
+    guide y = e) assembled at crank angle ``theta_deg``, slider ahead of A (+1) or behind (-1);
+    also the slider's x there (unscaled)."""
+    t = np.deg2rad(theta_deg)
+    A = np.array([a * np.cos(t), a * np.sin(t)])
+    x = A[0] + branch * np.sqrt(b**2 - (A[1] - e) ** 2)
+    sa, sb, se, sx = (scale * v for v in (a, b, e, x))
+    A = scale * A
+    unit_line = '\nunits = { length = "m", mass = "kg", time = "s", force = "N" }' if units else ""
+    return f"""
+[scene]
+name = "{name}"{unit_line}
+
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+A  = {{ x = {f(A[0])}, y = {f(A[1])} }}
+B  = {{ x = {f(sx)}, y = {f(se)} }}
+
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = {{ "O2-A" = {f(sa)} }}
+
+[[links]]
+name = "rod"
+points = ["A", "B"]
+lengths = {{ "A-B" = {f(sb)} }}
+
+[[sliders]]
+name = "piston"
+point = "B"
+along = {{ through = [0.0, {f(se)}], direction = [1.0, 0.0] }}
+""", x
+
+
 def slider_driven_text(a, b, e, x_from, x_to, steps, theta0_deg, rate=1.0, name="slider_driven",
                        scale=1.0, extra=""):
     """Return an offset slider-crank (crank a, rod b, guide y = e) driven by the slider's x.
 
     The start is assembled at crank angle ``theta0_deg`` (which must give x = ``x_from``).
     """
-    t = np.deg2rad(theta0_deg)
-    A = np.array([a * np.cos(t), a * np.sin(t)])
-    x = a * np.cos(t) + np.sqrt(b**2 - (a * np.sin(t) - e) ** 2)
-    a, b, e, x, x_from, x_to, rate = (scale * v for v in (a, b, e, x, x_from, x_to, rate))
-    A = scale * A
-    return f"""
-[scene]
-name = "{name}"
-units = {{ length = "m", mass = "kg", time = "s", force = "N" }}
-
-[points]
-O2 = {{ x = 0.0, y = 0.0, fixed = true }}
-A  = {{ x = {f(A[0])}, y = {f(A[1])} }}
-B  = {{ x = {f(x)}, y = {f(e)} }}
-
-[[links]]
-name = "crank"
-points = ["O2", "A"]
-lengths = {{ "O2-A" = {f(a)} }}
-
-[[links]]
-name = "rod"
-points = ["A", "B"]
-lengths = {{ "A-B" = {f(b)} }}
-
-[[sliders]]
-name = "piston"
-point = "B"
-along = {{ through = [0.0, {f(e)}], direction = [1.0, 0.0] }}
-
+    body, _ = _slider_crank_body(a, b, e, theta0_deg, +1, scale, name)
+    x_from, x_to, rate = (scale * v for v in (x_from, x_to, rate))
+    return body + f"""
 [[drivers]]
 name = "piston"
 coordinate = "B.x"
@@ -328,35 +337,8 @@ def slider_crank_text(a, b, e, start_deg, to_deg, steps, branch=+1, scale=1.0,
                       rate_deg=572.9577951308232, name="slider_crank"):
     """Return a crank-driven offset slider-crank: crank a, rod b, guide y = e; slider B ahead of
     A along +x (branch +1) or behind it (-1), assembled at ``start_deg``."""
-    t = np.deg2rad(start_deg)
-    A = np.array([a * np.cos(t), a * np.sin(t)])
-    x = A[0] + branch * np.sqrt(b**2 - (A[1] - e) ** 2)
-    a, b, e, x = (scale * v for v in (a, b, e, x))
-    A = scale * A
-    return f"""
-[scene]
-name = "{name}"
-
-[points]
-O2 = {{ x = 0.0, y = 0.0, fixed = true }}
-A  = {{ x = {f(A[0])}, y = {f(A[1])} }}
-B  = {{ x = {f(x)}, y = {f(e)} }}
-
-[[links]]
-name = "crank"
-points = ["O2", "A"]
-lengths = {{ "O2-A" = {f(a)} }}
-
-[[links]]
-name = "rod"
-points = ["A", "B"]
-lengths = {{ "A-B" = {f(b)} }}
-
-[[sliders]]
-name = "piston"
-point = "B"
-along = {{ through = [0.0, {f(e)}], direction = [1.0, 0.0] }}
-
+    body, _ = _slider_crank_body(a, b, e, start_deg, branch, scale, name, units=False)
+    return body + f"""
 [[drivers]]
 name = "crank"
 angle = ["O2", "A"]
