@@ -272,14 +272,28 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             out["slider_force_unique"] = (("slider",), unique, "1")
         coords["slider"] = [x.name for x in scene.sliders]
     fixed = np.flatnonzero(model.fixed)
+    g = np.asarray(scene.gravity, dtype=float) if "gravity" in eff and masses else None
+    couples = effects["loads"][1] if "loads" in effects else np.zeros((S, nl))
+    bodies = body_terms(model, masses, couples, Xz, np.where(np.isfinite(A), A, 0.0), g,
+                        "inertia" in eff and bool(masses))
+    R, PF = reactions(model, lam, Q_points, bodies, Xz, s, ok)
+    pairs = joints(model)
+    out["joint_force"] = (("step", "joint", "xy"), PF, Fu)
+    coords["joint"] = [f"{model.point_names[p]}@{scene.links[li].name}" for li, p in pairs]
+    # under redundancy a self-stress changes the multipliers of the undetermined rows: a
+    # reaction is not unique where such a row acts (minimum-norm choice reported, flagged)
+    Jp0 = None
+    if undetermined.any() and ok.any():
+        i0 = np.flatnonzero(ok)[0]
+        Jp0 = np.abs(model.jacobian_points(Xz[i0:i0 + 1], s[i0:i0 + 1])[0]).max(axis=2)  # (rows, P)
+        row_link = body_rows(model)
+        unique = [0 if (Jp0[undetermined & (row_link == li), p] > 0).any() else 1 for li, p in pairs]
+        out["joint_force_unique"] = (("joint",), np.array(unique, dtype=np.int8), "1")
     if len(fixed):
-        R = ground_reactions(model, lam, Q_points, Xz, s, ok)
         out["ground_reaction"] = (("step", "fixed_point", "xy"), R, Fu)
         coords["fixed_point"] = [model.point_names[i] for i in fixed]
-        if undetermined.any() and ok.any():
-            i0 = np.flatnonzero(ok)[0]
-            Jp = model.jacobian_points(Xz[i0:i0 + 1], s[i0:i0 + 1])[0][:, fixed]  # (rows, nf, 2)
-            touched = np.abs(Jp[undetermined]).max(axis=(0, 2)) > 0
+        if Jp0 is not None:
+            touched = Jp0[undetermined][:, fixed].max(axis=0) > 0
             out["ground_reaction_unique"] = (("fixed_point",), (~touched).astype(np.int8), "1")
     out["__status__"] = (("step",), status, "1")
     out["__coords__"] = ((), coords, "")
@@ -334,22 +348,98 @@ def _point_forces(model: Model, point_forces, couples, X):
     return fp
 
 
-def ground_reactions(model: Model, lam, point_forces, X, s, ok):
-    """Return the force the ground exerts at each fixed point (S, n_fixed, 2).
+def body_terms(model: Model, masses, couples, X, A, g, inertia: bool):
+    """Return {link index: (S, P, 2)} of ``M_k Xdd - Q_k`` at the points of each body k.
 
-    In natural coordinates a fixed point is a coordinate held by one more constraint; its
-    multiplier mu follows from that coordinate's row of the equations of motion,
-    ``-mu = Phi_X^T lambda - (Q - M Xdd)`` at the fixed point; ``point_forces`` (S, P, 2) holds
-    ``Q - M Xdd`` at every point, fixed ones included. NaN at steps that are not ok.
+    ``Q_k`` are the forces applied to the body itself (its weight, couples on it); forces at
+    points (springs, point loads) act on the pins, not on a body. ``g`` is None without gravity;
+    ``couples`` (S, n_links) the loads' couples.
+    """
+    S, P = X.shape[:2]
+    terms: dict[int, np.ndarray] = {}
+
+    def term(li):
+        if li not in terms:
+            terms[li] = np.zeros((S, P, 2))
+        return terms[li]
+
+    for m, (ia, ib, uu, vv, L) in masses:
+        li = _link_index(model, m.link)
+        if inertia:
+            aG = _center(A, ia, ib, uu, vv, L) - _center(np.zeros_like(A), ia, ib, uu, vv, L)
+            _add_at_center(term(li), m.mass * aG, ia, ib, uu, vv, L)
+            ddd = A[:, ib] - A[:, ia]
+            term(li)[:, ib] += m.inertia / L**2 * ddd
+            term(li)[:, ia] -= m.inertia / L**2 * ddd
+        if g is not None:
+            _add_at_center(term(li), -m.mass * g, ia, ib, uu, vv, L)
+    for li in np.flatnonzero(np.any(couples != 0, axis=0)):
+        ia, ib = model.link_a[li], model.link_b[li]
+        d = X[:, ib] - X[:, ia]
+        f = (couples[:, li] / np.einsum("sj,sj->s", d, d))[:, None] * _perp(d)
+        term(li)[:, ib] -= f
+        term(li)[:, ia] += f
+    return terms
+
+
+def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
+    """Return ground reactions (S, n_fixed, 2) and pin forces on bodies (S, n_joints, 2).
+
+    Ground: a fixed point is a coordinate held by one more constraint; its multiplier mu follows
+    from that coordinate's row of the equations of motion, ``-mu = Phi_X^T lambda - (Q - M Xdd)``
+    (``point_forces`` (S, P, 2) holds ``Q - M Xdd`` at every point, fixed ones included).
+    Pins: the force the pin at point P exerts on body k is ``(M_k Xdd - Q_k)_P + sum over the
+    body's own rows of lambda_r dPhi_r/dX_P`` (``bodies`` from :func:`body_terms`), for the
+    pairs of :func:`joints`. NaN at steps that are not ok.
     """
     fixed = np.flatnonzero(model.fixed)
+    pairs = joints(model)
+    row_link = body_rows(model)
     S = X.shape[0]
     R = np.full((S, len(fixed), 2), np.nan)
+    F = np.full((S, len(pairs), 2), np.nan)
     idx = np.flatnonzero(ok)
-    if len(fixed) and len(idx):
-        G = point_forces[:, fixed]
-        for lo in range(0, len(idx), 8192):
-            ii = idx[lo:lo + 8192]
-            Jp = model.jacobian_points(X[ii], s[ii])[:, :, fixed]  # (s, rows, n_fixed, 2)
-            R[ii] = np.einsum("sr,srfj->sfj", lam[ii], Jp) - G[ii]
-    return R
+    rows_of = {li: np.flatnonzero(row_link == li) for li in sorted({li for li, _ in pairs})}
+    for lo in range(0, len(idx), 8192):
+        ii = idx[lo:lo + 8192]
+        Jp = model.jacobian_points(X[ii], s[ii])  # (s, rows, P, 2)
+        if len(fixed):
+            R[ii] = np.einsum("sr,srfj->sfj", lam[ii], Jp[:, :, fixed]) - point_forces[ii][:, fixed]
+        for li, rs in rows_of.items():
+            own = np.einsum("sr,srpj->spj", lam[ii][:, rs], Jp[:, rs])
+            if li in bodies:
+                own = own + bodies[li][ii]
+            for k, (lj, p) in enumerate(pairs):
+                if lj == li:
+                    F[ii, k] = own[:, p]
+    return R, F
+
+
+def body_rows(model: Model) -> np.ndarray:
+    """Return (n_rows,) the link index of each body row, -1 elsewhere.
+
+    Body rows: each link's distance and local rows, and an angle driver whose two points lie on
+    one link (its multiplier is the actuator's couple on that body, reacted by the ground).
+    Slider rows and coordinate drivers act on points (pins), not on a body.
+    """
+    out = np.full(model.n_rows, -1, dtype=np.intp)
+    nd = len(model.dist_a)
+    out[:nd] = model.dist_link
+    out[nd:nd + 2 * len(model.loc_a)] = np.repeat(model.loc_link, 2)
+    names = model.point_names
+    with_rows = set(out[out >= 0].tolist())
+    for j in np.flatnonzero(model.drv_angle):
+        ends = {names[model.drv_a[j]], names[model.drv_b[j]]}
+        for li, link in enumerate(model.scene.links):
+            if li in with_rows and ends <= set(link.points):
+                out[model.n_constraints + j] = li
+                break
+    return out
+
+
+def joints(model: Model) -> list[tuple[int, int]]:
+    """Return the (link index, point index) pairs of every point of every link with rows."""
+    names = model.point_names
+    has_rows = set(body_rows(model).tolist())
+    return [(li, names.index(p)) for li, link in enumerate(model.scene.links) if li in has_rows
+            for p in link.points]

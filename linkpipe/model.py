@@ -65,6 +65,9 @@ class Model:
     # link frames (every link, ground links included) for link angles
     link_a: np.ndarray
     link_b: np.ndarray
+    # which link each body row belongs to: dist rows, and local pairs (two rows each)
+    dist_link: np.ndarray
+    loc_link: np.ndarray
 
     @property
     def n_points(self) -> int:
@@ -274,9 +277,9 @@ def build_model(scene: Scene) -> Model:
     lens = [float(np.hypot(*(X0[index[l.points[1]]] - X0[index[l.points[0]]]))) for l in scene.links]
     size = max([size] + lens) or 1.0
 
-    dist_a, dist_b, dist_len = [], [], []
-    loc = {k: [] for k in ("a", "b", "p", "u", "v", "len")}
-    for link in scene.links:
+    dist_a, dist_b, dist_len, dist_link = [], [], [], []
+    loc = {k: [] for k in ("a", "b", "p", "u", "v", "len", "link")}
+    for li, link in enumerate(scene.links):
         ia, ib = index[link.points[0]], index[link.points[1]]
         idx = [index[p] for p in link.points]
         if all(fixed[i] for i in idx):
@@ -288,6 +291,7 @@ def build_model(scene: Scene) -> Model:
             dist_a.append(ia)
             dist_b.append(ib)
             dist_len.append(L)
+            dist_link.append(li)
         e = d0 / L0
         ep = _R90 @ e
         for pname in link.points[2:]:
@@ -311,7 +315,7 @@ def build_model(scene: Scene) -> Model:
                     f'list a far point second so that the frame is long, e.g. points = '
                     f'["{link.points[0]}", "{pname}", ...] (lengths and local refer to the first '
                     f"two points)")
-            for key, val in zip(("a", "b", "p", "u", "v", "len"), (ia, ib, ip, u, v, L)):
+            for key, val in zip(("a", "b", "p", "u", "v", "len", "link"), (ia, ib, ip, u, v, L, li)):
                 loc[key].append(val)
 
     sfix_p, sfix_c, sfix_n = [], [], []
@@ -364,6 +368,7 @@ def build_model(scene: Scene) -> Model:
         smov_len=flts(smov["len"]),
         drv_angle=np.array(drv_angle, dtype=bool), drv_a=ints(drv_a), drv_b=ints(drv_b),
         drv_axis=ints(drv_axis), link_a=ia, link_b=ib,
+        dist_link=ints(dist_link), loc_link=ints(loc["link"]),
     )
 
 

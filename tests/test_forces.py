@@ -300,3 +300,56 @@ def test_shear_press_pivot_reaction_by_hand():
     expect = -(FB + np.stack([np.zeros_like(fP), fP], axis=1))
     RA = r.forces["ground_reaction"][1][:, 0]
     np.testing.assert_allclose(RA, expect, rtol=0, atol=1e-9 * np.abs(expect).max())
+
+
+def test_pin_forces_satisfy_each_body_newton_euler(tmp_path):
+    """Pin forces on each body, with its weight, couples and the actuator torque, give m a_G
+    and I alpha about G (Newton-Euler per body: an independent check of the multipliers)."""
+    r = linkpipe.solve(scene_from(EVERY_EFFECT, tmp_path))
+    from linkpipe.forces import _center, center_frame
+
+    F = r.forces["joint_force"][1]
+    joints = _joint_names(r)
+    X, A = r.position, r.acceleration
+    names = r.point_names
+    torque = r.forces["input_force"][1][:, 0]
+    masses = {m.link: m for m in r.scene.masses}
+    for li, link in enumerate(r.scene.links):
+        cols = [k for k, j in enumerate(joints) if j.endswith("@" + link.name)]
+        assert len(cols) == len(link.points)
+        m = masses.get(link.name)
+        if m is not None:
+            ia, ib, u, v, L = center_frame(r.model, m.link, m.center)
+            G = _center(X, ia, ib, u, v, L)
+            aG = _center(A, ia, ib, u, v, L) - _center(np.zeros_like(A), ia, ib, u, v, L)
+            mass, inertia = m.mass, m.inertia
+        else:
+            G, aG, mass, inertia = X[:, names.index(link.points[0])], 0.0, 0.0, 0.0
+        net = F[:, cols].sum(axis=1) + mass * np.array([0.0, -9.81])
+        scale = np.abs(F[:, cols]).max()
+        np.testing.assert_allclose(net, mass * aG * np.ones_like(net), rtol=0, atol=1e-9 * scale)
+        rel = X[:, [names.index(p) for p in link.points]] - G[:, None]
+        moment = (rel[..., 0] * F[:, cols, 1] - rel[..., 1] * F[:, cols, 0]).sum(axis=1)
+        moment += {"rocker": -2.0, "crank": torque}.get(link.name, 0.0)
+        alpha = r.link_angular_acceleration[:, li]
+        np.testing.assert_allclose(moment, inertia * alpha, rtol=0, atol=1e-9 * scale * r.model.size)
+
+
+def _joint_names(r):
+    from linkpipe.forces import joints
+
+    return [f"{r.point_names[p]}@{r.scene.links[li].name}" for li, p in joints(r.model)]
+
+
+def test_pins_between_two_bodies_transmit_equal_and_opposite_forces():
+    r = linkpipe.solve(str(DATA / "norton_11_3.toml"))
+    F = r.forces["joint_force"][1][0]
+    J = _joint_names(r)
+    np.testing.assert_allclose(F[J.index("A@crank")], -F[J.index("A@coupler")], atol=1e-9)
+    np.testing.assert_allclose(F[J.index("B@coupler")], -F[J.index("B@rocker")], atol=1e-9)
+    # the ground pins carry what the ground reactions say; the coupler point carries F_P
+    R = r.forces["ground_reaction"][1][0]
+    np.testing.assert_allclose(F[J.index("O2@crank")], R[0], atol=1e-9)
+    np.testing.assert_allclose(F[J.index("O4@rocker")], R[1], atol=1e-9)
+    fp = 80 * np.array([np.cos(np.deg2rad(330)), np.sin(np.deg2rad(330))])
+    np.testing.assert_allclose(F[J.index("P@coupler")], fp, atol=1e-9)

@@ -10,6 +10,7 @@ import re
 
 import h5py
 import numpy as np
+import pytest
 
 from hard_scenes import (HARD_DIR, acceleration, double_parallelogram_text, point, solve_config,
                          solve_text, velocity, method)  # noqa: F401 - a fixture
@@ -171,3 +172,16 @@ def test_flagged_rows_are_the_left_null_space_and_lambda_is_minimum_norm():
     Q = np.einsum("sij,si->sj", J, rng.normal(size=(len(J), 7)))
     lam = np.einsum("sij,sj->si", np.linalg.pinv(np.swapaxes(J, 1, 2), rcond=1e-12), Q)
     np.testing.assert_allclose((lam * N).sum(1), 0.0, atol=1e-10)
+
+
+def test_pin_and_ground_forces_flagged_not_unique_under_redundancy():
+    """A self-stress of the double parallelogram loads every pin of the loop: all flagged;
+    a scene without redundancy carries no flags at all."""
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parents[2] / "configs"
+    r = linkpipe.solve(str(root / "hard" / "double_parallelogram.toml"))
+    assert (r.forces["joint_force_unique"][1] == 0).all()
+    assert (r.forces["ground_reaction_unique"][1] == 0).all()
+    plain = linkpipe.solve(str(root / "shear_press.toml"))
+    assert "joint_force_unique" not in plain.forces and "ground_reaction_unique" not in plain.forces
