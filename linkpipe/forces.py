@@ -164,7 +164,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
         cp = np.zeros((S, nl))
         Mqdd = np.zeros((S, P, 2))
         for m, (ia_, ib_, uu, vv, L) in masses:
-            aG = _center(A, ia_, ib_, uu, vv, L) - _center(np.zeros_like(A), ia_, ib_, uu, vv, L)
+            aG = _center(A, ia_, ib_, uu, vv, L)
             _add_at_center(fp, -m.mass * aG, ia_, ib_, uu, vv, L)
             li = _link_index(model, m.link)
             cp[:, li] += -m.inertia * res.link_angular_acceleration[:, li]
@@ -366,7 +366,7 @@ def body_terms(model: Model, masses, couples, X, A, g, inertia: bool):
     for m, (ia, ib, uu, vv, L) in masses:
         li = _link_index(model, m.link)
         if inertia:
-            aG = _center(A, ia, ib, uu, vv, L) - _center(np.zeros_like(A), ia, ib, uu, vv, L)
+            aG = _center(A, ia, ib, uu, vv, L)
             _add_at_center(term(li), m.mass * aG, ia, ib, uu, vv, L)
             ddd = A[:, ib] - A[:, ia]
             term(li)[:, ib] += m.inertia / L**2 * ddd
