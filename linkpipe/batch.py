@@ -142,16 +142,24 @@ class Engine:
     def phi(self, X2: np.ndarray, sT: np.ndarray, trig: dict | None = None) -> np.ndarray:
         """Return Phi (m, S) at points X2 (P, 2, S) and driver values sT (nd, S).
 
+        ``X2`` may also be a dict {moving point index: (x (S,), y (S,))}.
+
         Row by row on contiguous coordinate arrays; fixed points enter as scalars. ``trig``:
         optional {driver: (cos s, sin s)} already computed by the caller.
         """
         md = self.model
-        S = X2.shape[2]
-        out = np.empty((md.n_rows, S))
         fx = self._fixed_xy
+        if isinstance(X2, dict):  # {moving point: (x (S,), y (S,))}: no copy into (P, 2, S)
+            S = len(next(iter(X2.values()))[0]) if X2 else sT.shape[1]
 
-        def xy(p):
-            return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
+            def xy(p):
+                return fx[p] if p in fx else X2[p]
+        else:
+            S = X2.shape[2]
+
+            def xy(p):
+                return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
+        out = np.empty((md.n_rows, S))
 
         r = 0
         for a, b, L in self._dist:
@@ -890,6 +898,15 @@ def residuals(model: Model, X: np.ndarray, s: np.ndarray, chunk: int = CHUNK) ->
     return out
 
 
+def _points_array(model: Model, pts: dict, S: int) -> np.ndarray:
+    """Return positions (S, P, 2) from {moving point: (x (S,), y (S,))}."""
+    X = np.broadcast_to(model.start_position, (S, model.n_points, 2)).copy()
+    for p, (x, y) in pts.items():
+        X[:, p, 0] = x
+        X[:, p, 1] = y
+    return X
+
+
 def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, order: int = 0):
     """Solve a sweep's positions (and, on the dyad path, velocities/accelerations) by the scene's method.
 
@@ -926,7 +943,7 @@ def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, o
             dyads.set_branches(plan, model.positions(q0[None])[0], s[0])
             eng = engine(model)
             phi = eng.phi if eng is not None else (
-                lambda X2, sT, trig=None: model.phi(X2.transpose(2, 0, 1), sT.T).T)
+                lambda pts, sT, trig=None: model.phi(_points_array(model, pts, sT.shape[1]), sT.T).T)
             sw = dyads.solve(plan, s, s_dot, s_ddot, order=order, gaps=method == "auto", phi=phi)
             if method == "dyads" or dyads.branch_check(plan, sw):
                 X = sw.position

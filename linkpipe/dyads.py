@@ -542,8 +542,8 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
     root are NaN in every moving point. ``gaps=True`` also returns each step's smallest
     distance between a dyad's two roots and its motion (for :func:`branch_check`). ``phi``:
-    an optional ``phi(X2 (P, 2, n), s (nd, n), trig) -> (m, n)`` for the residual at every
-    step (``trig``: {driver: (cos, sin)} of the angle drivers, already computed).
+    an optional ``phi(points {moving p: (x (n,), y (n,))}, s (nd, n), trig) -> (m, n)`` for the
+    residual at every step (``trig``: {driver: (cos, sin)} of the angle drivers, already computed).
     """
     model = plan.model
     S = s.shape[0]
@@ -561,7 +561,6 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
     ok = np.ones(S, dtype=bool)
     gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
     residual = np.empty(S) if phi is not None else None
-    X2 = None
     moving = [int(p) for p in model.moving]
     nd = model.n_drivers
     cols = [np.ascontiguousarray(s[:, j]) for j in range(nd)]
@@ -606,14 +605,12 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
                     prev[p] = (x[-1], y[-1], g2[-1])
                 ch.gap2 = []
             if phi is not None:
-                if X2 is None or X2.shape[2] != n:
-                    X2 = np.empty((P, 2, n))
-                    X2[fixed] = X0[fixed][:, :, None]
-                for p in moving:
-                    X2[p, 0] = ch.px[p]
-                    X2[p, 1] = ch.py[p]
-                F = phi(X2, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
-                residual[lo:hi] = np.abs(F).max(axis=0) if F.shape[0] else 0.0
+                pts = {p: (ch.px[p], ch.py[p]) for p in moving}
+                F = phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
+                if F.shape[0]:
+                    residual[lo:hi] = np.abs(F, out=F).max(axis=0)
+                else:
+                    residual[lo:hi] = 0.0
             if order >= 1:
                 ch.sd = [c if isinstance(c, float) else c[lo:hi] for c in dcols]
                 ch.vx = [None] * P
