@@ -132,12 +132,20 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             out["spring_force"] = (("step", "spring"), total, Fu)
 
     masses = [(m, center_frame(model, m.link, m.center)) for m in scene.masses]
+    # per body k: M_k Xdd - Q_k at its points (Q_k: the weight and couples on the body itself),
+    # filled below where those effects are computed, for the pin forces
+    bodies: dict[int, np.ndarray] = {}
+
+    def body(li):
+        if li not in bodies:
+            bodies[li] = np.zeros((S, P, 2))
+        return bodies[li]
+
     if "gravity" in eff and masses:
         g = np.asarray(scene.gravity, dtype=float)
-        fp = np.zeros((S, P, 2))
         for m, (ia_, ib_, uu, vv, L) in masses:
-            _add_at_center(fp, m.mass * g, ia_, ib_, uu, vv, L)
-        effects["gravity"] = (fp, np.zeros((S, nl)))
+            _add_at_center(body(_link_index(model, m.link)), -m.mass * g, ia_, ib_, uu, vv, L)
+        effects["gravity"] = (-sum(bodies.values()), np.zeros((S, nl)))
         pot = np.zeros(S)
         for m, (ia_, ib_, uu, vv, L) in masses:
             G = _center(X, ia_, ib_, uu, vv, L)
@@ -168,11 +176,14 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             _add_at_center(fp, -m.mass * aG, ia_, ib_, uu, vv, L)
             li = _link_index(model, m.link)
             cp[:, li] += -m.inertia * res.link_angular_acceleration[:, li]
-            # M qdd with the constant natural-coordinate mass matrix
-            _add_at_center(Mqdd, m.mass * aG, ia_, ib_, uu, vv, L)
+            # M qdd with the constant natural-coordinate mass matrix, per body
+            Mk = np.zeros((S, P, 2))
+            _add_at_center(Mk, m.mass * aG, ia_, ib_, uu, vv, L)
             ddd = A[:, ib_] - A[:, ia_]
-            Mqdd[:, ib_] += m.inertia / L**2 * ddd
-            Mqdd[:, ia_] -= m.inertia / L**2 * ddd
+            Mk[:, ib_] += m.inertia / L**2 * ddd
+            Mk[:, ia_] -= m.inertia / L**2 * ddd
+            Mqdd += Mk
+            body(li)[:] += Mk
         effects["inertia"] = (fp, cp)
         lagr_point = lagr_point - Mqdd
 
@@ -272,10 +283,12 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             out["slider_force_unique"] = (("slider",), unique, "1")
         coords["slider"] = [x.name for x in scene.sliders]
     fixed = np.flatnonzero(model.fixed)
-    g = np.asarray(scene.gravity, dtype=float) if "gravity" in eff and masses else None
-    couples = effects["loads"][1] if "loads" in effects else np.zeros((S, nl))
-    bodies = body_terms(model, masses, couples, Xz, np.where(np.isfinite(A), A, 0.0), g,
-                        "inertia" in eff and bool(masses))
+    if "loads" in effects:
+        couples = effects["loads"][1]
+        for li in np.flatnonzero(np.any(couples != 0, axis=0)):
+            cp = np.zeros_like(couples)
+            cp[:, li] = couples[:, li]
+            body(li)[:] -= _point_forces(model, np.zeros((S, P, 2)), cp, Xz)
     R, PF = reactions(model, lam, Q_points, bodies, Xz, s, ok)
     pairs = joints(model)
     out["joint_force"] = (("step", "joint", "xy"), PF, Fu)
@@ -348,40 +361,6 @@ def _point_forces(model: Model, point_forces, couples, X):
     return fp
 
 
-def body_terms(model: Model, masses, couples, X, A, g, inertia: bool):
-    """Return {link index: (S, P, 2)} of ``M_k Xdd - Q_k`` at the points of each body k.
-
-    ``Q_k`` are the forces applied to the body itself (its weight, couples on it); forces at
-    points (springs, point loads) act on the pins, not on a body. ``g`` is None without gravity;
-    ``couples`` (S, n_links) the loads' couples.
-    """
-    S, P = X.shape[:2]
-    terms: dict[int, np.ndarray] = {}
-
-    def term(li):
-        if li not in terms:
-            terms[li] = np.zeros((S, P, 2))
-        return terms[li]
-
-    for m, (ia, ib, uu, vv, L) in masses:
-        li = _link_index(model, m.link)
-        if inertia:
-            aG = _center(A, ia, ib, uu, vv, L)
-            _add_at_center(term(li), m.mass * aG, ia, ib, uu, vv, L)
-            ddd = A[:, ib] - A[:, ia]
-            term(li)[:, ib] += m.inertia / L**2 * ddd
-            term(li)[:, ia] -= m.inertia / L**2 * ddd
-        if g is not None:
-            _add_at_center(term(li), -m.mass * g, ia, ib, uu, vv, L)
-    for li in np.flatnonzero(np.any(couples != 0, axis=0)):
-        ia, ib = model.link_a[li], model.link_b[li]
-        d = X[:, ib] - X[:, ia]
-        f = (couples[:, li] / np.einsum("sj,sj->s", d, d))[:, None] * _perp(d)
-        term(li)[:, ib] -= f
-        term(li)[:, ia] += f
-    return terms
-
-
 def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
     """Return ground reactions (S, n_fixed, 2) and pin forces on bodies (S, n_joints, 2).
 
@@ -389,7 +368,7 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
     from that coordinate's row of the equations of motion, ``-mu = Phi_X^T lambda - (Q - M Xdd)``
     (``point_forces`` (S, P, 2) holds ``Q - M Xdd`` at every point, fixed ones included).
     Pins: the force the pin at point P exerts on body k is ``(M_k Xdd - Q_k)_P + sum over the
-    body's own rows of lambda_r dPhi_r/dX_P`` (``bodies`` from :func:`body_terms`), for the
+    body's own rows of lambda_r dPhi_r/dX_P`` (``bodies``: {link: M_k Xdd - Q_k at the points}), for the
     pairs of :func:`joints`. NaN at steps that are not ok.
     """
     fixed = np.flatnonzero(model.fixed)
