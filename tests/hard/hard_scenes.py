@@ -19,6 +19,18 @@ def f(x: float) -> str:
     return repr(float(x))
 
 
+def crank_driver(start_deg, to_deg, steps, rate_deg) -> str:
+    """Return the [[drivers]] table of a crank "crank" driven by the angle of O2 -> A."""
+    return f"""[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = {f(start_deg)}
+to = {f(to_deg)}
+steps = {int(steps)}
+rate = {f(rate_deg)}
+"""
+
+
 def fourbar_B(a, b, c, d, theta, branch=+1):
     """Return B of the four-bar O2=(0,0), A=a e(theta), O4=(d,0), |AB|=b, |O4B|=c (branch +1: left of A->O4)."""
     A = np.array([a * np.cos(theta), a * np.sin(theta)])
@@ -74,14 +86,7 @@ name = "rocker"
 points = ["O4", "B"]
 lengths = {{ "O4-B" = {f(c)} }}
 
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-from = {f(start_deg)}
-to = {f(to_deg)}
-steps = {int(steps)}
-rate = {f(rate_deg)}
-
+{crank_driver(start_deg, to_deg, steps, rate_deg)}
 [outputs]
 kinematics = ["velocity", "acceleration"]
 {extra}
@@ -216,14 +221,7 @@ points = ["A", "B", "E"]
 lengths = {{ "A-B" = 2.0 }}
 local = {{ E = [1.0, {f(v)}] }}
 
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-from = {f(start_deg)}
-to = {f(to_deg)}
-steps = {int(steps)}
-rate = {f(rate_deg)}
-{forces}
+{crank_driver(start_deg, to_deg, steps, rate_deg)}{forces}
 [outputs]
 kinematics = ["velocity", "acceleration"]
 trace = ["E"]
@@ -339,14 +337,7 @@ def slider_crank_text(a, b, e, start_deg, to_deg, steps, branch=+1, scale=1.0,
     A along +x (branch +1) or behind it (-1), assembled at ``start_deg``."""
     body, _ = _slider_crank_body(a, b, e, start_deg, branch, scale, name, units=False)
     return body + f"""
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-from = {f(start_deg)}
-to = {f(to_deg)}
-steps = {int(steps)}
-rate = {f(rate_deg)}
-
+{crank_driver(start_deg, to_deg, steps, rate_deg)}
 [outputs]
 kinematics = ["velocity", "acceleration"]
 """
@@ -398,14 +389,7 @@ points = ["P", "Q"]
 name = "link6"
 points = ["O6", "Q"]
 
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-from = {f(start_deg)}
-to = {f(to_deg)}
-steps = {int(steps)}
-rate = {f(rate_deg)}
-
+{crank_driver(start_deg, to_deg, steps, rate_deg)}
 [outputs]
 kinematics = ["velocity", "acceleration"]
 """
