@@ -257,18 +257,6 @@ class Engine:
                 out[r + j] = sddT[j]
         return out
 
-    def features_T(self, qT: np.ndarray, sT: np.ndarray) -> np.ndarray:
-        """Return the features (n_features, S) from qT (n_q, S) and sT (nd, S)."""
-        n, S = qT.shape
-        F = np.empty((self.n_features, S))
-        F[0] = 1.0
-        F[1:1 + n] = qT
-        na = len(self.angle)
-        if na:
-            F[1 + n:1 + n + na] = np.cos(sT[self.angle])
-            F[1 + n + na:] = np.sin(sT[self.angle])
-        return F
-
     def entries_T(self, qT: np.ndarray, sT: np.ndarray) -> np.ndarray:
         """Return the Jacobian's entries (nnz, S) from qT (n_q, S) and sT (nd, S).
 

@@ -75,11 +75,6 @@ class Result:
         return int((self.status == 0).sum())
 
     @property
-    def success(self) -> bool:
-        """True when the run finished (failed steps are data, not a failed run)."""
-        return True
-
-    @property
     def point_names(self) -> tuple[str, ...]:
         return self.scene.point_names
 
