@@ -24,9 +24,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from . import atomic_path
+from . import atomic_path, hdf5
 
-STR = h5py.string_dtype("utf-8")
 APPLICATION_ID = "linkpipe_accuracy"
 FLOOR = 1e-17  # relative errors below this are drawn at log10 = -17
 
@@ -39,47 +38,10 @@ _KNOB_MARKERS = {"tol": "circle", "max_iter": "diamond", "jacobian": "square",
 
 
 # ------------------------------------------------------------------------------ HDF5
-def _array(data) -> np.ndarray:
-    arr = np.asarray(data)
-    if arr.dtype.kind in "OUS":
-        return np.array([str(x) for x in arr.ravel()], dtype=STR).reshape(arr.shape)
-    return arr
-
-
-def _set_attr(attrs, key, value) -> None:
-    if value is None:
-        return
-    if isinstance(value, str):
-        attrs[key] = value
-    elif isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
-        attrs.create(key, np.array(value, dtype=STR), dtype=STR)
-    elif isinstance(value, bool):
-        attrs[key] = np.int8(value)
-    else:
-        attrs[key] = value
-
-
 def write_h5(ladder, path: str | os.PathLike) -> None:
     """Write ``ladder`` to ``path`` atomically, one row per setting (netCDF-4 layout)."""
     coords, data = ladder.variables()
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w", track_order=True) as f:
-            for key, value in ladder.attributes().items():
-                _set_attr(f.attrs, key, value)
-            scales = {}
-            for c in coords:
-                ds = f.create_dataset(c.name, data=_array(c.data))
-                ds.make_scale(c.name)
-                scales[c.name] = ds
-            for var in data:
-                arr = _array(var.data)
-                ds = f.create_dataset(var.name, data=arr)
-                if var.units:
-                    ds.attrs["units"] = var.units
-                for key, value in var.attrs.items():
-                    _set_attr(ds.attrs, key, value)
-                for axis, dim in enumerate(var.dims):
-                    ds.dims[axis].attach_scale(scales[dim])
+    hdf5.write_layout(path, ladder.attributes(), coords, data)
 
 
 def read_h5(path: str | os.PathLike) -> dict:

@@ -22,12 +22,18 @@ _PHANTOM = "This is a netCDF dimension but not a netCDF variable."
 
 def write(result, path: str | os.PathLike) -> None:
     """Write ``result`` to ``path`` atomically (temporary file, then ``os.replace``)."""
+    write_layout(path, result.attributes(), result.coordinates(), result.variables())
+
+
+def write_layout(path: str | os.PathLike, attributes: dict, coordinates, variables) -> None:
+    """Write root attributes, coordinate variables and data variables (``result.Variable``)
+    to ``path`` atomically, in the netCDF-4 layout described above."""
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w", track_order=True) as f:
-            for key, value in result.attributes().items():
+            for key, value in attributes.items():
                 _set_attr(f.attrs, key, value)
-            scales = {c.name: _write_coordinate(f, c) for c in result.coordinates()}
-            for var in result.variables():
+            scales = {c.name: _write_coordinate(f, c) for c in coordinates}
+            for var in variables:
                 _write_variable(f, var, scales)
 
 
