@@ -90,11 +90,12 @@ def solve(scene: Scene | str, progress=None) -> Result:
     if plan.velocity:
         res.velocity = der["velocity"]
         res.velocity_residual = der["velocity_residual"]
-        res.link_angular_velocity, _ = kin.link_rates(model, X, res.velocity)
     if plan.acceleration:
         res.acceleration = der["acceleration"]
         res.acceleration_residual = der["acceleration_residual"]
-        _, res.link_angular_acceleration = kin.link_rates(model, X, res.velocity, res.acceleration)
+    if plan.velocity:
+        res.link_angular_velocity, res.link_angular_acceleration = kin.link_rates(
+            model, X, res.velocity, res.acceleration)
     if plan.forces:
         from .forces import force_stage
 
