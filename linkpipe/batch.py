@@ -686,7 +686,7 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         ii = steps[lo:lo + chunk]
         g = seg[ii]
         t = (ii - nodes[g]) / lengths[g]
-        predT = _hermite_T(*(a[:, g] for a in hermite_T), t)
+        predT = _hermite_T(*(np.take(a, g, axis=1) for a in hermite_T), t)
         sT = np.ascontiguousarray(s[ii].T)
         qT, res, its, conv, E = _newton_soa(eng, predT.copy(), sT, tol_abs)
         moved = _colmax(np.abs(qT - predT)) if qT.shape[0] else np.zeros(len(ii))

@@ -331,7 +331,7 @@ def _line_at(line: Line, X: np.ndarray, s: np.ndarray):
 class _Chunk:
     """Per-coordinate arrays of one chunk of steps: x[p], y[p] (float for fixed points)."""
 
-    __slots__ = ("px", "py", "vx", "vy", "ax", "ay", "s", "sd", "sdd", "_target", "gap2", "trig")
+    __slots__ = ("px", "py", "vx", "vy", "ax", "ay", "s", "sd", "sdd", "_target", "gap2", "trig", "geo")
 
 
 def _rows_line(line: Line, px, py, ch, order):
@@ -395,8 +395,10 @@ def _position(st: Step, ch: _Chunk) -> None:
         ch.trig[st.driver] = (c, s)
         cx, cy = px[st.c], py[st.c]
         for p, (wx, wy) in zip(st.targets, st.w):
-            px[p] = cx + (c * wx - s * wy)
-            py[p] = cy + (s * wx + c * wy)
+            rx, ry = c * wx - s * wy, s * wx + c * wy
+            ch.geo[p] = (rx, ry)  # the arm from the pin, for the derivatives
+            px[p] = cx + rx
+            py[p] = cy + ry
         return
     if st.kind == "linear":
         ix, iy = px[st.i], py[st.i]
@@ -415,8 +417,12 @@ def _position(st: Step, ch: _Chunk) -> None:
         if ch.gap2 is not None:  # squared distance between the two roots: (2 h |d|)^2
             ch.gap2.append((p, 4.0 * h / inv))
         h = np.sqrt(h) if st.sign > 0 else -np.sqrt(h)
-        px[p] = c1x + (k * dx - h * dy)
-        py[p] = c1y + (k * dy + h * dx)
+        g1x, g1y = k * dx - h * dy, k * dy + h * dx  # p - c1
+        px[p] = c1x + g1x
+        py[p] = c1y + g1y
+        # the derivatives' rows: g1 = p - c1, g2 = p - c2 = g1 - d, and their determinant
+        # cross(g1, g2) = cross(d, g1) = h |d|^2 (no cancellation near the singular h = 0)
+        ch.geo[p] = (g1x, g1y, g1x - dx, g1y - dy, inv / h)
         return
     if st.kind == "circle_line":
         cx, cy = px[st.c1], py[st.c1]
@@ -462,20 +468,23 @@ def _derivative(st: Step, ch: _Chunk, order: int) -> None:
         ox, oy = ch.ax, ch.ay
     if st.kind == "angle":
         w = ch.sd[st.driver]
-        cx, cy = px[st.c], py[st.c]
         bx, by = ox[st.c], oy[st.c]
         if order == 1:
             for p in st.targets:
-                rx, ry = px[p] - cx, py[p] - cy
+                rx, ry = ch.geo[p]
                 ox[p] = _add(bx, -w * ry)
                 oy[p] = _add(by, w * rx)
         else:
             al = ch.sdd[st.driver]
             w2 = w * w
             for p in st.targets:
-                rx, ry = px[p] - cx, py[p] - cy
-                ox[p] = _add(bx, -al * ry - w2 * rx)
-                oy[p] = _add(by, al * rx - w2 * ry)
+                rx, ry = ch.geo[p]
+                if isinstance(al, float) and al == 0.0:  # constant rate: centripetal only
+                    ox[p] = _add(bx, -w2 * rx)
+                    oy[p] = _add(by, -w2 * ry)
+                else:
+                    ox[p] = _add(bx, -al * ry - w2 * rx)
+                    oy[p] = _add(by, al * rx - w2 * ry)
         return
     if st.kind == "linear":
         bx, by = ox[st.i], oy[st.i]
@@ -489,24 +498,44 @@ def _derivative(st: Step, ch: _Chunk, order: int) -> None:
         return
     p = st.targets[0]
     ch._target = p
-    rows = []
-    for kind, c, line in (("c", st.c1, None), ("c", st.c2, None)) if st.kind == "circles" else (
-            (("c", st.c1, None), ("l", -1, st.line1)) if st.kind == "circle_line"
-            else (("l", -1, st.line1), ("l", -1, st.line2))):
-        if kind == "c":
-            gx, gy = px[p] - px[c], py[p] - py[c]
-            b = _dot(gx, gy, ox[c], oy[c])
-            if order == 2:
-                rvx, rvy = _sub(ch.vx[p], ch.vx[c]), _sub(ch.vy[p], ch.vy[c])
-                if rvx is not None:
-                    b = b - (rvx * rvx + rvy * rvy)
-            rows.append((gx, gy, b))
-        else:
-            rows.append(_rows_line(line, px[p], py[p], ch, order))
-    (g1x, g1y, b1), (g2x, g2y, b2) = rows
+    if st.kind == "circles":  # rows and determinant from the position pass
+        g1x, g1y, g2x, g2y, idet = ch.geo[p]
+        b1 = _dot(g1x, g1y, ox[st.c1], oy[st.c1])
+        b2 = _dot(g2x, g2y, ox[st.c2], oy[st.c2])
+        if order == 2:
+            b1 = _minus_rel_speed2(b1, ch, p, st.c1)
+            b2 = _minus_rel_speed2(b2, ch, p, st.c2)
+        ox[p] = _cramer(b1, g2y, b2, g1y, idet)
+        oy[p] = _cramer(b2, g1x, b1, g2x, idet)
+        return
+    if st.kind == "circle_line":  # a distance row from the centre, then the line's row
+        c = st.c1
+        gx, gy = px[p] - px[c], py[p] - py[c]
+        b = _dot(gx, gy, ox[c], oy[c])
+        if order == 2:
+            b = _minus_rel_speed2(b, ch, p, c)
+        (g1x, g1y, b1), (g2x, g2y, b2) = (gx, gy, b), _rows_line(st.line1, px[p], py[p], ch, order)
+    else:  # lines
+        (g1x, g1y, b1), (g2x, g2y, b2) = (_rows_line(st.line1, px[p], py[p], ch, order),
+                                          _rows_line(st.line2, px[p], py[p], ch, order))
     idet = 1.0 / (g1x * g2y - g1y * g2x)
-    ox[p] = (b1 * g2y - b2 * g1y) * idet
-    oy[p] = (g1x * b2 - g2x * b1) * idet
+    ox[p] = _cramer(b1, g2y, b2, g1y, idet)
+    oy[p] = _cramer(b2, g1x, b1, g2x, idet)
+
+
+def _minus_rel_speed2(b, ch: _Chunk, p: int, c: int):
+    """Return b - |v_p - v_c|^2 (a distance row's acceleration RHS); b when both are at rest."""
+    rvx, rvy = _sub(ch.vx[p], ch.vx[c]), _sub(ch.vy[p], ch.vy[c])
+    return b if rvx is None else b - (rvx * rvx + rvy * rvy)
+
+
+def _cramer(a, b, c, d, idet):
+    """Return (a b - c d) idet, where a or c may be the scalar 0.0 (a point with no load)."""
+    if isinstance(c, float) and c == 0.0:
+        return a * b * idet
+    if isinstance(a, float) and a == 0.0:
+        return -(c * d) * idet
+    return (a * b - c * d) * idet
 
 
 def _val(a):
@@ -553,11 +582,12 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
     X = np.empty((S, P, 2))
     V = np.empty((S, P, 2)) if order >= 1 else None
     A = np.empty((S, P, 2)) if order >= 2 else None
-    X[:, fixed] = X0[fixed]
-    if V is not None:
-        V[:, fixed] = 0.0
-    if A is not None:
-        A[:, fixed] = 0.0
+    # each chunk is written into cache-resident (chunk, P, 2) buffers, then copied whole into
+    # the outputs (one contiguous copy instead of strided writes over the full arrays); the
+    # buffers hold the fixed points (their positions, zero rates) from the start
+    m = min(S, chunk)
+    bufs = [np.zeros((m, P, 2)) for _ in range(1 + min(order, 2))]
+    bufs[0][:, fixed] = X0[fixed]
     ok = np.ones(S, dtype=bool)
     gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
     residual = np.empty(S) if phi is not None else None
@@ -581,13 +611,16 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
             ch.py = [float(X0[p, 1]) if fixed[p] else None for p in range(P)]
             ch.s = [c[lo:hi] for c in cols]
             ch.trig = {}
+            ch.geo = {}
             for st in plan.steps:
                 _position(st, ch)
+            buf = bufs[0]
             total = 0.0
             for p in moving:
-                X[lo:hi, p, 0] = ch.px[p]
-                X[lo:hi, p, 1] = ch.py[p]
+                buf[:n, p, 0] = ch.px[p]
+                buf[:n, p, 1] = ch.py[p]
                 total = total + ch.px[p] + ch.py[p]  # NaN anywhere stays NaN
+            X[lo:hi] = buf[:n]
             if moving:
                 ok[lo:hi] = np.isfinite(total)
             if gaps:
@@ -617,18 +650,22 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
                 ch.vy = [None] * P
                 for st in plan.steps:
                     _derivative(st, ch, 1)
+                buf = bufs[1]
                 for p in moving:
-                    V[lo:hi, p, 0] = _val(ch.vx[p])
-                    V[lo:hi, p, 1] = _val(ch.vy[p])
+                    buf[:n, p, 0] = _val(ch.vx[p])
+                    buf[:n, p, 1] = _val(ch.vy[p])
+                V[lo:hi] = buf[:n]
             if order >= 2:
                 ch.sdd = [c if isinstance(c, float) else c[lo:hi] for c in ddcols]
                 ch.ax = [None] * P
                 ch.ay = [None] * P
                 for st in plan.steps:
                     _derivative(st, ch, 2)
+                buf = bufs[2]
                 for p in moving:
-                    A[lo:hi, p, 0] = _val(ch.ax[p])
-                    A[lo:hi, p, 1] = _val(ch.ay[p])
+                    buf[:n, p, 0] = _val(ch.ax[p])
+                    buf[:n, p, 1] = _val(ch.ay[p])
+                A[lo:hi] = buf[:n]
     bad = ~ok
     if bad.any():
         X[np.ix_(bad, moving)] = np.nan

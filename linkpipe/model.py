@@ -105,7 +105,8 @@ class Model:
         q = np.asarray(q, dtype=float)
         S, mv = q.shape[0], self.moving
         X = np.empty((S, self.n_points, 2))
-        X[:] = self.start_position
+        for p in np.flatnonzero(self.fixed):  # a plain slice per point: no fancy-index write
+            X[:, p] = self.start_position[p]
         q3 = q.reshape(S, -1, 2)
         if len(mv) > 8:
             X[:, mv] = q3
