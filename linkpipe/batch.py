@@ -142,60 +142,77 @@ class Engine:
     def phi(self, X2: np.ndarray, sT: np.ndarray, trig: dict | None = None) -> np.ndarray:
         """Return Phi (m, S) at points X2 (P, 2, S) and driver values sT (nd, S).
 
-        ``X2`` may also be a dict {moving point index: (x (S,), y (S,))}.
+        ``X2`` may also be a dict {moving point index: (x (S,), y (S,))}. ``trig``: optional
+        {driver: (cos s, sin s)} already computed by the caller.
+        """
+        S = self._n_steps(X2, sT)
+        out = np.empty((self.model.n_rows, S))
+        for r, row in enumerate(self._phi_rows(X2, sT, trig)):
+            out[r] = row
+        return out
 
-        Row by row on contiguous coordinate arrays; fixed points enter as scalars. ``trig``:
-        optional {driver: (cos s, sin s)} already computed by the caller.
+    def max_abs_phi(self, X2, sT: np.ndarray, trig: dict | None = None) -> np.ndarray:
+        """Return max |Phi| over the rows (S,), arguments as :meth:`phi`, without forming Phi.
+
+        NaN anywhere in a step gives NaN (``np.maximum`` propagates it).
+        """
+        res = np.zeros(self._n_steps(X2, sT))
+        for row in self._phi_rows(X2, sT, trig):
+            if isinstance(row, np.ndarray):
+                np.maximum(res, np.abs(row, out=row), out=res)  # every row is a fresh array
+            else:  # a row between fixed points only: a constant
+                np.maximum(res, abs(row), out=res)
+        return res
+
+    @staticmethod
+    def _n_steps(X2, sT) -> int:
+        if isinstance(X2, dict):
+            return len(next(iter(X2.values()))[0]) if X2 else sT.shape[1]
+        return X2.shape[2]
+
+    def _phi_rows(self, X2, sT: np.ndarray, trig: dict | None):
+        """Yield Phi's rows in order, each a new (S,) array (or a float when it is constant).
+
+        Row by row on contiguous coordinate arrays; fixed points enter as scalars.
         """
         md = self.model
         fx = self._fixed_xy
         if isinstance(X2, dict):  # {moving point: (x (S,), y (S,))}: no copy into (P, 2, S)
-            S = len(next(iter(X2.values()))[0]) if X2 else sT.shape[1]
-
             def xy(p):
                 return fx[p] if p in fx else X2[p]
         else:
-            S = X2.shape[2]
-
             def xy(p):
                 return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
-        out = np.empty((md.n_rows, S))
 
-        r = 0
         for a, b, L in self._dist:
             ax, ay = xy(a)
             bx, by = xy(b)
             dx, dy = bx - ax, by - ay
-            out[r] = (dx * dx + dy * dy - L * L) * (0.5 / L)
-            r += 1
+            yield (dx * dx + dy * dy - L * L) * (0.5 / L)
         for a, b, p, u, v in self._loc:  # u, v already divided by L
             ax, ay = xy(a)
             bx, by = xy(b)
             px, py = xy(p)
             dx, dy = bx - ax, by - ay
-            out[r] = px - ax - (u * dx - v * dy)
-            out[r + 1] = py - ay - (u * dy + v * dx)
-            r += 2
+            yield px - ax - (u * dx - v * dy)
+            yield py - ay - (u * dy + v * dx)
         for p, cx, cy, nx, ny in self._sfix:
             px, py = xy(p)
-            out[r] = (px - cx) * nx + (py - cy) * ny
-            r += 1
+            yield (px - cx) * nx + (py - cy) * ny
         for p, d, e, L in self._smov:
             px, py = xy(p)
             dx, dy = xy(d)
             ex, ey = xy(e)
-            out[r] = ((ex - dx) * (py - dy) - (ey - dy) * (px - dx)) / L
-            r += 1
+            yield ((ex - dx) * (py - dy) - (ey - dy) * (px - dx)) / L
         for j in range(md.n_drivers):
             a = int(md.drv_a[j])
             if md.drv_angle[j]:
                 ax, ay = xy(a)
                 bx, by = xy(int(md.drv_b[j]))
                 c, s = trig[j] if trig and j in trig else (np.cos(sT[j]), np.sin(sT[j]))
-                out[r + j] = c * (by - ay) - s * (bx - ax)
+                yield c * (by - ay) - s * (bx - ax)
             else:
-                out[r + j] = xy(a)[int(md.drv_axis[j])] - sT[j]
-        return out
+                yield xy(a)[int(md.drv_axis[j])] - sT[j]
 
     def _rows_setup(self):
         md = self.model
@@ -930,9 +947,10 @@ def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, o
             q0 = kin.assemble_start(model, s[0], tol_abs, sc.max_iter)
             dyads.set_branches(plan, model.positions(q0[None])[0], s[0])
             eng = engine(model)
-            phi = eng.phi if eng is not None else (
-                lambda pts, sT, trig=None: model.phi(_points_array(model, pts, sT.shape[1]), sT.T).T)
-            sw = dyads.solve(plan, s, s_dot, s_ddot, order=order, gaps=method == "auto", phi=phi)
+            max_abs_phi = eng.max_abs_phi if eng is not None else (
+                lambda pts, sT, trig=None: residuals(model, _points_array(model, pts, sT.shape[1]), sT.T))
+            sw = dyads.solve(plan, s, s_dot, s_ddot, order=order, gaps=method == "auto",
+                             max_abs_phi=max_abs_phi)
             if method == "dyads" or dyads.branch_check(plan, sw):
                 X = sw.position
                 residual = sw.residual

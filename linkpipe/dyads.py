@@ -550,7 +550,7 @@ def _add(a, b):
 class Sweep:
     """What :func:`solve` returns. Arrays step-axis first; velocity/acceleration None when not asked.
 
-    ``ok`` (S,) every point finite; ``residual`` (S,) max |Phi| when a ``phi`` was given;
+    ``ok`` (S,) every point finite; ``residual`` (S,) max |Phi| when ``max_abs_phi`` was given;
     ``gap`` (S,) with ``gaps=True``: the smallest over the dyads and the step pairs (i-1, i)
     and (i, i+1) of ``d^2 - (BRANCH_MARGIN m)^2``, d the distance between a dyad's two roots,
     m its point's move (|dx| + |dy|) between the two steps (positive: safe; see branch_check).
@@ -565,14 +565,15 @@ class Sweep:
 
 
 def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
-          order: int = 2, gaps: bool = False, phi=None, chunk: int = CHUNK) -> Sweep:
+          order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK) -> Sweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
     root are NaN in every moving point. ``gaps=True`` also returns each step's smallest
-    distance between a dyad's two roots and its motion (for :func:`branch_check`). ``phi``:
-    an optional ``phi(points {moving p: (x (n,), y (n,))}, s (nd, n), trig) -> (m, n)`` for the
-    residual at every step (``trig``: {driver: (cos, sin)} of the angle drivers, already computed).
+    distance between a dyad's two roots and its motion (for :func:`branch_check`).
+    ``max_abs_phi``: an optional ``f(points {moving p: (x (n,), y (n,))}, s (nd, n), trig) -> (n,)``,
+    max |Phi| over all the model's constraint rows, for the residual at every step (``trig``:
+    {driver: (cos, sin)} of the angle drivers, already computed).
     """
     model = plan.model
     S = s.shape[0]
@@ -590,7 +591,7 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
     bufs[0][:, fixed] = X0[fixed]
     ok = np.ones(S, dtype=bool)
     gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
-    residual = np.empty(S) if phi is not None else None
+    residual = np.empty(S) if max_abs_phi is not None else None
     moving = [int(p) for p in model.moving]
     nd = model.n_drivers
     cols = [np.ascontiguousarray(s[:, j]) for j in range(nd)]
@@ -637,13 +638,9 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
                         gap[lo] = min(gap[lo], min(g0, g2[0]) - (BRANCH_MARGIN * m0) ** 2)
                     prev[p] = (x[-1], y[-1], g2[-1])
                 ch.gap2 = []
-            if phi is not None:
+            if max_abs_phi is not None:
                 pts = {p: (ch.px[p], ch.py[p]) for p in moving}
-                F = phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
-                if F.shape[0]:
-                    residual[lo:hi] = np.abs(F, out=F).max(axis=0)
-                else:
-                    residual[lo:hi] = 0.0
+                residual[lo:hi] = max_abs_phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
             if order >= 1:
                 ch.sd = [c if isinstance(c, float) else c[lo:hi] for c in dcols]
                 ch.vx = [None] * P

@@ -86,6 +86,31 @@ def test_engine_derivatives_match_the_dense_ones(pair):
     np.testing.assert_allclose(a["condition"], b["condition"], rtol=1e-9)
 
 
+@pytest.mark.parametrize("path", CONFIGS + sorted((CONFIG_DIR / "hard").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_engine_max_abs_phi_is_the_models_residual(path):
+    """Engine.max_abs_phi (rows accumulated in place, the dyad path's residual) equals
+    max |Model.phi| row by row at configurations off the constraints; NaN in a step stays NaN."""
+    model = build_model(linkpipe.load_scene(str(path)))
+    eng = batch.engine(model)
+    if eng is None:
+        pytest.skip("no sparse engine for this model (the dense residual is used)")
+    rng = np.random.default_rng(3)
+    S = 50
+    X = model.start_position + rng.normal(scale=0.1 * model.size, size=(S, model.n_points, 2))
+    X[:, model.fixed] = model.start_position[model.fixed]
+    X[7, model.moving[0], 1] = np.nan
+    s = rng.uniform(-3, 3, size=(S, model.n_drivers))
+    want = np.abs(model.phi(X, s)).max(axis=1)
+    pts = {int(p): (X[:, p, 0].copy(), X[:, p, 1].copy()) for p in model.moving}
+    got = eng.max_abs_phi(pts, np.ascontiguousarray(s.T))
+    assert np.isnan(got[7]) and np.isnan(want[7])
+    keep = np.arange(S) != 7
+    # the same rows by the same operations up to association: a few roundings of the size
+    np.testing.assert_allclose(got[keep], want[keep], rtol=0, atol=1e-14 * model.size)
+    assert (want[keep] > 1e-3 * model.size).all()  # really off the constraints
+
+
 def test_vectorised_general_path_on_a_long_sweep():
     """Coarse continuation + batched Newton from Hermite predictions == the closed form."""
     scene = with_steps(linkpipe.load_scene(str(CONFIG_DIR / "fourbar_crank_rocker.toml")), 3001)
