@@ -1,6 +1,6 @@
 """Sweep speed of linkpipe against a hand-written closed form and pylinkage+numba, in one run.
 
-    .venv/bin/python benchmarks/bench_sweep.py            # everything (about a minute)
+    .venv/bin/python benchmarks/bench_sweep.py            # everything (about 15 s)
     .venv/bin/python benchmarks/bench_sweep.py --quick    # 36k steps only, no pipeline runs
 
 Part 1, the crank-rocker of ``configs/fourbar_crank_rocker.toml`` (crank 1, coupler 3.5, rocker
