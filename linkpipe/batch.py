@@ -903,6 +903,18 @@ def residuals(model: Model, X: np.ndarray, s: np.ndarray, chunk: int = CHUNK) ->
     return out
 
 
+def max_abs_phi(model: Model):
+    """Return ``f(points {moving p: (x (S,), y (S,))}, sT (nd, S), trig=None) -> (S,)``: max |Phi|.
+
+    The engine's in-place row accumulation when the model has an engine, else the dense
+    :func:`residuals` on the points put back into (S, n_points, 2).
+    """
+    eng = engine(model)
+    if eng is not None:
+        return eng.max_abs_phi
+    return lambda pts, sT, trig=None: residuals(model, _points_array(model, pts, sT.shape[1]), sT.T)
+
+
 def _points_array(model: Model, pts: dict, S: int) -> np.ndarray:
     """Return positions (S, P, 2) from {moving point: (x (S,), y (S,))}."""
     X = np.broadcast_to(model.start_position, (S, model.n_points, 2)).copy()
@@ -946,11 +958,8 @@ def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, o
             tol_abs = sc.tol * model.size
             q0 = kin.assemble_start(model, s[0], tol_abs, sc.max_iter)
             dyads.set_branches(plan, model.positions(q0[None])[0], s[0])
-            eng = engine(model)
-            max_abs_phi = eng.max_abs_phi if eng is not None else (
-                lambda pts, sT, trig=None: residuals(model, _points_array(model, pts, sT.shape[1]), sT.T))
             sw = dyads.solve(plan, s, s_dot, s_ddot, order=order, gaps=method == "auto",
-                             max_abs_phi=max_abs_phi)
+                             max_abs_phi=max_abs_phi(model))
             if method == "dyads" or dyads.branch_check(plan, sw):
                 X = sw.position
                 residual = sw.residual
