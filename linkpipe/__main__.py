@@ -135,9 +135,10 @@ def summary(result, written=(), seconds_total=None) -> str:
              f"{result.n_steps - result.n_ok} failed)"]
     solved = np.isfinite(result.position).all(axis=(1, 2))  # not no_assembly / not_converged
     if np.isfinite(result.residual[solved]).any():
+        how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else
+               f"Newton iterations mean {result.iterations.mean():.2f} max {result.iterations.max()}")
         lines.append(f"  max residual {np.nanmax(result.residual[solved]):.2e} {result.units()['length']}"
-                     f" (solved steps), "
-                     f"Newton iterations mean {result.iterations.mean():.2f} max {result.iterations.max()}")
+                     f" (solved steps), {how}")
     if result.velocity_residual is not None and np.isfinite(result.velocity_residual).any():
         extra = f"  max linear-equation residuals: velocity {np.nanmax(result.velocity_residual):.1e}"
         if result.acceleration_residual is not None and np.isfinite(result.acceleration_residual).any():

@@ -66,6 +66,12 @@ def test_run_summary_and_quiet(tmp_path, capsys):
     assert "basketball_goal: all 25 steps ok (25 steps, 25 ok, 0 failed)" in text
     assert "input force theta3a: -99.6771 .. -98.6229 lbf" in text
     assert "seconds:" in text and "positions" in text and "forces" in text
+    assert "(solved steps), closed-form dyads, no iterations" in text and "solver: path dyads" in text
+    newton = write(tmp_path, "newton.toml", (CONFIGS / "basketball_goal.toml").read_text()
+                   + '\n[solver]\nmethod = "newton"\n')
+    assert main(["run", str(newton), "--out", str(out), "--no-rrd"]) == 0
+    text = capsys.readouterr().out
+    assert "(solved steps), Newton iterations mean" in text and "solver: path newton" in text
     assert main(["run", str(CONFIGS / "shear_press.toml"), "--out", str(out), "--quiet", "--no-rrd"]) == 0
     assert capsys.readouterr().out == ""
 
