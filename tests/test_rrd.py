@@ -60,6 +60,7 @@ def _expected_entities(result) -> set[str]:
     """The contract's entity paths for what this scene computed."""
     sc = result.scene
     out = {"/mechanism/points", "/solver/residual", "/solver/iterations"}
+    out |= {"/solver/log10_residual", "/solver/log10_tolerance"}   # additions: readable scale
     out |= {"/mechanism/ground"} if any(p.fixed for p in sc.points) else set()
     out |= {f"/mechanism/links/{link}" for link in result.link_names}
     out |= {f"/plots/link_angle/{link}" for link in result.link_names}
@@ -147,6 +148,30 @@ def test_values_match_the_result_and_the_hdf5_file(solve, tmp_path):
     np.testing.assert_allclose(np.stack(trace), position[:, i["P"]], rtol=1e-6, atol=1e-6)
 
 
+def test_log10_residual_beside_the_tolerance(solve, tmp_path):
+    """The viewer labels no axis below ~1e-13: the residual is also plotted as its log10, beside
+    log10(tol x size); an exact zero sits one decade below rounding level, NaN stays NaN."""
+    base = solve("fourbar_crank_rocker")
+    residual = base.residual.copy()
+    residual[:3] = [0.0, np.nan, 2.5e-3]
+    result = dataclasses.replace(base, residual=residual)
+    rec = Recording(_write(result, tmp_path))
+    size = base.model.size
+    frame = rec.steps("/solver/log10_residual")
+    got = np.concatenate(_column(frame, "/solver/log10_residual", "Scalars:scalars").to_list())
+    floor = np.log10(np.finfo(float).eps * size) - 1
+    assert got[0] == pytest.approx(floor)
+    assert np.isnan(got[1]) and got[2] == pytest.approx(np.log10(2.5e-3))
+    rest = residual[3:]
+    with np.errstate(divide="ignore"):
+        np.testing.assert_allclose(got[3:], np.where(rest == 0, floor, np.log10(rest)), rtol=1e-12)
+    assert (got[3:] < np.log10(1e-14 * size)).all()   # the dyads: rounding level
+    frame = rec.steps("/solver/log10_tolerance")
+    tol = np.concatenate(_column(frame, "/solver/log10_tolerance", "Scalars:scalars").to_list())
+    np.testing.assert_allclose(tol, np.log10(base.scene.solver.tol * size), rtol=1e-12)
+    assert len(tol) == base.n_steps
+
+
 def test_nan_steps_are_cleared_not_fatal(solve, tmp_path):
     base = solve("fourbar_crank_rocker")
     moving = [k for k, p in enumerate(base.scene.points) if not p.fixed]
@@ -167,6 +192,18 @@ def test_nan_steps_are_cleared_not_fatal(solve, tmp_path):
     assert [len(run) for run in trace] == [10, base.n_steps - 20]      # split at the gap
     got = _column(rec.steps("/solver/iterations"), "/solver/iterations", "Scalars:scalars")
     np.testing.assert_array_equal(np.concatenate(got.to_list()), base.iterations)
+    # plotted series keep a row at every step, NaN where the step failed: the viewer breaks
+    # the line there instead of bridging the gap with a straight segment
+    link_angle = base.link_angle.copy()
+    link_angle[10:20] = np.nan
+    result = dataclasses.replace(result, link_angle=link_angle)
+    rec = Recording(_write(result, tmp_path / "again"))
+    frame = rec.steps("/plots/link_angle/coupler")
+    np.testing.assert_array_equal(frame["step"], np.arange(base.n_steps))
+    got = np.concatenate(_column(frame, "/plots/link_angle/coupler", "Scalars:scalars").to_list())
+    coupler = base.link_names.index("coupler")
+    np.testing.assert_array_equal(got, result.link_angle[:, coupler].astype(got.dtype))
+    assert np.isnan(got[10:20]).all() and np.isfinite(np.delete(got, range(10, 20))).all()
 
 
 MOVING_GUIDE = """

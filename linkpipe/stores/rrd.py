@@ -307,13 +307,37 @@ def _log_series(stream, send, result) -> None:
     for name in SOLVER:
         var = variables[name]
         series.append((f"solver/{name}", f"{name} [{var.units}]", var.data))
+    log_res, log_tol = log10_residual(result)
+    length = variables["residual"].units
+    series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res))
+    series.append(("solver/log10_tolerance", f"log10 tolerance [{length}]",
+                   np.full(result.n_steps, log_tol)))
     for entity, title, values in series:
         values = np.asarray(values, dtype=float)
-        ok = np.isfinite(values)
-        if not ok.any():
+        if not np.isfinite(values).any():
             continue
         stream.log(entity, rr.SeriesLines(names=title), static=True)
-        send(entity, rr.Scalars.columns(scalars=values[ok]), rows=ok)
+        # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
+        # out would be bridged by a straight segment that looks like data
+        send(entity, rr.Scalars.columns(scalars=values))
+
+
+def log10_residual(result) -> tuple[np.ndarray, float]:
+    """Return (log10 of the residual (S,), log10 of the solver's tolerance), lengths in scene units.
+
+    The viewer labels no axis below ~1e-13, so the raw ``solver/residual`` of a solved sweep
+    (rounding level, ~1e-16 of the size) plots as unlabelled noise; its log10 beside the
+    tolerance's (``tol`` x the mechanism's size, what Newton stops at) reads at a glance. A
+    residual of exactly 0 is drawn one decade below rounding level (log10(eps x size) - 1);
+    NaN (a step without assembly) stays NaN and is not drawn.
+    """
+    size = result.model.size
+    floor = float(np.log10(np.finfo(float).eps * size)) - 1.0
+    res = np.asarray(result.residual, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.log10(res)
+    out[res == 0] = floor
+    return out, float(np.log10(result.scene.solver.tol * size))
 
 
 # ------------------------------------------------------------------------------ blueprint
@@ -332,8 +356,11 @@ def blueprint(result) -> rrb.Blueprint:
     variables = {v.name: v for v in result.variables()}
     plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{variables[name].units}]")
              for name in PLOTTED if name in variables]
-    solver = [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]")
-              for name in SOLVER]
+    length = variables["residual"].units
+    solver = [rrb.TimeSeriesView(origin="solver", name=f"log10 residual [{length}]",
+                                 contents=["solver/log10_residual", "solver/log10_tolerance"])]
+    solver += [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]")
+               for name in SOLVER]
     return rrb.Blueprint(
         rrb.Horizontal(mechanism, rrb.Vertical(*plots, rrb.Tabs(*solver)), column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
