@@ -300,8 +300,26 @@ def _classify_failure(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_
     return NOT_CONVERGED if solvable else NO_ASSEMBLY
 
 
+#: largest driver move per step when the drawn pose is carried to the sweep's first value:
+#: 2 degrees for an angle driver, 0.5 % of the mechanism's size for a coordinate driver
+CARRY_ANGLE_STEP = np.deg2rad(2.0)
+CARRY_LENGTH_STEP = 0.005
+
+
 def assemble_start(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) -> np.ndarray:
-    """Assemble the first step from the start configuration as written; SceneError if impossible."""
+    """Assemble the first step from the start configuration as written; SceneError if impossible.
+
+    When the points are drawn at other driver values than the sweep's first (read off the
+    drawing: an angle driver's direction, a coordinate driver's coordinate), the drawn pose is
+    assembled there and carried to ``s0`` by the sweep's own continuation, so the sweep starts
+    in the assembly the drawing shows; one jump by Newton could land in the other (a
+    parallelogram drawn at -60 deg and started at +40 deg came out crossed). Where that path
+    leaves the assembly range, or the drawing is already at ``s0``, Newton runs from the
+    drawing directly at ``s0``.
+    """
+    q = _carry_drawn_pose(model, s0, tol_abs, max_iter)
+    if q is not None:
+        return q
     q0 = model.q_of(model.start_position[None])
     q, res, _, conv = newton(model, q0, s0[None], tol_abs, max(max_iter, 50))
     if conv[0]:
@@ -347,6 +365,35 @@ def assemble_start(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) 
                      f"{length} (tolerance {tol_abs:.3g})",
                      "check the link lengths, the `local` coordinates and the drivers' `from`; "
                      "the points' x, y must be close to an assembled position")
+
+
+def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
+    """Return q (n_q,) at ``s0`` carried by continuation from the drawn pose, or None.
+
+    None when the drawing is within one carrying step of ``s0``, when it cannot be assembled at
+    its own driver values, or when the path to ``s0`` leaves the assembly range.
+    """
+    if not model.n_drivers or not model.n_q:
+        return None
+    s_drawn = model.driver_values_at(model.start_position[None])[0]
+    delta = s0 - s_drawn
+    angle = model.drv_angle
+    delta[angle] = (delta[angle] + np.pi) % (2 * np.pi) - np.pi  # the shorter way round
+    step = np.where(angle, CARRY_ANGLE_STEP, CARRY_LENGTH_STEP * model.size)
+    n = int(np.ceil(np.max(np.abs(delta) / step)))
+    if n <= 1:
+        return None
+    start = s0 - delta  # the drawn values, next to s0 for the angles
+    q0 = model.q_of(model.start_position[None])
+    q_drawn, _, _, conv = newton(model, q0, start[None], tol_abs, max(max_iter, 50))
+    if not conv[0] or not drivers_aligned(model, q_drawn, start[None])[0]:
+        return None
+    path = start + np.linspace(0.0, 1.0, min(n, 2000) + 1)[:, None] * delta
+    path[-1] = s0
+    q, residual, _, _ = solve_positions(model, path, q_start=q_drawn[0])
+    if not (np.isfinite(q).all() and (residual <= tol_abs).all()):
+        return None  # a step without assembly on the way (or one that did not converge)
+    return q[-1]
 
 
 def _velocity_one(model, X, s, s_dot, J=None):

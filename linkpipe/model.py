@@ -257,6 +257,20 @@ class Model:
         parts.append(g)
         return np.concatenate(parts, axis=1)
 
+    def driver_values_at(self, X: np.ndarray) -> np.ndarray:
+        """Return the driver values ``(S, n_drivers)`` that positions ``X`` (S, n_points, 2) show,
+        in internal units: an angle driver's direction in radians (in (-pi, pi]), a coordinate
+        driver's coordinate."""
+        out = np.empty((X.shape[0], self.n_drivers))
+        for j in range(self.n_drivers):
+            a = X[:, self.drv_a[j]]
+            if self.drv_angle[j]:
+                d = X[:, self.drv_b[j]] - a
+                out[:, j] = np.arctan2(d[:, 1], d[:, 0])
+            else:
+                out[:, j] = a[:, self.drv_axis[j]]
+        return out
+
     def link_angles(self, X: np.ndarray) -> np.ndarray:
         """Return each link's direction (first to second point) in radians ``(S, n_links)``."""
         d = X[:, self.link_b] - X[:, self.link_a]
