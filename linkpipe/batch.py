@@ -657,7 +657,8 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         return _with_derivatives(model, eng, out, s, s_dot, s_ddot, order, chunk)
     tol_abs = sc.tol * model.size
     nodes = np.r_[np.arange(0, S - 1, k), S - 1]
-    qn, resn, itn, stn = kin.solve_positions(model, s[nodes])
+    start = kin.start_state(model, s[0], tol_abs, sc.max_iter)  # (q, slope) for a re-run from 0
+    qn, resn, itn, stn = kin.solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
     qn, resn = _polish(eng, qn, s[nodes], stn == kin.OK, resn)
     q = np.full((S, model.n_q), np.nan)
     residual = np.full(S, np.nan)
@@ -728,14 +729,14 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
     for run in runs:
         j0, j1 = run[0], run[-1]
         a, b = nodes[j0], nodes[j1 + 1]
-        qs, rs, its, sts = _sequential_from_before(model, s, q, a, b)
+        qs, rs, its, sts = _sequential_from_before(model, s, q, a, b, start)
         q[a + 1:b + 1], residual[a + 1:b + 1] = qs[1:], rs[1:]
         iterations[a + 1:b + 1], status[a + 1:b + 1] = its[1:], sts[1:]
         sequential[a + 1:b + 1] = True
         done[a + 1:b + 1] = False
         if j1 + 1 < last and not _same(qs[-1], qn[j1 + 1], model):
             # the coarse continuation went elsewhere at this node: continue sequentially
-            qs, rs, its, sts = _sequential_from_before(model, s, q, b, S - 1)
+            qs, rs, its, sts = _sequential_from_before(model, s, q, b, S - 1, start)
             q[b + 1:], residual[b + 1:], iterations[b + 1:], status[b + 1:] = qs[1:], rs[1:], its[1:], sts[1:]
             sequential[b + 1:] = True
             done[b + 1:] = False
@@ -849,11 +850,16 @@ def _same(a, b, model) -> bool:
     return bool(np.abs(a - b).max() <= 1e-8 * model.size)
 
 
-def _sequential_from_before(model, s, q, a, b):
-    """Run the sequential continuation over steps a..b from the last assembled step at or before a."""
+def _sequential_from_before(model, s, q, a, b, start):
+    """Run the sequential continuation over steps a..b from the last assembled step at or before a.
+
+    ``start``: :func:`linkpipe.kinematics.start_state` at step 0 (its slope is the first
+    predictor when the run starts there)."""
     prev = np.flatnonzero(np.isfinite(q[:a + 1]).all(axis=1))
     p = prev[-1] if len(prev) else 0
-    qs, rs, its, sts = kin.solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else None)
+    slope = start[1] if p == 0 else None
+    qs, rs, its, sts = kin.solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else None,
+                                           start_slope=slope)
     return qs[a - p:], rs[a - p:], its[a - p:], sts[a - p:]
 
 

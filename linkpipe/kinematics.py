@@ -317,9 +317,22 @@ def assemble_start(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) 
     leaves the assembly range, or the drawing is already at ``s0``, Newton runs from the
     drawing directly at ``s0``.
     """
-    q = _carry_drawn_pose(model, s0, tol_abs, max_iter)
-    if q is not None:
-        return q
+    return start_state(model, s0, tol_abs, max_iter)[0]
+
+
+def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
+    """Return (q (n_q,), slope): :func:`assemble_start`'s q and, when the drawn pose was carried
+    to ``s0`` by a one-driver path, dq/ds (n_q, 1) along that path's last step (a secant), else
+    None. The sweep's first predictor uses it: a sweep that starts on a change point then leaves
+    it on the branch the path arrived on instead of on a side chosen by rounding."""
+    carried = _carry_drawn_pose(model, s0, tol_abs, max_iter)
+    if carried is not None:
+        return carried
+    return _assemble_directly(model, s0, tol_abs, max_iter), None
+
+
+def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) -> np.ndarray:
+    """Newton (then least squares) at ``s0`` from the drawing itself; SceneError if impossible."""
     q0 = model.q_of(model.start_position[None])
     q, res, _, conv = newton(model, q0, s0[None], tol_abs, max(max_iter, 50))
     if conv[0]:
@@ -368,10 +381,11 @@ def assemble_start(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) 
 
 
 def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
-    """Return q (n_q,) at ``s0`` carried by continuation from the drawn pose, or None.
+    """Return (q (n_q,), slope) at ``s0`` carried by continuation from the drawn pose, or None.
 
     None when the drawing is within one carrying step of ``s0``, when it cannot be assembled at
-    its own driver values, or when the path to ``s0`` leaves the assembly range.
+    its own driver values, or when the path to ``s0`` leaves the assembly range. ``slope`` as
+    :func:`start_state` says (None with several drivers: one path gives one direction only).
     """
     if not model.n_drivers or not model.n_q:
         return None
@@ -393,7 +407,10 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
     q, residual, _, _ = solve_positions(model, path, q_start=q_drawn[0])
     if not (np.isfinite(q).all() and (residual <= tol_abs).all()):
         return None  # a step without assembly on the way (or one that did not converge)
-    return q[-1]
+    slope = None
+    if model.n_drivers == 1:
+        slope = ((q[-1] - q[-2]) / (path[-1, 0] - path[-2, 0]))[:, None]
+    return q[-1], slope
 
 
 def _velocity_one(model, X, s, s_dot, J=None):
@@ -640,14 +657,16 @@ def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
-                    jacobian: str | None = None, q_start: np.ndarray | None = None):
+                    jacobian: str | None = None, q_start: np.ndarray | None = None,
+                    start_slope: np.ndarray | None = None):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
     steps, residual (S,), iterations (S,), status (S,) int8 (OK / NO_ASSEMBLY / NOT_CONVERGED).
     ``predictor`` is "none", "first" (q + dq/ds * ds) or "second" (adds the curvature term).
     ``q_start`` (n_q,): continue from this assembled configuration instead of assembling the
-    scene's start (the vectorised general path re-runs single intervals of a sweep this way).
+    scene's start (the vectorised general path re-runs single intervals of a sweep this way),
+    with ``start_slope`` (n_q, nd) as the first predictor's dq/ds (see :func:`start_state`).
     """
     sc = model.scene.solver
     tol = sc.tol if tol is None else tol
@@ -663,11 +682,12 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     status = np.zeros(S, dtype=np.int8)
 
     if q_start is None:
-        q_start = assemble_start(model, s[0], tol_abs, max_iter)
-    unit = np.ones((1, model.n_drivers))  # derivative along the sweep direction, per unit of s
+        q_start, start_slope = start_state(model, s[0], tol_abs, max_iter)
     last_q = q_start
     last_s = s[0]
-    last_dq = None  # dq/ds along the sweep (n_q, nd)
+    # dq/ds along the sweep (n_q, nd); without a predictor the start slope is not used either
+    # (a singular start is then left by trying either side, below)
+    last_dq = start_slope if predictor != "none" else None
     last_d2q = None
     rcond = effective_rcond(model)
     square = model.n_rows == nq

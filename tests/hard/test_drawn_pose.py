@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import linkpipe
 from linkpipe.closed_forms import fourbar, slider_crank
-from linkpipe.kinematics import NO_ASSEMBLY, OK
+from linkpipe.kinematics import NO_ASSEMBLY, OK, SINGULAR
 from hard_scenes import (HARD_DIR, fourbar_text, method, point, slider_crank_text,  # noqa: F401
                          slider_driven_text, solve_text, with_driver, with_solver)
 from test_properties import MARGIN, full_rotation
@@ -47,6 +47,26 @@ def test_parallelogram_drawn_at_minus_60_started_anywhere(from_deg, method):
     arm = 2.0 * np.stack([np.cos(t), np.sin(t)], axis=1)
     np.testing.assert_allclose(point(r, "C"), [0.0, -2.0] + arm, rtol=0, atol=1e-10)
     np.testing.assert_allclose(point(r, "B"), [0.0, -1.0] + arm, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("steps", [7, 3001], ids=["sequential", "vectorised"])
+@pytest.mark.parametrize("from_deg, to_deg", [(90.0, 120.0), (90.0, 60.0), (-90.0, -120.0),
+                                               (-90.0, -60.0)])
+def test_parallelogram_started_on_a_change_point(from_deg, to_deg, steps, method):
+    """Started exactly on a change point (all links in line; two branches cross there), either
+    way: the sweep leaves it on the branch the drawing's path arrived on (the parallelogram),
+    not on a side chosen by rounding (two of these four came out crossed before). 3001 steps
+    run the vectorised general path, which re-runs the singular first interval sequentially."""
+    scene = linkpipe.load_scene(str(CONFIGS / "basketball_goal.toml"))
+    scene = with_solver(with_driver(scene, from_value=from_deg, to_value=to_deg, steps=steps,
+                                    step=None), method=method)
+    r = linkpipe.solve(scene)
+    assert r.status[0] == SINGULAR and (r.status[1:] == OK).all()
+    t = np.deg2rad(r.driver_value[:, 0])
+    arm = 2.0 * np.stack([np.cos(t), np.sin(t)], axis=1)
+    # on the change point the position along the null direction is known to ~sqrt(eps) size
+    np.testing.assert_allclose(point(r, "C"), [0.0, -2.0] + arm, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(point(r, "B")[1:], ([0.0, -1.0] + arm)[1:], rtol=0, atol=1e-10)
 
 
 def test_triple_rocker_drawn_on_its_limit_assembles_inside_its_range():
