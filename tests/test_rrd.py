@@ -271,3 +271,61 @@ def test_a_crash_mid_write_keeps_the_previous_recording(solve, tmp_path, monkeyp
         rrd.write(result, path)
     assert path.read_bytes() == before
     assert os.listdir(tmp_path) == [path.name]
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def _stream_entities(path) -> dict:
+    """Entity path -> archetypes of a streamed .rrd (no footer: read eagerly, not lazily)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "RRD file has no footer/manifest": expected here
+        store = RrdReader(path).stream().collect()
+    out = {}
+    for col in store.schema().component_columns():
+        out.setdefault(col.entity_path, set()).add(col.archetype)
+    return out
+
+
+def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
+    """`run --connect ADDR` streams to a running Rerun server (here the rerun binary itself,
+    listening and saving what it receives): it gets every entity the written file has."""
+    import socket
+    import time
+
+    from linkpipe.__main__ import main
+    from conftest import CONFIG_DIR
+
+    port = _free_port()
+    saved = tmp_path / "streamed.rrd"
+    server = subprocess.Popen([str(RERUN), "--port", str(port), "--save", str(saved)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 30
+        while True:  # wait until the server listens
+            with socket.socket() as sock:
+                if sock.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            assert time.monotonic() < deadline, "the rerun server did not start"
+            time.sleep(0.1)
+        out = tmp_path / "out"
+        assert main(["run", str(CONFIG_DIR / "fourbar_crank_rocker.toml"), "--out", str(out),
+                     "--no-h5", "--quiet", "--connect", f"rerun+http://127.0.0.1:{port}/proxy"]) == 0
+        size = -1
+        while saved.exists() and saved.stat().st_size != size:  # until the server has it all
+            size = saved.stat().st_size
+            time.sleep(0.5)
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    written = _stream_entities(out / "fourbar_crank_rocker.rrd")
+    streamed = _stream_entities(saved)
+    assert "/mechanism/points" in streamed and "/solver/log10_residual" in streamed
+    assert streamed == written
