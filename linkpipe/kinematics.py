@@ -591,8 +591,20 @@ class _Step:
             out.append(-(cs[j] * (X[b] - X[a]) + sn[j] * (X[b + 1] - X[a + 1])) if ang else -1.0)
         return out
 
-    def newton(self, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int):
-        """:func:`newton` (analytic Jacobian) at one step; same returns, shapes (1, n), (1,)."""
+    def fd_jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi_q (m, n) by central differences, as :func:`fd_jacobian` computes it."""
+        h = np.cbrt(np.finfo(float).eps) * self.model.size
+        cols = []
+        for k in range(self.n):
+            dq = np.zeros(self.n)
+            dq[k] = h
+            cols.append((self.phi(q + dq, s) - self.phi(q - dq, s)) / (2 * h))
+        return np.stack(cols, axis=1) if cols else np.zeros((self.m, 0))
+
+    def newton(self, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,
+               jacobian: str = "analytic"):
+        """:func:`newton` at one step; same returns, shapes (1, n), (1,)."""
+        jac = self.jac if jacobian == "analytic" else self.fd_jac
         q = np.array(q, dtype=float).reshape(-1)
         best = prev = np.inf
         stall = 0
@@ -611,7 +623,7 @@ class _Step:
             bad = not np.isfinite(r) or stall >= NEWTON_STALL
             if it == max_iter or done or bad:
                 break
-            dq = _lin_solve(self.jac(q, s)[None], -F[None])[0]
+            dq = _lin_solve(jac(q, s)[None], -F[None])[0]
             big = np.abs(dq).max()
             if big > step_cap:
                 dq = dq * (step_cap / big)
@@ -692,7 +704,9 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     rcond = effective_rcond(model)
     square = model.n_rows == nq
     # one-step kernels: the same Newton, Phi and checks with less overhead per step
-    fast = _step_kernels(model) if jacobian == "analytic" and nq else None
+    # (the finite-difference Jacobian knob changes Newton's iteration matrix only: the condition
+    # and the slopes below use the analytic one either way)
+    fast = _step_kernels(model) if nq else None
     last_sign = 0.0  # sign of det(Phi_q) at the last regular step: the assembly mode
     gap = False  # a failed step since the last assembled one
     gap_shape = None  # least-squares shape of the last failed step
@@ -744,7 +758,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                         break
         if not conv[0]:
             if fast is not None:
-                qi, res, it, conv = fast.newton(guess, s[i], tol_abs, max_iter)
+                qi, res, it, conv = fast.newton(guess, s[i], tol_abs, max_iter, jacobian)
             else:
                 qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
             residual[i] = res[0]
