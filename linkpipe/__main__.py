@@ -158,6 +158,8 @@ def summary(result, written=(), seconds_total=None) -> str:
         if names:
             line += f"; not unique (minimum-norm choice): {', '.join(names)}"
         lines.append(line)
+    if result.time_note:
+        lines.append(f"  {result.time_note}")
     if sc.effects:
         lines.append(f"  effects: {', '.join(sc.effects)}")
     if sc.present_but_off:

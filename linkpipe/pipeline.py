@@ -72,8 +72,9 @@ def solve(scene: Scene | str, progress=None) -> Result:
     status = der["status"]
     seconds["jacobian"] = _time.perf_counter() - t0
 
+    time, time_note = _time_axis(scene, value)
     res = Result(scene=scene, model=model, mobility=mob, driver_value=value,
-                 time=_time_axis(scene, value), position=X, link_angle=link_angle,
+                 time=time, time_note=time_note, position=X, link_angle=link_angle,
                  status=status, residual=residual, iterations=iterations,
                  condition=der["condition"], solver_method_used=k1["method"],
                  solver_note=k1["note"])
@@ -130,14 +131,24 @@ def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
     return out
 
 
-def _time_axis(scene: Scene, value: np.ndarray):
-    """Return seconds per step when every driver has a rate and no acceleration, else None."""
+def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """Return (seconds per step, note): the time when every driver has a rate and no
+    acceleration, ``|value - from| / |rate|``, and all drivers agree on it (to 1e-9 of the
+    sweep's duration); else None, with a note saying why when the rates alone would give one."""
     rates = np.array([d.rate for d in scene.drivers], dtype=float)
     accs = np.array([d.acceleration for d in scene.drivers], dtype=float)
     if not len(rates) or np.any(rates == 0) or np.any(accs != 0):
-        return None
-    d0 = scene.drivers[0]
-    return np.abs(value[:, 0] - d0.from_value) / abs(d0.rate)
+        return None, ""
+    times = [np.abs(value[:, j] - d.from_value) / abs(d.rate) for j, d in enumerate(scene.drivers)]
+    t = times[0]
+    span = float(max(tj.max() for tj in times)) if value.shape[0] else 0.0
+    for tj in times[1:]:
+        if not np.allclose(tj, t, rtol=0, atol=1e-9 * max(span, 1e-300)):
+            ends = ", ".join(f"{d.name} {tj[-1]:.6g} s" for d, tj in zip(scene.drivers, times))
+            return None, (f"no time axis: the drivers' rates give different times for the same "
+                          f"steps (at the last step: {ends}); make each driver's "
+                          f"(to - from) / rate the same")
+    return t, ""
 
 
 def _message(res: Result) -> str:

@@ -64,6 +64,7 @@ class Result:
     message: str = ""
     solver_method_used: str = ""  # "dyads" (closed form) or "newton" (general path)
     solver_note: str = ""  # the dyad chain, or why method = "auto" chose Newton
+    time_note: str = ""  # why there is no time axis although every driver has a rate
 
     # ------------------------------------------------------------------ summaries
     @property
@@ -222,6 +223,8 @@ class Result:
             attrs["max_velocity_residual"] = float(np.nanmax(self.velocity_residual))
         if self.acceleration_residual is not None and np.isfinite(self.acceleration_residual).any():
             attrs["max_acceleration_residual"] = float(np.nanmax(self.acceleration_residual))
+        if self.time_note:
+            attrs["time_note"] = self.time_note
         for key, val in self.units().items():
             attrs[f"units_{key}"] = val
         for stage, sec in self.seconds.items():

@@ -112,6 +112,12 @@ def arrow_scales(result) -> dict[str, float]:
     return scales
 
 
+def arrow_legend(result, quantity: str) -> str:
+    """Return ``"1 m = 7.51 m/s"``: what one length unit of ``quantity``'s arrows stands for."""
+    unit = {v.name: v.units for v in result.variables()}[quantity]
+    return f"1 {result.units()['length']} = {1 / arrow_scales(result)[quantity]:.3g} {unit}"
+
+
 def _point_index(result, names) -> list[int]:
     index = {n: i for i, n in enumerate(result.point_names)}
     return [index[n] for n in names]
@@ -273,18 +279,23 @@ def _log_traces(stream, result) -> None:
 
 
 def _log_vectors(stream, send, result) -> None:
-    units = {v.name: v.units for v in result.variables()}
-    length_unit = result.units()["length"]
-    for quantity, scale in arrow_scales(result).items():
+    """Velocity and acceleration arrows, one scale per quantity.
+
+    Each arrow's label names its scale but is not drawn (a velocity and an acceleration at one
+    point, often near parallel, would put their labels on top of each other): the viewer shows
+    it on hover, and the 2D view's title gives the scales (see :func:`arrow_legend`).
+    """
+    scales = arrow_scales(result)
+    for quantity, scale in scales.items():
         data = getattr(result, quantity)
         for name in result.scene.outputs.vectors:
             (k,) = _point_index(result, [name])
             origins, vectors = result.position[:, k], data[:, k]
             ok = _finite_rows(origins) & _finite_rows(vectors)
             entity = f"mechanism/{quantity}/{name}"
-            label = f"{quantity[0]} {name} (1 {length_unit} = {1 / scale:.3g} {units[quantity]})"
             stream.log(entity, rr.Arrows2D.from_fields(
-                labels=[label], colors=_VECTOR_COLORS[quantity],
+                labels=[f"{quantity[0]} {name} ({arrow_legend(result, quantity)})"],
+                colors=_VECTOR_COLORS[quantity], show_labels=False,
                 radii=rr.components.Radius.ui_points(1.5), draw_order=40.0), static=True)
             if ok.any():
                 if not ok.all():
@@ -341,17 +352,27 @@ def log10_residual(result) -> tuple[np.ndarray, float]:
 
 
 # ------------------------------------------------------------------------------ blueprint
-def blueprint(result) -> rrb.Blueprint:
-    """Return the default layout: the mechanism (y up) beside the plots and solver series."""
+def view_bounds(result) -> tuple[np.ndarray, np.ndarray]:
+    """Return the 2D view's (lower, upper) corners: every position and arrow tip, padded 8 %."""
     drawn = [result.position.reshape(-1, 2)]
     k = _point_index(result, result.scene.outputs.vectors)
     for quantity, scale in arrow_scales(result).items():    # arrow tips too
         drawn.append((result.position[:, k] + scale * getattr(result, quantity)[:, k]).reshape(-1, 2))
     lo, hi = _bounds(result, np.concatenate(drawn))
     pad = 0.08 * max(float(np.max(hi - lo)), 1e-9)
-    lo, hi = lo - pad, hi + pad
+    return lo - pad, hi + pad
+
+
+def blueprint(result) -> rrb.Blueprint:
+    """Return the default layout: the mechanism (y up) beside the plots and solver series."""
+    lo, hi = view_bounds(result)
+    name = f"{result.scene.name} (y up)"
+    if result.scene.outputs.vectors and arrow_scales(result):
+        colour = {"velocity": "green", "acceleration": "magenta"}
+        name += "; arrows: " + ", ".join(f"{q} ({colour[q]}) {arrow_legend(result, q)}"
+                                         for q in arrow_scales(result))
     mechanism = rrb.Spatial2DView(
-        origin="/", contents="mechanism/**", name=f"{result.scene.name} (y up)",
+        origin="/", contents="mechanism/**", name=name,
         visual_bounds=rrb.VisualBounds2D(x_range=[lo[0], hi[0]], y_range=[-hi[1], -lo[1]]))
     variables = {v.name: v for v in result.variables()}
     plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{variables[name].units}]")
