@@ -24,6 +24,7 @@ class Recording:
 
     def __init__(self, path):
         reader = RrdReader(path)
+        self.reader = reader
         self.blueprints = reader.blueprints()
         self.store = reader.store().stream().collect()
         columns = self.store.schema().component_columns()
@@ -37,6 +38,14 @@ class Recording:
     def steps(self, entity):
         """Return the pandas frame of ``entity`` on the ``step`` timeline (static columns too)."""
         return self.store.reader(index="step", contents=entity).to_pandas()
+
+    def view_titles(self) -> set[str]:
+        """The display names of the embedded blueprint's views."""
+        (entry,) = self.blueprints
+        store = self.reader.store(store=entry).stream().collect()
+        frame = store.reader(index="blueprint", contents="/view/**").to_pandas()
+        return {str(name) for col in frame.columns if col.endswith("ViewBlueprint:display_name")
+                for value in frame[col].dropna() for name in value}
 
     def static(self, entity, component):
         return self.store.reader(index=None, contents=entity).to_pandas()[f"{entity}:{component}"][0]
@@ -142,6 +151,14 @@ def test_values_match_the_result_and_the_hdf5_file(solve, tmp_path):
     assert lengths.max() == pytest.approx(0.25 * rrd.mechanism_size(result))
     (label,) = rec.static("/mechanism/velocity/P", "Arrows2D:labels")
     assert f"1 m = {1 / scale:.3g} m/s" in label
+    # labels of arrows at one point would overlap: stored (hover), not drawn; the 2D view's
+    # title gives both scales
+    assert not rec.static("/mechanism/velocity/P", "Arrows2D:show_labels")
+    accel = rrd.arrow_scales(result)["acceleration"]
+    titles = rec.view_titles()
+    assert (f"fourbar_crank_rocker (y up); arrows: velocity (green) 1 m = {1 / scale:.3g} m/s, "
+            f"acceleration (magenta) 1 m = {1 / accel:.3g} m/s^2") in titles
+    assert {"link_angle [rad]", "log10 residual [m]", "residual [m]", "iterations [1]"} <= titles
 
     # the traced coupler curve is one static strip through every step
     (trace,) = rec.static("/mechanism/trace/P", "LineStrips2D:strips")
