@@ -706,7 +706,8 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         t = (ii - nodes[g]) / lengths[g]
         predT = _hermite_T(*(np.take(a, g, axis=1) for a in hermite_T), t)
         sT = np.ascontiguousarray(s[ii].T)
-        qT, res, its, conv, E = _newton_soa(eng, predT.copy(), sT, tol_abs)
+        qT, res, its, conv, E = _newton_soa(eng, predT.copy(), sT, tol_abs,
+                                            min(NEWTON_ITERATIONS, sc.max_iter))
         moved = _colmax(np.abs(qT - predT)) if qT.shape[0] else np.zeros(len(ii))
         span = span_int[g]
         accept = conv & (moved <= np.maximum(OFF_BRANCH * span, OFF_BRANCH_ABS * model.size))
@@ -771,23 +772,24 @@ def _aligned(eng, qT, sT):
     return ok
 
 
-def _newton_soa(eng, qT, sT, tol_abs):
+def _newton_soa(eng, qT, sT, tol_abs, max_iter: int = NEWTON_ITERATIONS):
     """Newton on a chunk from predictions qT (n_q, k); return (qT, residual, its, converged, E).
 
-    E: the Jacobian's entries at the returned positions (for the derivatives)."""
+    At most ``max_iter`` iterations (the scene's cap, if lower than NEWTON_ITERATIONS). E: the
+    Jacobian's entries at the returned positions (for the derivatives)."""
     k = qT.shape[1]
     its = np.zeros(k, dtype=np.int32)
     res = np.full(k, np.inf)
     E = None
     step = np.full(k, np.inf)  # the last correction: Newton goes on while it is not tiny
     small = 1e-8 * eng.model.size  # (quadratic convergence: the next one is at rounding level)
-    for it in range(NEWTON_ITERATIONS + 1):
+    for it in range(max_iter + 1):
         F = eng.phi(eng.points(qT), sT)
         r = _colmax(np.abs(F)) if F.shape[0] else np.zeros(k)
         res = r
         keep = (r > tol_abs) | (step > small)  # NaN: not kept, not converged
         keep &= np.isfinite(r)
-        if it == NEWTON_ITERATIONS or not keep.any():
+        if it == max_iter or not keep.any():
             break
         E = eng.entries_T(qT, sT)
         dq = np.stack(eng.solve(E, list(-F)))

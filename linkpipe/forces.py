@@ -355,8 +355,10 @@ def _point_forces(model: Model, point_forces, couples, X):
     fp = point_forces.copy()
     d = X[:, model.link_b] - X[:, model.link_a]
     n2 = np.einsum("slj,slj->sl", d, d)
-    # a couple tau on a link = forces tau R d / L^2 on b and -tau R d / L^2 on a
-    f = (couples / n2)[..., None] * _perp(d)
+    # a couple tau on a link = forces tau R d / L^2 on b and -tau R d / L^2 on a (failed
+    # steps arrive zero-filled: 0 / 0 there, NaN, masked later like every failed step)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = (couples / n2)[..., None] * _perp(d)
     _scatter(fp, model.link_b, model.link_a, f)
     return fp
 

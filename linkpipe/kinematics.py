@@ -756,6 +756,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     if convc[0] and drivers_aligned(model, qc, s[i][None])[0]:
                         qi, conv = qc, convc
                         break
+        capped = False  # Newton used all max_iter iterations without converging
         if not conv[0]:
             if fast is not None:
                 qi, res, it, conv = fast.newton(guess, s[i], tol_abs, max_iter, jacobian)
@@ -763,6 +764,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
             residual[i] = res[0]
             iterations[i] += it[0]
+            capped = bool(not conv[0] and it[0] >= max_iter and np.isfinite(res[0]))
             if conv[0] and not (fast.aligned(qi[0], s[i]) if fast is not None
                                 else drivers_aligned(model, qi, s[i][None])[0]):
                 # the angle constraint's other root (vector pointing backwards): not this step's
@@ -772,10 +774,13 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 iterations[i] += it2[0]
                 residual[i] = res[0]
                 conv = conv & drivers_aligned(model, qi, s[i][None])
+                capped = bool(not conv[0] and it2[0] >= max_iter and np.isfinite(res[0]))
         lm_residual = None
-        if not conv[0] and nq:
-            # Newton gave up: slow or wandering at a singular root, or no root at all. Damped
-            # least squares from the same guess tells which, and reaches a singular root.
+        if not conv[0] and nq and not capped:
+            # Newton gave up before the cap (it stalled or failed): slow or wandering at a
+            # singular root, or no root at all. Damped least squares from the same guess tells
+            # which, and reaches a singular root. A Newton run that reached max_iter is not
+            # rescued this way: the step is not_converged (if a root exists), as max_iter says.
             q_lm, lm_residual, it_lm = _lm_root(model, guess, s[i], tol_abs)
             iterations[i] += it_lm
             if lm_residual <= tol_abs and drivers_aligned(model, q_lm[None], s[i][None])[0]:

@@ -107,3 +107,48 @@ def test_sweep_out_of_assembly_range_gives_nan_and_recovers(tmp_path):
     np.testing.assert_allclose(np.linalg.norm(B - A, axis=1), 2.0, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(B - [3.5, 0.0], axis=1), 2.0, atol=1e-12)
     assert inside[-1] and r.status[-1] == OK  # the sweep came back and ends assembled
+
+
+def test_max_iter_is_a_cap_not_converged_otherwise():
+    """max_iter caps Newton on a step: where it runs out while still converging the step is
+    not_converged (a root exists: NaN positions, as the contract says), not rescued by more
+    iterations of another method. The crank-rocker needs 2 iterations a step from its
+    predictor: with max_iter = 2 every step is ok, with 1 the capped steps are not_converged
+    and every ok step still equals the closed form."""
+    import dataclasses as dc
+
+    from linkpipe.kinematics import NOT_CONVERGED
+
+    scene = linkpipe.load_scene("configs/fourbar_crank_rocker.toml")
+
+    def run(max_iter):
+        return linkpipe.solve(dc.replace(scene, solver=dc.replace(
+            scene.solver, method="newton", max_iter=max_iter)))
+
+    assert (run(2).status == OK).all()
+    r = run(1)
+    capped = r.status == NOT_CONVERGED
+    assert capped.sum() >= 100 and set(np.unique(r.status)) == {OK, NOT_CONVERGED}
+    assert (r.iterations[capped] == 1).all()  # no hidden iterations beyond the cap
+    assert np.isnan(r.position[capped][:, r.model.moving]).all()
+    assert np.isnan(r.velocity[capped][:, r.model.moving]).all()
+    tol_abs = scene.solver.tol * r.model.size
+    assert (r.residual[capped] > tol_abs).all() and (r.residual[~capped] <= tol_abs).all()
+    th = np.deg2rad(r.driver_value[:, 0])
+    cf = fourbar(1.0, 3.5, 3.0, 4.0, th, 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
+    ok = ~capped
+    np.testing.assert_allclose(r.position[ok, idx(r, "B")], cf["B"][ok], rtol=0, atol=1e-10 * 4.0)
+
+
+def test_max_iter_caps_the_vectorised_path_too():
+    """3001 steps take the vectorised general path: its batched Newton also stops at max_iter
+    (a step that needs more goes back to the sequential path, which applies the cap)."""
+    import dataclasses as dc
+
+    scene = linkpipe.load_scene("configs/fourbar_crank_rocker.toml")
+    scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=3001, step=None) for d in scene.drivers))
+    for max_iter in (1, 2):
+        r = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton",
+                                                               max_iter=max_iter)))
+        assert r.iterations[r.status == OK].max() <= max_iter
+        assert (r.status == OK).mean() > 0.5
