@@ -49,15 +49,19 @@ def _err(msg: str) -> None:
 
 
 def _run(args) -> int:
-    from .pipeline import solve
+    from .pipeline import check_memory, solve
     from .scene import load_scene
 
     out = pathlib.Path(args.out)
+    if out.exists() and not out.is_dir():
+        _err(f"--out {out}: is a file, not a folder; name a folder (it is created if missing)")
+        return 2
     worst = 0
     for path in args.scenes:
         try:
             t0 = time.perf_counter()
             scene = load_scene(path)
+            check_memory(scene)  # before the progress bar: a sweep too big for memory is a scene error
             bar = _progress_bar(scene, args)
             result = solve(scene, progress=bar.stage if bar else None)
             written = []
@@ -89,6 +93,10 @@ def _run(args) -> int:
                 print(summary(result, written, time.perf_counter() - t0))
         except LinkpipeError as exc:
             _err(str(exc))
+            worst = max(worst, 2)
+        except MemoryError:  # the estimate in pipeline.check_memory passed, the machine did not
+            _err(f"{path}: out of memory for this sweep: use fewer steps, or split it into "
+                 "several scenes")
             worst = max(worst, 2)
         except Exception as exc:  # noqa: BLE001 - one scene's crash must not stop the others
             _err(f"{path}: internal error: {type(exc).__name__}: {exc}")
@@ -180,15 +188,14 @@ def summary(result, written=(), seconds_total=None) -> str:
 
 
 def _check(args) -> int:
-    from .model import build_model, check_mobility
+    from .pipeline import preflight
     from .scene import load_scene
 
     worst = 0
     for path in args.scenes:
         try:
             scene = load_scene(path)
-            model = build_model(scene)
-            mob = check_mobility(model)
+            model, mob = preflight(scene)  # memory, degrees of freedom, the start assembles
             print(f"{path}: scene {scene.name!r} is valid")
             print(f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}")
             print(f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}")

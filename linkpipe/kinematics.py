@@ -369,6 +369,14 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
                                  f"move {name} a little off the line, to the side of the "
                                  "assembly you want")
     worst = float(np.abs(sol.fun).max())
+    if worst <= 1e-13 * model.size:
+        # assembled to rounding level: it is the tolerance that cannot be met, not the scene
+        raise SceneError(path, "solver", "tol",
+                         f"tol = {model.scene.solver.tol:g} ({tol_abs:.3g} for this mechanism's "
+                         f"size) is below what double precision reaches here: the start "
+                         f"assembles to {worst:.3g} and no closer",
+                         "use tol >= 1e-15 (a solved step's residual is rounded to about 1e-16 "
+                         "of the size)")
     table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
     length = dict(model.scene.units).get("length", "length units")
     where = f"[{table}]" + (f" {key}" if key else "")

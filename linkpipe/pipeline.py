@@ -10,6 +10,7 @@ from . import batch
 from . import kinematics as kin
 from .model import build_model, check_mobility
 from .result import Result
+from .errors import SceneError
 from .scene import Scene, load_scene
 
 
@@ -36,6 +37,52 @@ class Plan:
             ("accelerations",) if self.acceleration else ()) + (("forces",) if self.forces else ())
 
 
+#: memory a sweep may need per step and point: 2 coordinates x 8 bytes x 40 arrays, an upper
+#: bound of the measured peaks (about 31 such arrays for the 100k-step crank-rocker with every
+#: effect, 9 for the Jansen linkage's kinematics)
+BYTES_PER_POINT_STEP = 2 * 8 * 40
+
+
+def available_memory() -> int | None:
+    """Return the memory the kernel says is available (bytes), or None where it does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(scene: Scene) -> None:
+    """SceneError when the sweep would need more memory than is available (before any work:
+    a run that the kernel kills half-way writes nothing)."""
+    need = scene.n_steps * max(1, len(scene.points)) * BYTES_PER_POINT_STEP
+    avail = available_memory()
+    if avail is not None and need > avail:
+        driver = scene.drivers[0].name if scene.drivers else ""
+        raise SceneError(scene.path, f'drivers "{driver}"', "steps",
+                         f"{scene.n_steps:,} steps of {len(scene.points)} points need about "
+                         f"{need / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is available",
+                         "use fewer steps, or split the sweep into several scenes")
+
+
+def preflight(scene: Scene):
+    """Check what can be checked before solving; return (model, mobility).
+
+    The scene's memory need, its degrees of freedom against its drivers, and that the start
+    assembles at the first driver value (SceneError otherwise): what ``check`` reports."""
+    check_memory(scene)
+    model = build_model(scene)
+    mob = check_mobility(model)
+    _, s, _, _ = kin.driver_motion(model) if scene.n_steps else (None, None, None, None)
+    if s is not None and len(s):
+        sc = scene.solver
+        kin.start_state(model, s[0], sc.tol * model.size, sc.max_iter)
+    return model, mob
+
+
 def solve(scene: Scene | str, progress=None) -> Result:
     """Run every stage the scene calls for and return the result (failed steps are data).
 
@@ -48,6 +95,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     t0 = _time.perf_counter()
+    check_memory(scene)
     model = build_model(scene)
     mob = check_mobility(model)
     seconds["model"] = _time.perf_counter() - t0

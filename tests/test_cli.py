@@ -46,6 +46,38 @@ def test_start_configuration_that_cannot_assemble(tmp_path, capsys):
     assert "cannot be assembled" in err and "check the link lengths" in err
     with pytest.raises(linkpipe.SceneError):
         linkpipe.solve(str(p))
+    # `check` finds it too (it assembles the start), with the same message
+    assert main(["check", str(p)]) == 2
+    assert capsys.readouterr().err == err
+
+
+def test_tolerance_below_rounding_names_solver_tol(tmp_path, capsys):
+    """tol = 1e-17 cannot be met in double precision: the scene error names [solver] tol, not
+    the link lengths (the start does assemble, to rounding level)."""
+    p = write(tmp_path, "tiny_tol.toml", CRANK_ROCKER.replace("[outputs]", "[solver]\ntol = 1e-17\n\n[outputs]"))
+    assert main(["check", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "[solver] tol: tol = 1e-17" in err and "below what double precision reaches" in err
+    assert "use tol >= 1e-15" in err and "link lengths" not in err
+
+
+def test_a_sweep_too_big_for_memory_is_a_scene_error(tmp_path, capsys):
+    """1e11 steps would need ~5e5 GiB: a scene error naming the driver's steps, before any work
+    (run and check alike), instead of a MemoryError or a run the kernel kills half-way."""
+    p = write(tmp_path, "huge.toml", CRANK_ROCKER.replace("steps = 361", "steps = 100000000000"))
+    for command in (["run", str(p), "--out", str(tmp_path / "out")], ["check", str(p)]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert '[drivers "crank"] steps: 100,000,000,000 steps of 5 points need about' in err
+        assert "GiB is available" in err and "use fewer steps" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_out_that_is_a_file(tmp_path, capsys):
+    target = tmp_path / "not_a_folder"
+    target.write_text("")
+    assert main(["run", str(CONFIGS / "shear_press.toml"), "--out", str(target)]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
 
 
 def test_bad_scene_does_not_stop_the_others(tmp_path, capsys):
