@@ -493,6 +493,11 @@ def check_mobility(model: Model) -> Mobility:
         sc = model.scene
         hint = ("add a driver or a constraint (link, slider)" if mob.dof > nd
                 else "remove a driver, or free the mechanism (too many links or sliders)")
+        on_links = {p for link in sc.links for p in link.points}
+        loose = [p.name for p in sc.points if not p.fixed and p.name not in on_links]
+        if loose and mob.dof > nd:
+            hint = (f"point(s) {', '.join(loose)} belong to no link (2 degrees of freedom each): "
+                    "put them on a link, or remove them")
         raise SceneError(sc.path, "drivers", None,
                          f"the mechanism has {mob.dof} degree(s) of freedom "
                          f"({mob.n_q} unknowns, constraint rank {mob.rank}"

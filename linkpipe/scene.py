@@ -292,6 +292,10 @@ def _show(value) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+#: the keys of ``[scene].units`` (their values are free text, recorded in the outputs)
+UNIT_KEYS = ("length", "mass", "time", "force")
+
+
 def _suggest(word: str, choices) -> str:
     """A "did you mean" hint that also catches a wrong case ("p" for "P")."""
     same = [c for c in choices if str(c).lower() == str(word).lower()]
@@ -549,6 +553,10 @@ class _Parser:
             if not isinstance(table.data["units"], dict):
                 raise table.wrong_type("units", "a table of strings")
             for key, value in table.data["units"].items():
+                if key not in UNIT_KEYS:  # they name the outputs' units: a typo must not pass
+                    raise self.error("scene.units", key, f"unknown unit key {_show(key)}: "
+                                     + _suggest(key, UNIT_KEYS),
+                                     "the keys are " + ", ".join(UNIT_KEYS))
                 if not isinstance(value, str):
                     raise self.error("scene.units", key, f"expected a string, got "
                                      f"{_type_name(value)} ({_show(value)})",
@@ -727,6 +735,10 @@ class _Parser:
             sub = table.sub("input")
             driver_input = Input(self.point(sub, "point", sub.string("point")),
                                  sub.pair("direction", nonzero=True))
+            if self.points[driver_input.point].fixed:
+                raise sub.error("point", f'point "{driver_input.point}" is fixed: it never moves, '
+                                "so an actuator there does no work (every step would be "
+                                "no_leverage)", "name the moving point the actuator pushes")
         return Driver(table.data["name"], kind, tuple(points), axis, start, stop, steps, step,
                       rate=table.number("rate", 0.0),
                       acceleration=table.number("acceleration", 0.0), input=driver_input)

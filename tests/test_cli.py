@@ -28,6 +28,16 @@ def test_dof_mismatch_names_both_numbers(tmp_path, capsys):
     assert "Traceback" not in err
 
 
+def test_a_point_on_no_link_is_named(tmp_path, capsys):
+    """A stray moving point adds 2 degrees of freedom: the message says which point."""
+    text = CRANK_ROCKER.replace("P  = {", "Z  = { x = 9.0, y = 9.0 }\nP  = {")
+    p = write(tmp_path, "stray.toml", text)
+    assert main(["check", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "3 degree(s) of freedom" in err and "but 1 driver(s)" in err
+    assert "point(s) Z belong to no link" in err
+
+
 def test_overconstrained_names_both_numbers(tmp_path, capsys):
     text = CRANK_ROCKER + '\n[[drivers]]\nname = "rocker"\nangle = ["O4", "B"]\nfrom = 10.0\nto = 20.0\nsteps = 361\n'
     p = write(tmp_path, "two_drivers.toml", text)

@@ -310,6 +310,11 @@ ERRORS = [
      ["missing", "add name ="]),
     ("empty-name", variant([('name = "rocker"', 'name = ""')]), "links[3]", "name",
      ["is empty"]),
+    ("input-on-a-fixed-point", variant([("steps = 361", 'steps = 361\ninput = { point = "O2", '
+                                         'direction = [0.0, 1.0] }')]),
+     'drivers "crank".input', "point", ['point "O2" is fixed', "no_leverage"]),
+    ("unknown-unit-key", '[scene]\nunits = { lenght = "ft" }\n' + BASE, "scene.units", "lenght",
+     ["unknown unit key", 'did you mean "length"?', "length, mass, time, force"]),
     ("units-not-strings", '[scene]\nunits = { length = 1 }\n' + BASE, "scene.units", "length",
      ["expected a string"]),
     ("no-points", BASE.split("[[links]]", 1)[0].replace("O2 =", "#").replace("A  =", "#")
