@@ -148,8 +148,12 @@ def test_errors_fall_as_the_tolerance_tightens(tol_ladders, name):
         errors = [r.relative_error[q] for r in solved]
         for looser, tighter in zip(errors, errors[1:]):
             assert tighter <= 2 * looser + floor, (q, errors)
-        for r in solved:  # and every error is within what its tolerance allows
-            assert r.relative_error[q] <= max(1e3 * float(r.value), floor), (q, r.label)
+        # and every error is within what its tolerance allows: a residual of at most tol x size
+        # moves the positions by up to cond x tol x size, with the Jacobian's condition below 15
+        # on both scenes (14.2 and 5.7, Result.condition), and the velocities and accelerations
+        # solved at those positions by as much again: 2 x 15 x tol (measured: up to 7.8 x tol)
+        for r in solved:
+            assert r.relative_error[q] <= max(30 * float(r.value), floor), (q, r.label)
 
 
 @pytest.mark.parametrize("name", ["fourbar_crank_rocker", "slider_crank"])
@@ -252,7 +256,7 @@ def test_every_knob_has_rows_and_dyads_never_crash():
     assert set(methods) == {"auto", "newton", "dyads"}
     assert methods["auto"].available and methods["newton"].available
     dy = methods["dyads"]
-    assert dy.available or dy.note.startswith("not available")
+    assert dy.available and dy.path == "dyads"  # every shipped scene decomposes
     for r in rows(ladder, "predictor"):  # iterations and the branch are reported
         assert r.iterations_max >= 1 and isinstance(r.branch_kept, bool)
     text = accuracy.table(ladder)
@@ -292,9 +296,6 @@ def test_method_rows_say_which_path_ran():
     methods = {r.value: r for r in rows(ladder, "method")}
     assert methods["newton"].path == "newton"
     dy = methods["dyads"]
-    if dy.available:  # the closed-form fast path: as exact as the closed form
-        assert dy.path == "dyads" and dy.iterations_max == 0
-        for q in KINEMATIC:
-            assert dy.relative_error[q] <= 1e-12
-    else:
-        assert dy.note.startswith("not available")
+    assert dy.available and dy.path == "dyads" and dy.iterations_max == 0
+    for q in KINEMATIC:  # the closed-form fast path: as exact as the closed form (rounding)
+        assert dy.relative_error[q] <= 1e-14

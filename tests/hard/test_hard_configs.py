@@ -1,6 +1,5 @@
-"""The hard-case example scenes are valid scenes the CLI runs, quickly, with exit status 0."""
-import time
-
+"""The hard-case example scenes are valid scenes the CLI runs with exit status 0 (their speed is
+the benchmark's business, benchmarks/bench_sweep.py: tests check correctness only)."""
 import h5py
 import numpy as np
 
@@ -17,9 +16,7 @@ def test_check_accepts_every_hard_scene(capsys):
 
 
 def test_run_writes_h5_and_rrd_with_exit_status_0(tmp_path, capsys):
-    t0 = time.perf_counter()
     assert main(["run", *map(str, SCENES), "--out", str(tmp_path)]) == 0
-    seconds = time.perf_counter() - t0
     captured = capsys.readouterr()
     assert "error" not in captured.err and "Traceback" not in captured.err
     for path in SCENES:
@@ -29,5 +26,3 @@ def test_run_writes_h5_and_rrd_with_exit_status_0(tmp_path, capsys):
         with h5py.File(tmp_path / f"{name}.h5") as f:
             status = f["status"][:]
             assert len(status) == len(f["step"][:]) and set(np.unique(status)) <= {0, 1, 2}
-    # they must not make the main run slow (a few seconds for all, with the Rerun recordings)
-    assert seconds < 20
