@@ -634,7 +634,7 @@ def _colmax(a: np.ndarray) -> np.ndarray:
 
 
 def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: int = 0,
-                 coarse: int = COARSE_NODES, chunk: int = CHUNK):
+                 coarse: int = COARSE_NODES, chunk: int = CHUNK, start=None):
     """Solve the sweep by the general path, vectorised; return a dict.
 
     Keys: q (S, n_q) NaN at failed steps, residual, iterations, status (as
@@ -642,7 +642,8 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
     continuation solved the step, and with ``order`` >= 1 velocity (and 2 acceleration)
     (S, n_points, 2) from the engine's solves (NaN where not OK). Falls back to the sequential
     path for every step when the model has no engine, the scene asks for a finite-difference
-    Jacobian, or the driver values are not evenly spaced.
+    Jacobian, or the driver values are not evenly spaced. ``start``: the
+    :func:`linkpipe.kinematics.start_state` at ``s[0]`` when the caller has it already.
     """
     sc = model.scene.solver
     S = s.shape[0]
@@ -652,12 +653,14 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
                                 rtol=0, atol=1e-9 * max(1.0, float(np.abs(s).max())))
     out = {}
     if eng is None or sc.jacobian != "analytic" or S < VECTORISE_FROM or not even:
-        q, res, it, st = kin.solve_positions(model, s)
+        q0, slope0 = start if start is not None else (None, None)
+        q, res, it, st = kin.solve_positions(model, s, q_start=q0, start_slope=slope0)
         out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
         return _with_derivatives(model, eng, out, s, s_dot, s_ddot, order, chunk)
     tol_abs = sc.tol * model.size
     nodes = np.r_[np.arange(0, S - 1, k), S - 1]
-    start = kin.start_state(model, s[0], tol_abs, sc.max_iter)  # (q, slope) for a re-run from 0
+    if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
+        start = kin.start_state(model, s[0], tol_abs, sc.max_iter)
     qn, resn, itn, stn = kin.solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
     qn, resn = _polish(eng, qn, s[nodes], stn == kin.OK, resn)
     q = np.full((S, model.n_q), np.nan)
@@ -950,6 +953,7 @@ def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, o
     method = sc.method
     note = ""
     S = s.shape[0]
+    start = None  # the start state, once assembled (the Newton path reuses it)
     if method in ("auto", "dyads"):
         plan = dyads.decompose(model)
         if not plan.ok:
@@ -964,8 +968,15 @@ def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, o
             note = f"auto: jacobian = {sc.jacobian!r} asks for Newton; general Newton path"
         else:
             tol_abs = sc.tol * model.size
-            q0 = kin.assemble_start(model, s[0], tol_abs, sc.max_iter)
+            start = kin.start_state(model, s[0], tol_abs, sc.max_iter)
+            q0, slope0 = start
             dyads.set_branches(plan, model.positions(q0[None])[0], s[0])
+            if slope0 is not None and S > 1:
+                # a start on a dyad's singular shape (a change point) takes that dyad's sign a
+                # step along the path the drawing was carried on
+                q1 = q0 + slope0 @ (s[1] - s[0])
+                dyads.refine_branches(plan, model.positions(q0[None])[0], s[0],
+                                      model.positions(q1[None])[0], s[1])
             sw = dyads.solve(plan, s, s_dot, s_ddot, order=order, gaps=method == "auto",
                              max_abs_phi=max_abs_phi(model))
             if method == "dyads" or dyads.branch_check(plan, sw):
@@ -984,7 +995,7 @@ def stage1(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, o
                             velocity=sw.velocity, acceleration=sw.acceleration)
             note = ("auto: a dyad passes near its singular configuration or cannot be assembled "
                     "at some step; general Newton path")
-    out = solve_newton(model, s)
+    out = solve_newton(model, s, start=start)
     q = out["q"]
     fin = np.isfinite(q).all(axis=1)
     X = model.positions(np.where(np.isfinite(q), q, 0.0))

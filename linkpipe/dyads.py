@@ -298,18 +298,43 @@ def set_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray) -> None:
     """Take each dyad's branch (sign) from the configuration ``X0`` (n_points, 2) at driver values s0."""
     size = plan.model.size
     for st in plan.steps:
-        p = st.targets[0]
-        if st.kind == "circles":
-            d = X0[st.c2] - X0[st.c1]
-            r = X0[p] - X0[st.c1]
-            val = (d[0] * r[1] - d[1] * r[0]) / max(np.hypot(*d), 1e-300)
-        elif st.kind == "circle_line":
-            _, t = _line_at(st.line1, X0, s0)
-            val = (X0[p] - X0[st.c1]) @ t
-        else:
+        val = _branch_value(st, X0, s0)
+        if val is None:
             continue
         st.sign = 1.0 if val >= 0 else -1.0
         st.ambiguous = bool(abs(val) <= 1e-9 * size)
+
+
+def refine_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray, X1: np.ndarray,
+                    s1: np.ndarray) -> None:
+    """Re-take the sign of each dyad that starts nearer its singular shape than one step's change.
+
+    ``X1`` at ``s1``: a prediction of the next step along the path the start came by (see
+    :func:`linkpipe.kinematics.start_state`). A dyad whose side at ``X0`` is smaller than the
+    change of that side over the step starts on (or next to) its singular shape, where the
+    start's own side is rounding; the predicted step is on the branch the path continues on.
+    Such dyads are marked ambiguous (``method = "auto"`` leaves those sweeps to Newton)."""
+    for st in plan.steps:
+        v0 = _branch_value(st, X0, s0)
+        if v0 is None:
+            continue
+        v1 = _branch_value(st, X1, s1)
+        if abs(v0) <= abs(v1 - v0):
+            st.sign = 1.0 if v1 >= 0 else -1.0
+            st.ambiguous = True
+
+
+def _branch_value(st: Step, X: np.ndarray, s: np.ndarray):
+    """Return the signed side of a two-root dyad's point at configuration X (None: no branches)."""
+    p = st.targets[0]
+    if st.kind == "circles":
+        d = X[st.c2] - X[st.c1]
+        r = X[p] - X[st.c1]
+        return (d[0] * r[1] - d[1] * r[0]) / max(np.hypot(*d), 1e-300)
+    if st.kind == "circle_line":
+        _, t = _line_at(st.line1, X, s)
+        return (X[p] - X[st.c1]) @ t
+    return None
 
 
 def _line_at(line: Line, X: np.ndarray, s: np.ndarray):

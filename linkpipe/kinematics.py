@@ -412,7 +412,12 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
         return None
     path = start + np.linspace(0.0, 1.0, min(n, 2000) + 1)[:, None] * delta
     path[-1] = s0
-    q, residual, _, _ = solve_positions(model, path, q_start=q_drawn[0])
+    # the carry's own settings, not the scene's knobs (a low max_iter or no predictor must not
+    # send the start back to the one-jump assembly); it stops at its first failed step
+    q, residual, _, _ = solve_positions(model, path, tol=model.scene.solver.tol,
+                                        max_iter=max(max_iter, 50), predictor="first",
+                                        jacobian="analytic", q_start=q_drawn[0],
+                                        stop_on_failure=True)
     if not (np.isfinite(q).all() and (residual <= tol_abs).all()):
         return None  # a step without assembly on the way (or one that did not converge)
     slope = None
@@ -678,7 +683,7 @@ def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
 def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
                     jacobian: str | None = None, q_start: np.ndarray | None = None,
-                    start_slope: np.ndarray | None = None):
+                    start_slope: np.ndarray | None = None, stop_on_failure: bool = False):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
@@ -687,6 +692,12 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     ``q_start`` (n_q,): continue from this assembled configuration instead of assembling the
     scene's start (the vectorised general path re-runs single intervals of a sweep this way),
     with ``start_slope`` (n_q, nd) as the first predictor's dq/ds (see :func:`start_state`).
+    ``stop_on_failure``: return at the first step that fails (the rest stay NaN, status 0).
+
+    After a step without assembly the next one starts by damped least squares from the last
+    assembled shape (a gap in the assembly range); after a not_converged step (``max_iter``
+    reached on a step that has a root) the sweep goes on with Newton from the last assembled
+    step's prediction, so a low cap costs steps, never hidden iterations.
     """
     sc = model.scene.solver
     tol = sc.tol if tol is None else tol
@@ -866,6 +877,10 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
         else:
             status[i] = (_classify_failure(model, guess, s[i], tol_abs) if lm_residual is None
                          else NOT_CONVERGED if lm_residual <= 10 * tol_abs else NO_ASSEMBLY)
+            if stop_on_failure:
+                break
+            if status[i] == NOT_CONVERGED and capped:
+                continue  # a root exists, the cap stopped Newton: predict on from the last step
             gap = True
             if lm_residual is not None and np.all(np.isfinite(q_lm)):
                 gap_shape = q_lm
