@@ -293,11 +293,20 @@ def _lm_loop(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: floa
     return q, r, it
 
 
-def _classify_failure(model: Model, q_guess: np.ndarray, s_row: np.ndarray, tol_abs: float) -> int:
-    """Tell no_assembly (least-squares minimum of Phi above tolerance) from not_converged."""
-    q, r, _ = _lm_root(model, q_guess, s_row, 10 * tol_abs)
-    solvable = r <= 10 * tol_abs and drivers_aligned(model, q[None], s_row[None])[0]
-    return NOT_CONVERGED if solvable else NO_ASSEMBLY
+def _classify_failure(model: Model, q_guesses, s_row: np.ndarray, tol_abs: float):
+    """Tell no_assembly (least-squares minimum of Phi above tolerance) from not_converged.
+
+    Returns (status, the root found or None). Damped least squares from each guess in turn (the
+    step's guess, where Newton stopped, the last assembled shape): a poor guess (a singular
+    start) can sit in a local minimum that is not a root, and one root found from any of them
+    means the step has one."""
+    for q_guess in q_guesses:
+        if q_guess is None or not np.all(np.isfinite(q_guess)):
+            continue
+        q, r, _ = _lm_root(model, np.asarray(q_guess, float).reshape(-1), s_row, 10 * tol_abs)
+        if r <= 10 * tol_abs and drivers_aligned(model, q[None], s_row[None])[0]:
+            return NOT_CONVERGED, q
+    return NO_ASSEMBLY, None
 
 
 #: largest driver move per step when the drawn pose is carried to the sweep's first value:
@@ -875,12 +884,21 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
             # the slope from before it; predicting across with that slope keeps the branch
             last_q, last_s = qi[0], s[i]
         else:
-            status[i] = (_classify_failure(model, guess, s[i], tol_abs) if lm_residual is None
-                         else NOT_CONVERGED if lm_residual <= 10 * tol_abs else NO_ASSEMBLY)
+            root = None
+            if lm_residual is None:
+                tries = (guess, qi, last_q) if capped else (guess,)
+                status[i], root = _classify_failure(model, tries, s[i], tol_abs)
+            else:
+                status[i] = NOT_CONVERGED if lm_residual <= 10 * tol_abs else NO_ASSEMBLY
             if stop_on_failure:
                 break
             if status[i] == NOT_CONVERGED and capped:
-                continue  # a root exists, the cap stopped Newton: predict on from the last step
+                # a root exists, the cap stopped Newton: the step stays not_converged (NaN), and
+                # the sweep goes on predicting from that root (found to tell the two failures
+                # apart) with the slope from before, not by a least-squares restart
+                if root is not None:
+                    last_q, last_s = root, s[i]
+                continue
             gap = True
             if lm_residual is not None and np.all(np.isfinite(q_lm)):
                 gap_shape = q_lm

@@ -152,3 +152,27 @@ def test_max_iter_caps_the_vectorised_path_too():
                                                                max_iter=max_iter)))
         assert r.iterations[r.status == OK].max() <= max_iter
         assert (r.status == OK).mean() > 0.5
+
+
+def test_a_low_cap_never_calls_an_assemblable_step_no_assembly():
+    """The slider-driven slider-crank starts on its dead centre; with max_iter = 3 Newton from
+    there runs out on the next steps. Those are not_converged (the mechanism assembles
+    everywhere inside the stroke 2.5..4.5), not no_assembly, and the sweep goes on: the steps
+    that converge equal the closed form (crank pin on the upper half-turn)."""
+    import dataclasses as dc
+
+    from linkpipe.kinematics import NOT_CONVERGED, SINGULAR
+
+    scene = linkpipe.load_scene("configs/hard/slider_driven_dead_centres.toml")
+    r = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton", max_iter=3)))
+    x = r.driver_value[:, 0]
+    inside = (x > 2.5 + 1e-9) & (x < 4.5 - 1e-9)
+    assert set(np.unique(r.status[inside])) <= {OK, NOT_CONVERGED}
+    assert (r.status[~inside] != NO_ASSEMBLY).all() and (r.status == SINGULAR).any()
+    ok = r.status == OK
+    assert ok.sum() >= 20
+    # crank 1, rod 3.5, no offset: cos t = (1 + x^2 - 3.5^2) / (2 x), upper half-turn; 1e-9 of
+    # the size: next to the dead centres the condition reaches ~1e3 (residual tolerance 1e-12)
+    c = (1.0 + x**2 - 3.5**2) / (2 * x)
+    A = np.stack([c, np.sqrt(np.clip(1 - c * c, 0, None))], axis=1)
+    np.testing.assert_allclose(r.position[ok, idx(r, "A")], A[ok], rtol=0, atol=1e-9)
