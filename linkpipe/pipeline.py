@@ -39,7 +39,8 @@ class Plan:
 
 #: memory a sweep may need per step and point: 2 coordinates x 8 bytes x 40 arrays, an upper
 #: bound of the measured peaks (about 31 such arrays for the 100k-step crank-rocker with every
-#: effect, 9 for the Jansen linkage's kinematics)
+#: effect, 9 for the Jansen linkage's kinematics); the force stage adds the constraint
+#: Jacobian's inverse, (2 P)^2 numbers per step, counted twice for its temporaries
 BYTES_PER_POINT_STEP = 2 * 8 * 40
 
 
@@ -58,14 +59,19 @@ def available_memory() -> int | None:
 def check_memory(scene: Scene) -> None:
     """SceneError when the sweep would need more memory than is available (before any work:
     a run that the kernel kills half-way writes nothing)."""
-    need = scene.n_steps * max(1, len(scene.points)) * BYTES_PER_POINT_STEP
+    P = max(1, len(scene.points))
+    per_step = P * BYTES_PER_POINT_STEP + (2 * 8 * (2 * P) ** 2 if scene.effects else 0)
+    need = scene.n_steps * per_step
     avail = available_memory()
     if avail is not None and need > avail:
-        driver = scene.drivers[0].name if scene.drivers else ""
-        raise SceneError(scene.path, f'drivers "{driver}"', "steps",
+        first = scene.drivers[0] if scene.drivers else None
+        driver = first.name if first else ""
+        key = "step" if first is not None and first.step is not None else "steps"
+        raise SceneError(scene.path, f'drivers "{driver}"', key,
                          f"{scene.n_steps:,} steps of {len(scene.points)} points need about "
                          f"{need / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is available",
-                         "use fewer steps, or split the sweep into several scenes")
+                         ("use a larger step" if key == "step" else "use fewer steps")
+                         + ", or split the sweep into several scenes")
 
 
 def preflight(scene: Scene):

@@ -6,7 +6,7 @@ configuration) live in :mod:`linkpipe.model` and raise the same :class:`SceneErr
 """
 from __future__ import annotations
 
-import math  # isfinite and floor only: no maths here
+import math  # isfinite, floor and hypot (a fixed link's drawn length) only: no maths here
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -624,6 +624,13 @@ class _Parser:
             if length <= 0:
                 raise sub.error(key, f"must be positive, got {length:g}",
                                 f'write the distance of "{a}" and "{b}"')
+            pa, pb = self.points[a], self.points[b]
+            if pa.fixed and pb.fixed:  # nothing moves to meet this length: it must hold as drawn
+                drawn = math.hypot(pb.x - pa.x, pb.y - pa.y)
+                if abs(drawn - length) > 1e-9 * max(drawn, length):
+                    raise sub.error(key, f'"{a}" and "{b}" are both fixed, {drawn:g} apart, but '
+                                    f"the length says {length:g}",
+                                    "move the fixed points, or correct (or drop) the length")
         return length
 
     def link_local(self, table: _Table, names) -> dict[str, tuple[float, float]]:

@@ -170,7 +170,7 @@ def test_log10_residual_beside_the_tolerance(solve, tmp_path):
     log10(tol x size); an exact zero sits one decade below rounding level, NaN stays NaN."""
     base = solve("fourbar_crank_rocker")
     residual = base.residual.copy()
-    residual[:3] = [0.0, np.nan, 2.5e-3]
+    residual[:4] = [0.0, np.nan, 2.5e-3, np.inf]  # inf: a failed step's least-squares residual
     result = dataclasses.replace(base, residual=residual)
     rec = Recording(_write(result, tmp_path))
     size = base.model.size
@@ -179,10 +179,14 @@ def test_log10_residual_beside_the_tolerance(solve, tmp_path):
     floor = np.log10(np.finfo(float).eps * size) - 1
     assert got[0] == pytest.approx(floor)
     assert np.isnan(got[1]) and got[2] == pytest.approx(np.log10(2.5e-3))
-    rest = residual[3:]
+    assert np.isnan(got[3])  # +-inf is sent as NaN (a gap), never as an infinite value
+    raw = np.concatenate(_column(rec.steps("/solver/residual"), "/solver/residual",
+                                 "Scalars:scalars").to_list())
+    assert np.isnan(raw[3]) and raw[2] == 2.5e-3
+    rest = residual[4:]
     with np.errstate(divide="ignore"):
-        np.testing.assert_allclose(got[3:], np.where(rest == 0, floor, np.log10(rest)), rtol=1e-12)
-    assert (got[3:] < np.log10(1e-14 * size)).all()   # the dyads: rounding level
+        np.testing.assert_allclose(got[4:], np.where(rest == 0, floor, np.log10(rest)), rtol=1e-12)
+    assert (got[4:] < np.log10(1e-14 * size)).all()   # the dyads: rounding level
     frame = rec.steps("/solver/log10_tolerance")
     tol = np.concatenate(_column(frame, "/solver/log10_tolerance", "Scalars:scalars").to_list())
     np.testing.assert_allclose(tol, np.log10(base.scene.solver.tol * size), rtol=1e-12)

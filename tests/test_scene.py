@@ -313,6 +313,9 @@ ERRORS = [
     ("input-on-a-fixed-point", variant([("steps = 361", 'steps = 361\ninput = { point = "O2", '
                                          'direction = [0.0, 1.0] }')]),
      'drivers "crank".input', "point", ['point "O2" is fixed', "no_leverage"]),
+    ("fixed-link-length-contradicts", BASE.replace('name = "crank"', 'name = "ground"\npoints = ["O2", "O4"]\n'
+                                                    'lengths = { "O2-O4" = 4.5 }\n\n[[links]]\nname = "crank"', 1),
+     'links "ground".lengths', "O2-O4", ['"O2" and "O4" are both fixed, 4 apart', "the length says 4.5"]),
     ("unknown-unit-key", '[scene]\nunits = { lenght = "ft" }\n' + BASE, "scene.units", "lenght",
      ["unknown unit key", 'did you mean "length"?', "length, mass, time, force"]),
     ("units-not-strings", '[scene]\nunits = { length = 1 }\n' + BASE, "scene.units", "length",

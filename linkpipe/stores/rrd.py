@@ -325,8 +325,11 @@ def _log_series(stream, send, result) -> None:
                    np.full(result.n_steps, log_tol)))
     for entity, title, values in series:
         values = np.asarray(values, dtype=float)
-        if not np.isfinite(values).any():
+        finite = np.isfinite(values)
+        if not finite.any():
             continue
+        if not finite.all():  # +-inf (e.g. a failed step's residual) would wreck the axis
+            values = np.where(finite, values, np.nan)
         stream.log(entity, rr.SeriesLines(names=title), static=True)
         # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
         # out would be bridged by a straight segment that looks like data
