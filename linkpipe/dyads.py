@@ -548,6 +548,17 @@ def _derivative(st: Step, ch: _Chunk, order: int) -> None:
     oy[p] = _cramer(b2, g1x, b1, g2x, idet)
 
 
+def _derivative_pass(plan: Plan, ch: _Chunk, order: int, moving, buf: np.ndarray, n: int):
+    """Velocities (order 1) or accelerations (2) of every step of the chunk, into ``buf[:n]``."""
+    for st in plan.steps:
+        _derivative(st, ch, order)
+    xs, ys = (ch.vx, ch.vy) if order == 1 else (ch.ax, ch.ay)
+    for p in moving:
+        buf[:n, p, 0] = _val(xs[p])
+        buf[:n, p, 1] = _val(ys[p])
+    return buf[:n]
+
+
 def _minus_rel_speed2(b, ch: _Chunk, p: int, c: int):
     """Return b - |v_p - v_c|^2 (a distance row's acceleration RHS); b when both are at rest."""
     rvx, rvy = _sub(ch.vx[p], ch.vx[c]), _sub(ch.vy[p], ch.vy[c])
@@ -668,26 +679,12 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
                 residual[lo:hi] = max_abs_phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
             if order >= 1:
                 ch.sd = [c if isinstance(c, float) else c[lo:hi] for c in dcols]
-                ch.vx = [None] * P
-                ch.vy = [None] * P
-                for st in plan.steps:
-                    _derivative(st, ch, 1)
-                buf = bufs[1]
-                for p in moving:
-                    buf[:n, p, 0] = _val(ch.vx[p])
-                    buf[:n, p, 1] = _val(ch.vy[p])
-                V[lo:hi] = buf[:n]
+                ch.vx, ch.vy = [None] * P, [None] * P
+                V[lo:hi] = _derivative_pass(plan, ch, 1, moving, bufs[1], n)
             if order >= 2:
                 ch.sdd = [c if isinstance(c, float) else c[lo:hi] for c in ddcols]
-                ch.ax = [None] * P
-                ch.ay = [None] * P
-                for st in plan.steps:
-                    _derivative(st, ch, 2)
-                buf = bufs[2]
-                for p in moving:
-                    buf[:n, p, 0] = _val(ch.ax[p])
-                    buf[:n, p, 1] = _val(ch.ay[p])
-                A[lo:hi] = buf[:n]
+                ch.ax, ch.ay = [None] * P, [None] * P
+                A[lo:hi] = _derivative_pass(plan, ch, 2, moving, bufs[2], n)
     bad = ~ok
     if bad.any():
         X[np.ix_(bad, moving)] = np.nan
