@@ -705,8 +705,9 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
 
     After a step without assembly the next one starts by damped least squares from the last
     assembled shape (a gap in the assembly range); after a not_converged step (``max_iter``
-    reached on a step that has a root) the sweep goes on with Newton from the last assembled
-    step's prediction, so a low cap costs steps, never hidden iterations.
+    reached on a step that has a root) the sweep predicts on from the root that told the two
+    failures apart, with the slope from before: a low cap costs steps, and the step it stopped
+    is reported as not_converged, never finished by other iterations.
     """
     sc = model.scene.solver
     tol = sc.tol if tol is None else tol
