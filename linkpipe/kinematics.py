@@ -343,7 +343,9 @@ def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
 def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) -> np.ndarray:
     """Newton (then least squares) at ``s0`` from the drawing itself; SceneError if impossible."""
     q0 = model.q_of(model.start_position[None])
-    q, res, _, conv = newton(model, q0, s0[None], tol_abs, max(max_iter, 50))
+    fast = _step_kernels(model) if model.n_q else None  # the same Newton on plain floats
+    q, res, _, conv = (fast.newton(q0[0], s0, tol_abs, max(max_iter, 50)) if fast is not None
+                       else newton(model, q0, s0[None], tol_abs, max(max_iter, 50)))
     if conv[0]:
         return q[0]
     # Newton may wander from a poor guess: a least-squares solve tells whether a solution exists.
@@ -416,7 +418,9 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
         return None
     start = s0 - delta  # the drawn values, next to s0 for the angles
     q0 = model.q_of(model.start_position[None])
-    q_drawn, _, _, conv = newton(model, q0, start[None], tol_abs, max(max_iter, 50))
+    fast = _step_kernels(model)
+    q_drawn, _, _, conv = (fast.newton(q0[0], start, tol_abs, max(max_iter, 50)) if fast is not None
+                           else newton(model, q0, start[None], tol_abs, max(max_iter, 50)))
     if not conv[0] or not drivers_aligned(model, q_drawn, start[None])[0]:
         return None
     path = start + np.linspace(0.0, 1.0, min(n, 2000) + 1)[:, None] * delta
