@@ -82,10 +82,8 @@ def preflight(scene: Scene):
     check_memory(scene)
     model = build_model(scene)
     mob = check_mobility(model)
-    _, s, _, _ = kin.driver_motion(model) if scene.n_steps else (None, None, None, None)
-    if s is not None and len(s):
-        sc = scene.solver
-        kin.start_state(model, s[0], sc.tol * model.size, sc.max_iter)
+    _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
+    kin.start_state(model, s[0], scene.solver.tol * model.size, scene.solver.max_iter)
     return model, mob
 
 
