@@ -381,18 +381,13 @@ class Engine:
             if k == 1:
                 x[cols[0]] = rhs[0] / E[inner[0][0]]
             elif k == 2:
-                a, b_, c, d = (E[e] if e >= 0 else 0.0 for e in (inner[0][0], inner[0][1],
-                                                                  inner[1][0], inner[1][1]))
+                a, b_, c, d = _block2(E, inner)
                 idet = 1.0 / (a * d - b_ * c)
                 x[cols[0]] = (rhs[0] * d - rhs[1] * b_) * idet
                 x[cols[1]] = (a * rhs[1] - c * rhs[0]) * idet
             else:
                 S = E.shape[1]
-                M = np.zeros((S, k, k))
-                for i in range(k):
-                    for j in range(k):
-                        if inner[i][j] >= 0:
-                            M[:, i, j] = E[inner[i][j]]
+                M = _dense_block(E, inner)
                 shp = np.broadcast_shapes(*(np.shape(r) for r in rhs), (S,))
                 R = np.stack([np.broadcast_to(r, shp).reshape(-1, S) for r in rhs])  # (k, r, S)
                 try:
@@ -423,18 +418,13 @@ class Engine:
                 if k == 1:
                     y[rows[0]] = rhs[0] / E[inner[0][0]]
                 elif k == 2:  # the block transposed: [[a, c], [b, d]]
-                    a, b_, c, d = (E[e] if e >= 0 else 0.0 for e in (inner[0][0], inner[0][1],
-                                                                      inner[1][0], inner[1][1]))
+                    a, b_, c, d = _block2(E, inner)
                     idet = 1.0 / (a * d - b_ * c)
                     y[rows[0]] = (rhs[0] * d - rhs[1] * c) * idet
                     y[rows[1]] = (a * rhs[1] - b_ * rhs[0]) * idet
                 else:
                     S = E.shape[1]
-                    M = np.zeros((S, k, k))
-                    for i in range(k):
-                        for j in range(k):
-                            if inner[i][j] >= 0:
-                                M[:, j, i] = E[inner[i][j]]
+                    M = _dense_block(E, inner).transpose(0, 2, 1)
                     R = np.stack([np.broadcast_to(r, (S,)) for r in rhs], axis=1)
                     try:
                         sol = np.linalg.solve(M, R[..., None])[..., 0]
@@ -510,6 +500,22 @@ def _components(succ: list) -> list:
         if index[v] is None:
             visit(v)
     return out[::-1]  # Tarjan emits sinks first: reversed, every component follows its sources
+
+
+def _block2(E: np.ndarray, inner) -> tuple:
+    """Return the entries (a, b, c, d) of a 2x2 diagonal block [[a, b], [c, d]] (0.0 where empty)."""
+    return tuple(E[e] if e >= 0 else 0.0 for e in (inner[0][0], inner[0][1], inner[1][0], inner[1][1]))
+
+
+def _dense_block(E: np.ndarray, inner) -> np.ndarray:
+    """Return a k x k diagonal block as dense matrices (S, k, k) from the entries E (nnz, S)."""
+    k = len(inner)
+    M = np.zeros((E.shape[1], k, k))
+    for i in range(k):
+        for j in range(k):
+            if inner[i][j] >= 0:
+                M[:, i, j] = E[inner[i][j]]
+    return M
 
 
 def engine(model: Model) -> Engine | None:
