@@ -15,6 +15,7 @@ from .model import Model, constraint_source, driver_scale, driver_values
 
 OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED = 0, 1, 2, 3
 NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
+SUBSTEPS, SUBDIVIDE = 8, 2  # a failing step's retry: 8 sub-steps, at most 2 levels deep
 STATUS_NAMES = ("ok", "no_assembly", "singular", "not_converged")
 
 
@@ -439,6 +440,20 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
     return q[-1], slope
 
 
+def _converging_at_cap(model: Model, fast, guess: np.ndarray, s_row: np.ndarray, iterations: int,
+                       residual: float, converged: bool, max_iter: int) -> bool:
+    """Return whether a Newton run used all ``max_iter`` iterations while converging.
+
+    Converging: its residual fell to a thousandth of the guess's or less. Such a step is
+    not_converged (the cap stopped it); a run that reached the cap wandering (far from any root,
+    e.g. after a gap) is treated like one that stalled: damped least squares takes over."""
+    if converged or iterations < max_iter or not np.isfinite(residual):
+        return False
+    F = fast.phi(guess, s_row) if fast is not None else model.phi(
+        model.positions(guess[None]), s_row[None])[0]
+    return bool(F.size and residual <= 1e-3 * float(np.abs(F).max()))
+
+
 def _velocity_one(model, X, s, s_dot, J=None):
     """Return qdot (n_q,) at one step (for the predictor)."""
     if J is None:
@@ -696,7 +711,8 @@ def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
 def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
                     jacobian: str | None = None, q_start: np.ndarray | None = None,
-                    start_slope: np.ndarray | None = None, stop_on_failure: bool = False):
+                    start_slope: np.ndarray | None = None, stop_on_failure: bool = False,
+                    subdivide: int = SUBDIVIDE):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
@@ -706,6 +722,8 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     scene's start (the vectorised general path re-runs single intervals of a sweep this way),
     with ``start_slope`` (n_q, nd) as the first predictor's dq/ds (see :func:`start_state`).
     ``stop_on_failure``: return at the first step that fails (the rest stay NaN, status 0).
+    ``subdivide``: how many levels of ``SUBSTEPS`` sub-steps a step that fails right after an
+    assembled one is retried in before it counts as failed.
 
     After a step without assembly the next one starts by damped least squares from the last
     assembled shape (a gap in the assembly range); after a not_converged step (``max_iter``
@@ -742,6 +760,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     fast = _step_kernels(model) if nq else None
     last_sign = 0.0  # sign of det(Phi_q) at the last regular step: the assembly mode
     gap = False  # a failed step since the last assembled one
+    mode_pending = False  # a failed step since the last regular one: its mode to be kept
     gap_shape = None  # least-squares shape of the last failed step
     for i in range(S):
         ds = s[i] - last_s
@@ -789,7 +808,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     if convc[0] and drivers_aligned(model, qc, s[i][None])[0]:
                         qi, conv = qc, convc
                         break
-        capped = False  # Newton used all max_iter iterations without converging
+        capped = False  # Newton reached max_iter while converging (see _converging_at_cap)
         if not conv[0]:
             if fast is not None:
                 qi, res, it, conv = fast.newton(guess, s[i], tol_abs, max_iter, jacobian)
@@ -797,7 +816,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
             residual[i] = res[0]
             iterations[i] += it[0]
-            capped = bool(not conv[0] and it[0] >= max_iter and np.isfinite(res[0]))
+            capped = _converging_at_cap(model, fast, guess, s[i], it[0], res[0], conv[0], max_iter)
             if conv[0] and not (fast.aligned(qi[0], s[i]) if fast is not None
                                 else drivers_aligned(model, qi, s[i][None])[0]):
                 # the angle constraint's other root (vector pointing backwards): not this step's
@@ -807,17 +826,31 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 iterations[i] += it2[0]
                 residual[i] = res[0]
                 conv = conv & drivers_aligned(model, qi, s[i][None])
-                capped = bool(not conv[0] and it2[0] >= max_iter and np.isfinite(res[0]))
+                capped = _converging_at_cap(model, fast, aim_drivers(model, guess, s[i]), s[i],
+                                            it2[0], res[0], conv[0], max_iter)
         lm_residual = None
         if not conv[0] and nq and not capped:
-            # Newton gave up before the cap (it stalled or failed): slow or wandering at a
-            # singular root, or no root at all. Damped least squares from the same guess tells
-            # which, and reaches a singular root. A Newton run that reached max_iter is not
-            # rescued this way: the step is not_converged (if a root exists), as max_iter says.
+            # Newton gave up (it stalled, failed, or wandered to the cap): slow or wandering at
+            # a singular root, or no root at all. Damped least squares from the same guess tells
+            # which, and reaches a singular root. A Newton run that reached max_iter while
+            # converging is not rescued this way: the step is not_converged, as max_iter says.
             q_lm, lm_residual, it_lm = _lm_root(model, guess, s[i], tol_abs)
             iterations[i] += it_lm
             if lm_residual <= tol_abs and drivers_aligned(model, q_lm[None], s[i][None])[0]:
                 qi, conv, residual[i] = q_lm[None], np.ones(1, dtype=bool), lm_residual
+        if not conv[0] and nq and not gap and subdivide > 0 and i > 0:
+            # failing from an assembled step, the step may just be too long for the continuation
+            # (a dyad that moves fast there): retry it in sub-steps (each Newton run capped at
+            # max_iter too) before calling it a failure
+            sub = last_s + np.linspace(0.0, 1.0, SUBSTEPS + 1)[:, None] * (s[i] - last_s)
+            sub[-1] = s[i]
+            qs, rs, its, _ = solve_positions(model, sub, tol, max_iter, predictor, jacobian,
+                                             q_start=last_q, start_slope=last_dq,
+                                             stop_on_failure=True, subdivide=subdivide - 1)
+            iterations[i] += int(its.sum())
+            if np.isfinite(qs[-1]).all() and rs[-1] <= tol_abs:
+                qi, conv, residual[i] = qs[-1][None], np.ones(1, dtype=bool), rs[-1]
+                lm_residual, capped = None, False
         if conv[0]:
             X = None if fast is not None else model.positions(qi)
             J = fast.jac(qi[0], s[i])[None] if fast is not None else model.jacobian(X, s[i][None])
@@ -836,7 +869,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 J = model.jacobian(X, s[i][None])
                 cond, inv = jacobian_condition(J)[0], None
             regular = bool(cond * rcond < 1.0)  # as derivatives() decides
-            if square and regular and gap and last_sign:
+            if square and regular and mode_pending and last_sign:
                 # re-entering after a gap: no path connects the two sides, so keep the assembly
                 # mode (sign of det Phi_q) of the last regular step, if it exists here
                 if np.linalg.slogdet(J[0])[0] != last_sign:
@@ -854,6 +887,11 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                         inv = None
                         residual[i] = float(np.abs(model.phi(X, s[i][None])).max())
             gap, gap_shape = False, None
+            if cond * rcond < 1e-4:
+                # well clear of a limit (condition below 100 at the default rcond): the mode is
+                # settled. A re-entry on or next to the limit
+                # (its two modes about to meet) leaves the check to the steps after it
+                mode_pending = False
             if square and regular:
                 last_sign = np.linalg.slogdet(J[0])[0]
             q[i] = qi[0]
@@ -904,7 +942,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                 if root is not None:
                     last_q, last_s = root, s[i]
                 continue
-            gap = True
+            gap = mode_pending = True
             if lm_residual is not None and np.all(np.isfinite(q_lm)):
                 gap_shape = q_lm
             last_dq, last_d2q = None, None  # after a gap, restart from the last assembled shape

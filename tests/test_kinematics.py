@@ -109,14 +109,16 @@ def test_sweep_out_of_assembly_range_gives_nan_and_recovers(tmp_path):
     assert inside[-1] and r.status[-1] == OK  # the sweep came back and ends assembled
 
 
-def test_max_iter_is_a_cap_not_converged_otherwise():
-    """max_iter caps Newton on a step: where it runs out while still converging the step is
-    not_converged (a root exists: NaN positions, as the contract says), not rescued by more
-    iterations of another method. The crank-rocker needs 2 iterations a step from its
-    predictor: with max_iter = 2 every step is ok, with 1 the capped steps are not_converged
-    and every ok step still equals the closed form."""
+def test_max_iter_caps_each_newton_run():
+    """max_iter caps each Newton run. The crank-rocker needs 2 iterations a step from its
+    predictor. With max_iter = 1 a step whose run reaches the cap while converging is retried in
+    sub-steps (each run capped again): every step is still ok and equals the closed form, and
+    the sub-steps' iterations are counted (above 1 on the retried steps), never hidden. Without
+    the retry (``subdivide = 0``) those steps are not_converged: NaN, exactly 1 iteration, a
+    residual above the tolerance, and the sweep goes on (every other step ok)."""
     import dataclasses as dc
 
+    from linkpipe import kinematics as kin
     from linkpipe.kinematics import NOT_CONVERGED
 
     scene = linkpipe.load_scene("configs/fourbar_crank_rocker.toml")
@@ -125,33 +127,45 @@ def test_max_iter_is_a_cap_not_converged_otherwise():
         return linkpipe.solve(dc.replace(scene, solver=dc.replace(
             scene.solver, method="newton", max_iter=max_iter)))
 
-    assert (run(2).status == OK).all()
-    r = run(1)
-    capped = r.status == NOT_CONVERGED
-    assert capped.sum() >= 100 and set(np.unique(r.status)) == {OK, NOT_CONVERGED}
-    assert (r.iterations[capped] == 1).all()  # no hidden iterations beyond the cap
-    assert np.isnan(r.position[capped][:, r.model.moving]).all()
-    assert np.isnan(r.velocity[capped][:, r.model.moving]).all()
-    tol_abs = scene.solver.tol * r.model.size
-    assert (r.residual[capped] > tol_abs).all() and (r.residual[~capped] <= tol_abs).all()
-    th = np.deg2rad(r.driver_value[:, 0])
-    cf = fourbar(1.0, 3.5, 3.0, 4.0, th, 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
-    ok = ~capped
-    np.testing.assert_allclose(r.position[ok, idx(r, "B")], cf["B"][ok], rtol=0, atol=1e-10 * 4.0)
+    th_cf = lambda r: fourbar(1.0, 3.5, 3.0, 4.0, np.deg2rad(r.driver_value[:, 0]), 10.0, 0.0,  # noqa: E731
+                              branch=+1, coupler_uv=(1.5, 0.8))
+    r2, r1 = run(2), run(1)
+    assert (r2.status == OK).all() and r2.iterations.max() == 2
+    assert (r1.status == OK).all() and r1.iterations.max() > 1  # sub-steps, counted
+    np.testing.assert_allclose(r1.position[:, idx(r1, "B")], th_cf(r1)["B"], rtol=0, atol=1e-10 * 4.0)
+
+    model = r1.model
+    _, s, _, _ = kin.driver_motion(model)
+    q, residual, iterations, status = kin.solve_positions(model, s, max_iter=1, subdivide=0)
+    capped = status == NOT_CONVERGED
+    assert capped.sum() >= 100 and set(np.unique(status)) == {OK, NOT_CONVERGED}
+    assert (iterations[capped] == 1).all() and np.isnan(q[capped]).all()
+    tol_abs = scene.solver.tol * model.size
+    assert (residual[capped] > tol_abs).all() and (residual[~capped] <= tol_abs).all()
+    X = model.positions(q[~capped])
+    np.testing.assert_allclose(X[:, idx(r1, "B")], th_cf(r1)["B"][~capped], rtol=0, atol=1e-10 * 4.0)
 
 
 def test_max_iter_caps_the_vectorised_path_too():
     """3001 steps take the vectorised general path: its batched Newton also stops at max_iter
-    (a step that needs more goes back to the sequential path, which applies the cap)."""
+    (a step that needs more goes back to the sequential path, which caps each Newton run and
+    may retry in sub-steps, counted in its iterations)."""
     import dataclasses as dc
+
+    from linkpipe import batch
+    from linkpipe import kinematics as kin
+    from linkpipe.model import build_model
 
     scene = linkpipe.load_scene("configs/fourbar_crank_rocker.toml")
     scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=3001, step=None) for d in scene.drivers))
     for max_iter in (1, 2):
-        r = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton",
-                                                               max_iter=max_iter)))
-        assert r.iterations[r.status == OK].max() <= max_iter
-        assert (r.status == OK).mean() > 0.5
+        model = build_model(dc.replace(scene, solver=dc.replace(scene.solver, method="newton",
+                                                                max_iter=max_iter)))
+        _, s, _, _ = kin.driver_motion(model)
+        out = batch.solve_newton(model, s)
+        batched = ~out["sequential"]
+        assert batched.sum() > 2500 and (out["status"] == OK).all()
+        assert out["iterations"][batched].max() <= max_iter
 
 
 def test_a_low_cap_never_calls_an_assemblable_step_no_assembly():
