@@ -19,9 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from .batch import engine
-from .kinematics import OK
+from .status import NO_LEVERAGE, OK
 from .model import Model, _R90
-from .result import NO_LEVERAGE
 
 LEVERAGE_RTOL = 1e-9  # |n . dr_H/ds| below this times the mechanism size: no leverage
 

@@ -12,11 +12,10 @@ import numpy as np
 
 from .errors import SceneError
 from .model import Model, constraint_source, driver_scale, driver_values
+from .status import NO_ASSEMBLY, NOT_CONVERGED, OK, SINGULAR
 
-OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED = 0, 1, 2, 3
 NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
 SUBSTEPS, SUBDIVIDE = 8, 2  # a failing step's retry: 8 sub-steps, at most 2 levels deep
-STATUS_NAMES = ("ok", "no_assembly", "singular", "not_converged")
 
 
 def driver_motion(model: Model):

@@ -10,13 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from .kinematics import STATUS_NAMES
 from .model import Mobility, Model
 from .scene import Scene
+from .status import FLAG_MEANINGS, OK, counts
 
-#: status codes beyond stage 1's (see kinematics.STATUS_NAMES)
-NO_LEVERAGE = 4
-FLAG_MEANINGS = STATUS_NAMES + ("no_leverage",)
 
 
 @dataclass(frozen=True)
@@ -73,7 +70,7 @@ class Result:
 
     @property
     def n_ok(self) -> int:
-        return int((self.status == 0).sum())
+        return int((self.status == OK).sum())
 
     @property
     def point_names(self) -> tuple[str, ...]:
@@ -105,8 +102,7 @@ class Result:
         return out
 
     def status_counts(self) -> dict[str, int]:
-        return {name: int((self.status == code).sum()) for code, name in enumerate(FLAG_MEANINGS)
-                if (self.status == code).any()}
+        return counts(self.status)
 
     # ------------------------------------------------------------------ the output table
     def units(self) -> dict[str, str]:

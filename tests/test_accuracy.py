@@ -16,7 +16,7 @@ import pytest
 import linkpipe
 from linkpipe import accuracy, closed_forms
 from linkpipe.__main__ import main
-from linkpipe.kinematics import OK
+from linkpipe.status import OK
 from linkpipe.stores import accuracy as store
 
 CONFIGS = pathlib.Path(__file__).resolve().parent.parent / "configs"

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import linkpipe
+from linkpipe import status as st
 from linkpipe import batch, dyads
 from linkpipe import kinematics as kin
 from linkpipe.errors import SceneError
@@ -77,7 +78,7 @@ def test_engine_derivatives_match_the_dense_ones(pair):
     model = r.model
     value, s, sd, sdd = kin.driver_motion(model)
     X = np.where(np.isfinite(r.position), r.position, 0.0)
-    status = np.where(np.isfinite(r.position).all(axis=(1, 2)), kin.OK, kin.NO_ASSEMBLY).astype(np.int8)
+    status = np.where(np.isfinite(r.position).all(axis=(1, 2)), st.OK, st.NO_ASSEMBLY).astype(np.int8)
     a = batch.derivatives(model, X, s, sd, sdd, status, True)
     b = kin.derivatives(model, X, s, sd, sdd, status, True)
     np.testing.assert_array_equal(a["status"], b["status"])
@@ -115,7 +116,7 @@ def test_vectorised_general_path_on_a_long_sweep():
     model = build_model(scene)
     value, s, sd, sdd = kin.driver_motion(model)
     out = batch.solve_newton(model, s, sd, sdd, order=2)
-    assert (out["status"] == kin.OK).all()
+    assert (out["status"] == st.OK).all()
     assert out["sequential"].sum() < 200  # the coarse nodes only: the rest went vectorised
     cf = fourbar(1.0, 3.5, 3.0, 4.0, s[:, 0], 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
     X = model.positions(out["q"])
@@ -177,7 +178,7 @@ def test_a_triad_does_not_decompose_and_auto_runs_newton():
     assert not plan.ok and "B" in plan.reason
     r = linkpipe.solve(scene)
     assert r.solver_method_used == "newton" and "no closed-form dyad" in r.solver_note
-    assert (r.status == kin.OK).all()
+    assert (r.status == st.OK).all()
     # the loops close: every link keeps its start length
     X = r.position
     for a, b in (("O1", "A"), ("A", "B"), ("O2", "C"), ("O3", "D"), ("B", "C")):
@@ -212,7 +213,7 @@ def test_auto_leaves_dyads_that_pass_a_change_point_to_newton():
     t = np.deg2rad(auto.driver_value[:, 0])
     arm = 2.0 * np.stack([np.cos(t), np.sin(t)], axis=1)
     regular = np.abs(auto.driver_value[:, 0] - 90.0) > 1e-9
-    assert (auto.status[regular] == kin.OK).all() and (auto.status[~regular] == kin.SINGULAR).all()
+    assert (auto.status[regular] == st.OK).all() and (auto.status[~regular] == st.SINGULAR).all()
     idx = {n: auto.point_names.index(n) for n in ("B", "C")}
     np.testing.assert_allclose(auto.position[:, idx["B"]], [0.0, -1.0] + arm, rtol=0, atol=1e-7)
     np.testing.assert_allclose(auto.position[regular][:, idx["C"]], ([0.0, -2.0] + arm)[regular],
@@ -220,7 +221,7 @@ def test_auto_leaves_dyads_that_pass_a_change_point_to_newton():
     # forced, the fixed-sign dyads run and keep their sign on every step they assemble
     forced = linkpipe.solve(with_solver(scene, method="dyads"))
     assert forced.solver_method_used == "dyads"
-    ok = forced.status == kin.OK
+    ok = forced.status == st.OK
     assert ok.sum() >= 35
     P = forced.position
     i = {n: forced.point_names.index(n) for n in ("O2", "B", "C")}
@@ -236,7 +237,7 @@ def test_dyads_without_assembly_give_nan_and_no_assembly():
     th = np.deg2rad(r.driver_value[:, 0])
     dist = np.hypot(2 * np.cos(th) - 3.5, 2 * np.sin(th))
     outside, inside = dist > 4 + 1e-6, dist < 4 - 1e-6
-    assert (r.status[outside] == kin.NO_ASSEMBLY).all() and outside.any()
-    assert (r.status[inside] == kin.OK).all()
+    assert (r.status[outside] == st.NO_ASSEMBLY).all() and outside.any()
+    assert (r.status[inside] == st.OK).all()
     assert np.isnan(r.position[outside][:, r.point_names.index("B")]).all()
     np.testing.assert_array_equal(r.position[outside][:, r.point_names.index("O4")], [[3.5, 0.0]] * outside.sum())

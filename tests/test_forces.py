@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import linkpipe
-from linkpipe.kinematics import OK
-from linkpipe.result import NO_LEVERAGE
+from linkpipe.status import OK
+from linkpipe.status import NO_LEVERAGE
 
 CONFIGS = pathlib.Path(__file__).parent.parent / "configs"
 DATA = pathlib.Path(__file__).parent / "data"

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import linkpipe
-from linkpipe.kinematics import NO_ASSEMBLY, OK
+from linkpipe.status import NO_ASSEMBLY, OK
 
 from linkpipe.closed_forms import fourbar, slider_crank
 
@@ -119,7 +119,7 @@ def test_max_iter_caps_each_newton_run():
     import dataclasses as dc
 
     from linkpipe import kinematics as kin
-    from linkpipe.kinematics import NOT_CONVERGED
+    from linkpipe.status import NOT_CONVERGED
 
     scene = linkpipe.load_scene("configs/fourbar_crank_rocker.toml")
 
@@ -175,7 +175,7 @@ def test_a_low_cap_never_calls_an_assemblable_step_no_assembly():
     that converge equal the closed form (crank pin on the upper half-turn)."""
     import dataclasses as dc
 
-    from linkpipe.kinematics import NOT_CONVERGED, SINGULAR
+    from linkpipe.status import NOT_CONVERGED, SINGULAR
 
     scene = linkpipe.load_scene("configs/hard/slider_driven_dead_centres.toml")
     r = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton", max_iter=3)))

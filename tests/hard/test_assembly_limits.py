@@ -13,7 +13,7 @@ import pytest
 from linkpipe.closed_forms import fourbar
 from hard_scenes import HARD_DIR, fourbar_text, point, solve_config, solve_text, method  # noqa: F401 - a fixture
 from linkpipe.__main__ import main
-from linkpipe.kinematics import NO_ASSEMBLY, OK, SINGULAR
+from linkpipe.status import NO_ASSEMBLY, OK, SINGULAR
 
 A_, B_, C_, D_ = 2.0, 2.0, 2.0, 3.5
 T_LIM = np.degrees(np.arccos((A_**2 + D_**2 - (B_ + C_) ** 2) / (2 * A_ * D_)))

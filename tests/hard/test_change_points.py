@@ -13,7 +13,7 @@ import pytest
 
 from hard_scenes import HARD_DIR, acceleration, point, solve_config, velocity, with_solver, method  # noqa: F401 - a fixture
 import linkpipe
-from linkpipe.kinematics import OK, SINGULAR
+from linkpipe.status import OK, SINGULAR
 
 W = 0.5  # driver rate, rad/s (28.6479 deg/s in the scene)
 FT = 1.0  # length scale: the links are 1 and 2 ft

@@ -15,7 +15,7 @@ import pytest
 from linkpipe.closed_forms import slider_crank
 from hard_scenes import (HARD_DIR, acceleration, point, slider_driven_text, solve_config,
                          solve_text, velocity, method)  # noqa: F401 - a fixture
-from linkpipe.kinematics import OK, SINGULAR
+from linkpipe.status import OK, SINGULAR
 
 A_, B_ = 1.0, 3.5
 V = 0.5  # slider speed, m/s (the scene's rate)

@@ -16,7 +16,7 @@ from hard_scenes import (fourbar_text, point, solve_text, velocity, acceleration
                          method)  # noqa: F401 - a fixture
 import linkpipe
 from linkpipe.__main__ import main
-from linkpipe.kinematics import OK
+from linkpipe.status import OK
 
 W = 10.0  # crank speed, rad/s (the builders' default rate)
 

@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 import linkpipe
 from linkpipe.closed_forms import fourbar, slider_crank
-from linkpipe.kinematics import NO_ASSEMBLY, OK, SINGULAR
+from linkpipe.status import NO_ASSEMBLY, OK, SINGULAR
 from hard_scenes import (HARD_DIR, fourbar_text, method, point, slider_crank_text,  # noqa: F401
                          slider_driven_text, solve_text, with_driver, with_solver)
 from test_properties import MARGIN, full_rotation

@@ -9,7 +9,7 @@ import numpy as np
 
 from hard_scenes import (CONFIG_DIR, JANSEN, JANSEN_BARS, jansen_closed_form, point, solve_config,
                          method)  # noqa: F401 - a fixture
-from linkpipe.kinematics import OK
+from linkpipe.status import OK
 
 CONFIG = CONFIG_DIR / "jansen.toml"
 W = 2 * np.pi  # crank speed: one turn per second (rate = 360 deg/s)

@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, assume, example, given, settings, strategies
 from linkpipe.closed_forms import fourbar, slider_crank
 from hard_scenes import (acceleration, fourbar_B, fourbar_text, point, six_bar_text,
                          slider_crank_text, solve_text, velocity)
-from linkpipe.kinematics import NO_ASSEMBLY, OK
+from linkpipe.status import NO_ASSEMBLY, OK
 
 W = 10.0  # the builders' crank speed, rad/s
 MARGIN = 0.05  # relative distance kept from change points and assembly limits

@@ -16,7 +16,7 @@ from hard_scenes import (HARD_DIR, acceleration, double_parallelogram_text, poin
                          solve_text, velocity, method)  # noqa: F401 - a fixture
 import linkpipe
 from linkpipe.__main__ import main
-from linkpipe.kinematics import OK, SINGULAR
+from linkpipe.status import OK, SINGULAR
 from linkpipe.model import build_model, check_mobility
 
 W = 10.0  # crank speed, rad/s

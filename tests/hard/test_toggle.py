@@ -8,7 +8,7 @@ import numpy as np
 
 from linkpipe.closed_forms import fourbar
 from hard_scenes import HARD_DIR, acceleration, fourbar_text, point, solve_config, solve_text, velocity, method  # noqa: F401 - a fixture
-from linkpipe.kinematics import OK
+from linkpipe.status import OK
 
 A_, B_, C_, D_ = 1.0, 3.5, 3.0, 4.0  # crank, coupler, rocker, ground (m)
 W = 10.0  # crank speed, rad/s
