@@ -441,10 +441,11 @@ def _extended(scene: Scene, steps: int, base_steps: int):
         def sample(a):
             return a[pick] if isinstance(a, np.ndarray) and a.ndim and a.shape[0] == n_fine else a
 
-        for name in ("position", "velocity", "acceleration", "driver_value", "status"):
-            setattr(ref, name, sample(getattr(ref, name)))
+        sampled = {name: sample(getattr(ref, name))
+                   for name in ("position", "velocity", "acceleration", "driver_value", "status")}
         if ref.forces:
-            ref.forces = {n: (d, sample(a), u) for n, (d, a, u) in ref.forces.items()}
+            sampled["forces"] = {n: (d, sample(a), u) for n, (d, a, u) in ref.forces.items()}
+        ref = dc.replace(ref, **sampled)
     return ref, moved
 
 

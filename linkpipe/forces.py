@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from .batch import engine
+from .result import Forces, Motion
 from .status import NO_LEVERAGE, OK
 from .model import Model, _R90
 
@@ -60,23 +61,23 @@ def _center(X, ia, ib, u, v, L):
     return X[:, ia] + (u * d + v * _perp(d)) / L
 
 
-def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
-    """Compute every named effect and the input force; return ``{name: (dims, data, units)}``.
+def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
+    """Compute every named effect and the input force of a solved sweep.
 
-    ``jacobian_inverse`` (S, n_q, n_rows) from stage 1 (NaN at steps that are not ok).
-    Also returns ``"__status__"`` (the step status with NO_LEVERAGE added) and
-    ``"__coords__"`` (extra coordinate variables).
+    ``motion``: the sweep (positions, derivatives, kinematic status, Jacobian inverse);
+    ``units``: the scene's unit strings. Returns :class:`Forces` (variables in the contract's
+    names, the labels of the dimensions they add, and the status with no_leverage added).
     """
-    model: Model = res.model
+    s, s_dot, s_ddot, jacobian_inverse = motion.s, motion.s_dot, motion.s_ddot, motion.jacobian_inverse
     scene = model.scene
     eff = set(scene.effects)
-    S, P = res.position.shape[:2]
+    S, P = motion.position.shape[:2]
     nl = len(scene.links)
-    u = res.units()
+    u = units
     Lu, Fu, Tu = u["length"], u["force"], u["time"]
-    X = res.position
-    V = res.velocity if res.velocity is not None else np.zeros_like(X)
-    A = res.acceleration if res.acceleration is not None else np.zeros_like(X)
+    X = motion.position
+    V = motion.velocity if motion.velocity is not None else np.zeros_like(X)
+    A = motion.acceleration if motion.acceleration is not None else np.zeros_like(X)
     out: dict = {}
     coords: dict = {}
 
@@ -174,7 +175,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
             aG = _center(A, ia_, ib_, uu, vv, L)
             _add_at_center(fp, -m.mass * aG, ia_, ib_, uu, vv, L)
             li = _link_index(model, m.link)
-            cp[:, li] += -m.inertia * res.link_angular_acceleration[:, li]
+            cp[:, li] += -m.inertia * motion.link_angular_acceleration[:, li]
             # M qdd with the constant natural-coordinate mass matrix, per body
             Mk = np.zeros((S, P, 2))
             _add_at_center(Mk, m.mass * aG, ia_, ib_, uu, vv, L)
@@ -199,7 +200,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
     Q_points = _point_forces(model, lagr_point, lagr_couple, Xz)  # Q - M Xdd at every point
     Qg = Q_points[:, model.moving].reshape(S, -1)  # (S, n_q) generalized
     lam = np.full((S, model.n_rows), np.nan)
-    ok = res.status == OK
+    ok = motion.status == OK
     eng = engine(model)  # square and structurally regular: sparse block solves
     if ok.any() and eng is not None:
         idx = np.flatnonzero(ok)
@@ -221,7 +222,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
     FL = lam[:, drv] * phi_s
 
     # ---- report along the input direction where given
-    status = res.status.copy()
+    status = motion.status.copy()
     units = []
     for j, dr in enumerate(scene.drivers):
         if dr.input is not None:
@@ -307,9 +308,7 @@ def force_stage(res, jacobian_inverse, s, s_dot, s_ddot) -> dict:
         if Jp0 is not None:
             touched = Jp0[undetermined][:, fixed].max(axis=0) > 0
             out["ground_reaction_unique"] = (("fixed_point",), (~touched).astype(np.int8), "1")
-    out["__status__"] = (("step",), status, "1")
-    out["__coords__"] = ((), coords, "")
-    return out
+    return Forces(variables=out, coords=coords, status=status)
 
 
 def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:

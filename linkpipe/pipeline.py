@@ -9,13 +9,14 @@ import numpy as np
 from . import batch
 from . import kinematics as kin
 from .model import build_model, check_mobility
-from .result import Result
+from .result import Motion, Result, units_of
+from .status import OK, counts, worst
 from .errors import SceneError
 from .scene import Scene, load_scene
 
 
 @dataclass(frozen=True)
-class Plan:
+class Stages:
     """What a scene calls for: kinematic orders and whether the force stage runs."""
 
     velocity: bool
@@ -23,7 +24,7 @@ class Plan:
     forces: bool
 
     @classmethod
-    def of(cls, scene: Scene) -> "Plan":
+    def of(cls, scene: Scene) -> "Stages":
         eff = set(scene.effects)
         out = scene.outputs
         vectors = bool(out.vectors)
@@ -91,17 +92,17 @@ def solve(scene: Scene | str, progress=None) -> Result:
     """Run every stage the scene calls for and return the result (failed steps are data).
 
     ``progress``: an optional callable ``progress(stage_name)`` told as each stage starts
-    (the CLI drives a tqdm bar with it on long sweeps).
+    (the CLI drives a tqdm bar with it on long sweeps). The Result is built once, here.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
-    plan = Plan.of(scene)
+    stages = Stages.of(scene)
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     t0 = _time.perf_counter()
     check_memory(scene)
     model = build_model(scene)
-    mob = check_mobility(model)
+    mobility = check_mobility(model)
     seconds["model"] = _time.perf_counter() - t0
 
     tell("positions")
@@ -109,58 +110,69 @@ def solve(scene: Scene | str, progress=None) -> Result:
     value, s, s_dot, s_ddot = kin.driver_motion(model)
     # closed-form dyads or the general Newton path, as [solver] method says (see batch.stage1);
     # the dyad path also gives velocities and accelerations here
-    order = 2 if plan.acceleration else 1 if plan.velocity else 0
+    order = 2 if stages.acceleration else 1 if stages.velocity else 0
     k1 = batch.stage1(model, s, s_dot, s_ddot, order)
-    X, residual, iterations, status = k1["position"], k1["residual"], k1["iterations"], k1["status"]
+    X = k1["position"]
     link_angle = kin.link_angles_unwrapped(model, X)
     seconds["positions"] = _time.perf_counter() - t0
 
     tell("jacobian")
     t0 = _time.perf_counter()
     Xz = np.where(np.isfinite(X), X, 0.0)
-    der = batch.derivatives(model, Xz, s, s_dot, s_ddot, status, plan.acceleration,
+    der = batch.derivatives(model, Xz, s, s_dot, s_ddot, k1["status"], stages.acceleration,
                             velocity=k1["velocity"], acceleration=k1["acceleration"],
-                            need_inverse=plan.forces)
-    status = der["status"]
+                            need_inverse=stages.forces)
+    kinematic_status = der["status"]
     seconds["jacobian"] = _time.perf_counter() - t0
-
-    time, time_note = _time_axis(scene, value)
-    res = Result(scene=scene, model=model, mobility=mob, driver_value=value,
-                 time=time, time_note=time_note, position=X, link_angle=link_angle,
-                 status=status, residual=residual, iterations=iterations,
-                 condition=der["condition"], solver_method_used=k1["method"],
-                 solver_note=k1["note"])
-    if scene.solver.derivatives == "finite_difference" and plan.velocity:
+    if scene.solver.derivatives == "finite_difference" and stages.velocity:
         t0 = _time.perf_counter()
-        fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, plan.acceleration)
-        der["velocity"] = np.where(status[:, None, None] == kin.OK, fdV, np.nan)
-        if plan.acceleration:
-            der["acceleration"] = np.where(status[:, None, None] == kin.OK, fdA, np.nan)
-        # the stored residuals describe the stored (finite-difference) derivatives
-        der.update(_residuals(model, Xz, s, s_dot, s_ddot, der["velocity"], der["acceleration"]
-                              if plan.acceleration else None))
+        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, kinematic_status, stages.acceleration))
         seconds["fd_derivatives"] = _time.perf_counter() - t0
-    if plan.velocity:
-        res.velocity = der["velocity"]
-        res.velocity_residual = der["velocity_residual"]
-    if plan.acceleration:
-        res.acceleration = der["acceleration"]
-        res.acceleration_residual = der["acceleration_residual"]
-    if plan.velocity:
-        res.link_angular_velocity, res.link_angular_acceleration = kin.link_rates(
-            model, X, res.velocity, res.acceleration)
-    if plan.forces:
-        from .forces import force_stage
+    velocity = der["velocity"] if stages.velocity else None
+    acceleration = der["acceleration"] if stages.acceleration else None
+    link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
+                  else (None, None))
+
+    forces = None
+    status = kinematic_status
+    if stages.forces:
+        from .forces import compute_forces
 
         tell("forces")
         t0 = _time.perf_counter()
-        res.forces = force_stage(res, der["jacobian_inverse"], s, s_dot, s_ddot)
-        if "__status__" in res.forces:
-            res.status = res.forces.pop("__status__")[1]
+        motion = Motion(s=s, s_dot=s_dot, s_ddot=s_ddot, position=X, velocity=velocity,
+                        acceleration=acceleration, status=kinematic_status,
+                        jacobian_inverse=der["jacobian_inverse"],
+                        link_angular_acceleration=link_rates[1])
+        forces = compute_forces(model, motion, units_of(scene))
+        status = worst(kinematic_status, forces.status)
         seconds["forces"] = _time.perf_counter() - t0
-    res.seconds = seconds
-    res.message = _message(res)
-    return res
+
+    time, time_note = _time_axis(scene, value)
+    return Result(
+        scene=scene, model=model, mobility=mobility, driver_value=value, time=time,
+        time_note=time_note, position=X, link_angle=link_angle, status=status,
+        residual=k1["residual"], iterations=k1["iterations"], condition=der["condition"],
+        velocity=velocity, acceleration=acceleration,
+        link_angular_velocity=link_rates[0], link_angular_acceleration=link_rates[1],
+        velocity_residual=der["velocity_residual"] if stages.velocity else None,
+        acceleration_residual=der["acceleration_residual"] if stages.acceleration else None,
+        forces=forces.variables if forces else None,
+        force_coords=forces.coords if forces else {},
+        seconds=seconds, message=message(status),
+        solver_method_used=k1["method"], solver_note=k1["note"])
+
+
+def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration) -> dict:
+    """Velocities (and accelerations) by finite differences of the positions along the sweep,
+    NaN where a step is not ok, with the residuals of the stored (finite-difference) values."""
+    fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, need_acceleration)
+    ok = (status == OK)[:, None, None]
+    out = {"velocity": np.where(ok, fdV, np.nan)}
+    if need_acceleration:
+        out["acceleration"] = np.where(ok, fdA, np.nan)
+    out.update(_residuals(model, Xz, s, s_dot, s_ddot, out["velocity"], out.get("acceleration")))
+    return out
 
 
 def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
@@ -203,10 +215,11 @@ def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]
     return t, ""
 
 
-def _message(res: Result) -> str:
-    counts = res.status_counts()
-    failed = res.n_steps - res.n_ok
-    if not failed:
-        return f"all {res.n_steps} steps ok"
-    return f"{res.n_ok}/{res.n_steps} steps ok; " + ", ".join(
-        f"{n} {k}" for k, n in counts.items() if k != "ok")
+def message(status: np.ndarray) -> str:
+    """One line: how many steps are ok, and what the others are."""
+    found = counts(status)
+    n_ok, n_steps = found.get("ok", 0), len(status)
+    if n_ok == n_steps:
+        return f"all {n_steps} steps ok"
+    return f"{n_ok}/{n_steps} steps ok; " + ", ".join(
+        f"{n} {k}" for k, n in found.items() if k != "ok")

@@ -27,7 +27,47 @@ class Variable:
     attrs: dict[str, Any] = field(default_factory=dict)
 
 
-@dataclass
+def units_of(scene: Scene) -> dict[str, str]:
+    """Unit strings of a scene (free text), with neutral defaults: length, time, force, mass."""
+    u = dict(scene.units)
+    return {"length": u.get("length", "length"), "time": u.get("time", "s"),
+            "force": u.get("force", "force"), "mass": u.get("mass", "mass")}
+
+
+@dataclass(frozen=True)
+class Motion:
+    """The solved sweep the force stage works on, step axis first.
+
+    ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) driver values and rates in internal units
+    (rad, length); ``position`` (S, n_points, 2) with NaN at failed steps; ``velocity`` and
+    ``acceleration`` (S, n_points, 2) or None where the scene needs none; ``status`` (S,) the
+    kinematic status; ``jacobian_inverse`` (S, n_q, n_rows), NaN where the step is not ok;
+    ``link_angular_acceleration`` (S, n_links) rad/s^2 or None.
+    """
+
+    s: np.ndarray
+    s_dot: np.ndarray
+    s_ddot: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray | None
+    acceleration: np.ndarray | None
+    status: np.ndarray
+    jacobian_inverse: np.ndarray
+    link_angular_acceleration: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Forces:
+    """What the force stage returns: ``variables`` {name: (dims, data, units)} in the
+    contract's names, ``coords`` {dimension: labels} for the dimensions it adds (joint, effect,
+    slider, fixed_point), and ``status`` (S,) with no_leverage where an input has none."""
+
+    variables: dict[str, tuple[tuple[str, ...], np.ndarray, str]]
+    coords: dict[str, list[str]]
+    status: np.ndarray
+
+
+@dataclass(frozen=True)
 class Result:
     """Everything one run produced, step axis first (like scipy's ``OdeResult``).
 
@@ -35,7 +75,8 @@ class Result:
     (S, n_points, 2), ``velocity``/``acceleration`` (S, n_points, 2) or None, ``link_angle``
     (S, n_links) rad unwrapped, ``link_angular_velocity``/``_acceleration`` (S, n_links) or
     None, ``status`` (S,) int8, ``residual`` (S,), ``iterations`` (S,), ``condition`` (S,).
-    ``forces``: name -> (dims, array, units) from stage 2 (None when no effect is on).
+    ``forces``: name -> (dims, array, units) from stage 2 (None when no effect is on);
+    ``force_coords``: the labels of the dimensions stage 2 adds.
     ``seconds``: stage name -> wall seconds, only for stages that ran.
     """
 
@@ -57,6 +98,7 @@ class Result:
     velocity_residual: np.ndarray | None = None
     acceleration_residual: np.ndarray | None = None
     forces: dict[str, tuple[tuple[str, ...], np.ndarray, str]] | None = None
+    force_coords: dict[str, list[str]] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     message: str = ""
     solver_method_used: str = ""  # "dyads" (closed form) or "newton" (general path)
@@ -107,12 +149,7 @@ class Result:
     # ------------------------------------------------------------------ the output table
     def units(self) -> dict[str, str]:
         """Unit strings from the scene (free text), with neutral defaults."""
-        u = dict(self.scene.units)
-        L = u.get("length", "length")
-        T = u.get("time", "s")
-        F = u.get("force", "force")
-        M = u.get("mass", "mass")
-        return {"length": L, "time": T, "force": F, "mass": M}
+        return units_of(self.scene)
 
     def driver_units(self) -> list[str]:
         L = self.units()["length"]
@@ -129,11 +166,8 @@ class Result:
         ]
         if self.spring_names:
             coords.append(Variable("spring", ("spring",), np.array(self.spring_names, dtype=object), ""))
-        if self.forces:
-            extra = self.forces.get("__coords__")
-            if extra:
-                for name, values in extra[1].items():
-                    coords.append(Variable(name, (name,), np.array(values, dtype=object), ""))
+        for name, values in self.force_coords.items():
+            coords.append(Variable(name, (name,), np.array(values, dtype=object), ""))
         return coords
 
     def variables(self) -> list[Variable]:
@@ -161,8 +195,6 @@ class Result:
                                 self.link_angular_acceleration, f"rad/{T}^2"))
         if self.forces:
             for name, (dims, data, units) in self.forces.items():
-                if name.startswith("__"):
-                    continue
                 out.append(Variable(name, dims, data, units))
         out.append(Variable("status", ("step",), self.status.astype(np.int8), "1", {
             "flag_values": np.arange(len(FLAG_MEANINGS), dtype=np.int8),

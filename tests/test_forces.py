@@ -243,7 +243,7 @@ def test_skipped_stages_do_not_run(monkeypatch, method):
         return linkpipe.solve(scene)
 
     monkeypatch.setattr(batch, "stage1", recording_stage1)
-    monkeypatch.setattr(linkpipe.forces, "force_stage", boom)
+    monkeypatch.setattr(linkpipe.forces, "compute_forces", boom)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
     text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
     text = text.split("[outputs]")[0]  # no extra kinematic orders asked for
