@@ -2,6 +2,7 @@
 import dataclasses
 import os
 import pathlib
+import signal
 import subprocess
 import sys
 
@@ -326,8 +327,11 @@ def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
 
     port = _free_port()
     saved = tmp_path / "streamed.rrd"
+    # its own process group: the rerun launcher may leave the server as a child of its own,
+    # which must go too (it outlived the test when only the launcher was terminated)
     server = subprocess.Popen([str(RERUN), "--port", str(port), "--save", str(saved)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
     try:
         deadline = time.monotonic() + 30
         while True:  # wait until the server listens
@@ -344,7 +348,7 @@ def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
             size = saved.stat().st_size
             time.sleep(0.5)
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=30)
     written = _stream_entities(out / "fourbar_crank_rocker.rrd")
     streamed = _stream_entities(saved)
