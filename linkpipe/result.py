@@ -1,7 +1,7 @@
 """The result of one scene's run, and the one table of output names, dims and units.
 
 ``Result.variables()`` is the single place where the contract's variable names
-(``shared/OUTPUT_FORMAT.md``) meet the arrays; both stores write from it.
+(``docs/output-format.md``) meet the arrays; both stores write from it.
 """
 from __future__ import annotations
 

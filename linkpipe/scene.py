@@ -1,6 +1,6 @@
 """Read a scene TOML file into frozen, typed objects (no maths here).
 
-The contract is ``shared/SCENE_FORMAT.md``. Every check that needs only the text lives here;
+The contract is ``docs/scene-format.md``. Every check that needs only the text lives here;
 checks that need the constraint Jacobian (degrees of freedom, assembly of the start
 configuration) live in :mod:`linkpipe.model` and raise the same :class:`SceneError`.
 """

@@ -1,4 +1,4 @@
-"""The HDF5 store against the output contract (shared/OUTPUT_FORMAT.md), on real files."""
+"""The HDF5 store against the output contract (docs/output-format.md), on real files."""
 import datetime
 import os
 import pathlib

@@ -1,4 +1,4 @@
-"""Writers (and a reader) for the output contract, ``shared/OUTPUT_FORMAT.md``.
+"""Writers (and a reader) for the output contract, ``docs/output-format.md``.
 
 The only modules that import h5py (:mod:`.hdf5`) and rerun (:mod:`.rrd`); import them
 explicitly, so that writing one format never pays for importing the other.

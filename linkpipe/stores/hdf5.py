@@ -1,6 +1,6 @@
 """Write a :class:`~linkpipe.result.Result` as a netCDF-4 style HDF5 file, and read it back.
 
-Layout (``shared/OUTPUT_FORMAT.md``): one HDF5 dataset per coordinate and data variable at
+Layout (``docs/output-format.md``): one HDF5 dataset per coordinate and data variable at
 the root, named as in ``Result.coordinates()`` / ``Result.variables()``. Coordinate variables
 are HDF5 dimension scales and every data variable has them attached, so h5py, xarray
 (``engine="h5netcdf"``), MATLAB and HDFView all see labelled dimensions.

@@ -1,6 +1,6 @@
 """Write a :class:`~linkpipe.result.Result` as a Rerun recording (``.rrd``), rerun-sdk 0.41.
 
-Entity paths and timelines follow ``shared/OUTPUT_FORMAT.md``. Everything that changes per
+Entity paths and timelines follow ``docs/output-format.md``. Everything that changes per
 step goes out columnar with ``send_columns`` (one call per entity, never one per step);
 geometry that does not change is logged once as static. Steps where a point is NaN (failed
 assembly) log an empty batch for the entities that need it, which clears them at that step.
