@@ -2,13 +2,16 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import pathlib
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
 
-from .errors import LinkpipeError
+from .errors import LinkpipeError, SceneError
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
@@ -33,75 +36,145 @@ def _parser(prog: str) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
-    """Run the command line and return the exit status (0 ok, 1 a scene failed, 2 bad input)."""
+    """Run the command line and return the exit status: 0 ok, 1 a scene failed inside linkpipe
+    or its output could not be written, 2 bad input (scene, option), 130 interrupted (Ctrl-C),
+    143 terminated (SIGTERM). Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
-    if args.command == "run":
-        return _run(args)
-    if args.command == "check":
-        return _check(args)
-    if args.command == "accuracy":
-        return _accuracy(args)
-    return 2  # pragma: no cover - argparse rejects unknown commands
+    command = {"run": _run, "check": _check, "accuracy": _accuracy}[args.command]
+    previous = _terminate_as_interrupt()
+    try:
+        return command(args)
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the writers removed their temporaries
+        code = 143 if isinstance(exc, _Terminated) else 130
+        print(f"linkpipe: {'terminated' if code == 143 else 'interrupted'}; "
+              "outputs written before stay, the one being written was not kept", file=sys.stderr)
+        return code
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
-def _err(msg: str) -> None:
-    print(f"error: {msg}", file=sys.stderr)
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that it unwinds like Ctrl-C."""
+
+
+def _terminate_as_interrupt():
+    """Turn SIGTERM into :class:`_Terminated` (main thread only); return the previous handler."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        raise _Terminated()
+
+    return signal.signal(signal.SIGTERM, handler)
+
+
+class _Outcome:
+    """The worst exit status met so far, and which inputs failed."""
+
+    def __init__(self):
+        self.code = 0
+        self.failed: list[str] = []
+        self.duplicate_names = False
+
+    def fail(self, path, code: int, message: str) -> None:
+        print(f"error: {message}", file=sys.stderr)
+        self.code = max(self.code, code)
+        self.failed.append(str(path))
+
+
+@contextlib.contextmanager
+def _reporting(path, outcome: _Outcome):
+    """The one error handler: a user's mistake (LinkpipeError, MemoryError) is exit 2 with its
+    message; anything else is exit 1, one line naming the file and the exception; never a
+    traceback. The caller goes on with its next input."""
+    try:
+        yield
+    except LinkpipeError as exc:
+        outcome.fail(path, 2, str(exc))
+    except MemoryError:  # the estimate in pipeline.check_memory passed, the machine did not
+        outcome.fail(path, 2, f"{path}: out of memory for this sweep: use fewer steps, or "
+                              "split it into several scenes")
+    except OSError as exc:  # a file that cannot be read or written (disk full, permissions)
+        where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+        outcome.fail(path, 1, f"{path}:{where} {exc.strerror or exc}".rstrip())
+    except Exception as exc:  # noqa: BLE001 - one input's crash must not stop the others
+        outcome.fail(path, 1, f"{path}: internal error: {type(exc).__name__}: {exc}")
+
+
+def _load_all(paths, outcome: _Outcome) -> list:
+    """Load every scene first (bad ones reported, the others kept); two scenes that would write
+    the same outputs are an error before any work (exit 2, naming both files)."""
+    from .scene import load_scene
+
+    scenes, first_path = [], {}
+    for path in paths:
+        with _reporting(path, outcome):
+            scene = load_scene(path)
+            if scene.name in first_path:
+                outcome.duplicate_names = True
+                raise SceneError(path, "scene", "name", f"the name {scene.name!r} is also the name "
+                                 f"of {first_path[scene.name]}: both would write "
+                                 f"{scene.name}.h5 / .rrd", "give each scene its own [scene] name")
+            first_path[scene.name] = path
+            scenes.append(scene)
+    return scenes
 
 
 def _run(args) -> int:
     from .pipeline import check_memory, solve
-    from .scene import load_scene
 
     out = pathlib.Path(args.out)
     if out.exists() and not out.is_dir():
-        _err(f"--out {out}: is a file, not a folder; name a folder (it is created if missing)")
+        print(f"error: --out {out}: is a file, not a folder; name a folder (it is created if "
+              "missing)", file=sys.stderr)
         return 2
-    worst = 0
-    for path in args.scenes:
-        try:
+    outcome = _Outcome()
+    scenes = _load_all(args.scenes, outcome)
+    if outcome.duplicate_names:
+        return 2  # before any work: two scenes would overwrite each other's outputs
+    for scene in scenes:
+        with _reporting(scene.path, outcome):
             t0 = time.perf_counter()
-            scene = load_scene(path)
             check_memory(scene)  # before the progress bar: a sweep too big for memory is a scene error
             bar = _progress_bar(scene, args)
             result = solve(scene, progress=bar.stage if bar else None)
-            written = []
-            out.mkdir(parents=True, exist_ok=True)
-            if not args.no_h5:
-                from .stores import hdf5
-
-                if bar:
-                    bar.stage("hdf5")
-                t1 = time.perf_counter()
-                target = out / f"{scene.name}.h5"
-                hdf5.write(result, target)
-                result.seconds["hdf5"] = time.perf_counter() - t1
-                written.append(str(target))
-            if not args.no_rrd or args.spawn or args.connect:
-                from .stores import rrd
-
-                if bar:
-                    bar.stage("rrd")
-                t1 = time.perf_counter()
-                target = None if args.no_rrd else out / f"{scene.name}.rrd"
-                rrd.write(result, target, spawn=args.spawn, connect=args.connect)
-                result.seconds["rrd"] = time.perf_counter() - t1
-                if target is not None:
-                    written.append(str(target))
+            written, writer_seconds = _write(result, out, args, bar)
             if bar:
                 bar.close()
             if not args.quiet:
-                print(summary(result, written, time.perf_counter() - t0))
-        except LinkpipeError as exc:
-            _err(str(exc))
-            worst = max(worst, 2)
-        except MemoryError:  # the estimate in pipeline.check_memory passed, the machine did not
-            _err(f"{path}: out of memory for this sweep: use fewer steps, or split it into "
-                 "several scenes")
-            worst = max(worst, 2)
-        except Exception as exc:  # noqa: BLE001 - one scene's crash must not stop the others
-            _err(f"{path}: internal error: {type(exc).__name__}: {exc}")
-            worst = max(worst, 1)
-    return worst
+                print(summary(result, written, time.perf_counter() - t0, writer_seconds))
+    if outcome.failed and len(args.scenes) > 1 and not args.quiet:
+        print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
+    return outcome.code
+
+
+def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
+    """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each)."""
+    written, seconds = [], {}
+    name = result.scene.name
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.no_h5:
+        from .stores import hdf5
+
+        if bar:
+            bar.stage("hdf5")
+        t0 = time.perf_counter()
+        hdf5.write(result, out / f"{name}.h5")
+        seconds["hdf5"] = time.perf_counter() - t0
+        written.append(str(out / f"{name}.h5"))
+    if not args.no_rrd or args.spawn or args.connect:
+        from .stores import rrd
+
+        if bar:
+            bar.stage("rrd")
+        t0 = time.perf_counter()
+        target = None if args.no_rrd else out / f"{name}.rrd"
+        rrd.write(result, target, spawn=args.spawn, connect=args.connect)
+        seconds["rrd"] = time.perf_counter() - t0
+        if target is not None:
+            written.append(str(target))
+    return written, seconds
 
 
 PROGRESS_MIN_STEPS = 20_000  # sweeps at least this long get a progress bar
@@ -113,7 +186,8 @@ class _StageBar:
     def __init__(self, scene, total):
         from tqdm import tqdm
 
-        self.bar = tqdm(total=total, desc=scene.name, unit="stage", leave=False, file=sys.stderr)
+        self.bar = tqdm(total=total, desc=scene.name, unit="stage", leave=False, file=sys.stderr,
+                        disable=None)  # None: shown on a terminal only, never in a log
         self.started = False
 
     def stage(self, name):
@@ -130,13 +204,13 @@ class _StageBar:
 def _progress_bar(scene, args):
     if args.quiet or scene.n_steps < PROGRESS_MIN_STEPS:
         return None
-    from .pipeline import Plan
+    from .pipeline import Stages
 
     writers = (0 if args.no_h5 else 1) + (0 if args.no_rrd else 1)
-    return _StageBar(scene, len(Plan.of(scene).stages) + 1 + writers)
+    return _StageBar(scene, len(Stages.of(scene).stages) + 1 + writers)
 
 
-def summary(result, written=(), seconds_total=None) -> str:
+def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
     """Return the short per-scene report printed by ``run``."""
     sc = result.scene
     lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
@@ -180,7 +254,8 @@ def summary(result, written=(), seconds_total=None) -> str:
                 lines.append(f"  input force {name}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} {unit}")
     if written:
         lines.append("  wrote " + ", ".join(written))
-    secs = ", ".join(f"{k} {v:.3f}" for k, v in result.seconds.items())
+    stage_seconds = {**result.seconds, **(writer_seconds or {})}
+    secs = ", ".join(f"{k} {v:.3f}" for k, v in stage_seconds.items())
     if seconds_total is not None:
         secs += f"; total {seconds_total:.3f}"
     lines.append(f"  seconds: {secs}")
@@ -189,45 +264,43 @@ def summary(result, written=(), seconds_total=None) -> str:
 
 def _check(args) -> int:
     from .pipeline import preflight
-    from .scene import load_scene
 
-    worst = 0
-    for path in args.scenes:
-        try:
-            scene = load_scene(path)
+    outcome = _Outcome()
+    for scene in _load_all(args.scenes, outcome):
+        with _reporting(scene.path, outcome):
             model, mob = preflight(scene)  # memory, degrees of freedom, the start assembles
-            print(f"{path}: scene {scene.name!r} is valid")
-            print(f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}")
-            print(f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}")
-            if scene.sliders:
-                print(f"  sliders: {', '.join(s.name for s in scene.sliders)}")
-            print(f"  degrees of freedom: {mob.dof} ({mob.n_q} unknowns, {mob.n_constraints} constraints, "
-                  f"rank {mob.rank}, {mob.redundant} redundant); drivers: "
-                  + ", ".join(f"{d.name} ({d.steps} steps)" for d in scene.drivers))
-            if mob.redundant:
-                print(f"  redundant: {mob.redundant} constraint(s) implied by the others (e.g. a link "
-                      "parallel to two others); solved by least squares, 'singular' flags only rank "
-                      "loss beyond them, and the forces they share are a minimum-norm choice")
-            print(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
-            if scene.present_but_off:
-                print(f"  present but off: {', '.join(scene.present_but_off)}")
-        except LinkpipeError as exc:
-            _err(str(exc))
-            worst = 2
-    return worst
+            print(describe(scene, mob))
+    return outcome.code
+
+
+def describe(scene, mob) -> str:
+    """What ``check`` prints of a valid scene."""
+    lines = [f"{scene.path}: scene {scene.name!r} is valid",
+             f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}",
+             f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}"]
+    if scene.sliders:
+        lines.append(f"  sliders: {', '.join(s.name for s in scene.sliders)}")
+    lines.append(f"  degrees of freedom: {mob.dof} ({mob.n_q} unknowns, {mob.n_constraints} "
+                 f"constraints, rank {mob.rank}, {mob.redundant} redundant); drivers: "
+                 + ", ".join(f"{d.name} ({d.steps} steps)" for d in scene.drivers))
+    if mob.redundant:
+        lines.append(f"  redundant: {mob.redundant} constraint(s) implied by the others (e.g. a "
+                     "link parallel to two others); solved by least squares, 'singular' flags only "
+                     "rank loss beyond them, and the forces they share are a minimum-norm choice")
+    lines.append(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
+    if scene.present_but_off:
+        lines.append(f"  present but off: {', '.join(scene.present_but_off)}")
+    return "\n".join(lines)
 
 
 def _accuracy(args) -> int:
-    try:
-        from .accuracy import run_accuracy
-    except ImportError:  # pragma: no cover
-        _err("the accuracy command is not available in this build")
-        return 2
-    try:
-        return run_accuracy(args.scene, out=pathlib.Path(args.out), quick=args.quick, repeats=args.repeats)
-    except LinkpipeError as exc:
-        _err(str(exc))
-        return 2
+    from .accuracy import run_accuracy
+
+    outcome = _Outcome()
+    with _reporting(args.scene, outcome):
+        return run_accuracy(args.scene, out=pathlib.Path(args.out), quick=args.quick,
+                            repeats=args.repeats)
+    return outcome.code
 
 
 if __name__ == "__main__":

@@ -46,6 +46,7 @@ import numpy as np
 from . import closed_forms
 from . import kinematics as kin
 from .pipeline import solve
+from .errors import LinkpipeError
 from .result import Variable
 from .scene import Scene, load_scene
 
@@ -87,6 +88,7 @@ class Row:
     solver: dict
     available: bool = True
     note: str = ""
+    failure: str = ""  # the exception that stopped this rung ("Type: message"); "" if none
     seconds: float = math.nan
     seconds_positions: float = math.nan
     seconds_derivatives: float = math.nan
@@ -241,6 +243,7 @@ class Ladder:
         data += [
             col("available", np.array([r.available for r in rows], dtype=np.int8), "1", **flag),
             strings("note", [r.note for r in rows]),
+            strings("failure", [r.failure for r in rows]),
             col("seconds", [r.seconds for r in rows], "s",
                 long_name=f"median wall time of the knob's stage over {self.repeats} runs"),
             col("seconds_positions", [r.seconds_positions for r in rows], "s"),
@@ -413,27 +416,25 @@ def _extended(scene: Scene, steps: int, base_steps: int):
     fine = _with_steps(scene, (steps - 1) * k + 1) if steps > 1 else scene
     ref = solve(_with_solver(_all_orders(fine), **REFERENCE_SOLVER))
     moved = math.nan
-    try:  # refinement: one more Newton step everywhere, kept where it lowers the residual
-        model = ref.model
-        _, s, s_dot, s_ddot = kin.driver_motion(model)
-        ok = ref.status == kin.OK
-        if ok.any():
-            q = model.q_of(ref.position[ok])
-            q2, res2, _, _ = kin.newton(model, q, s[ok], 0.0, 1, "analytic")
-            better = res2 <= ref.residual[ok]
-            q2 = np.where(better[:, None], q2, q)
-            moved = float(np.abs(q2 - q).max()) if q.size else 0.0
-            X = ref.position.copy()
-            X[ok] = model.positions(q2)
-            X[:, model.fixed] = model.start_position[model.fixed]
-            der = kin.derivatives(model, np.where(np.isfinite(X), X, 0.0), s, s_dot, s_ddot,
-                                  ref.status, True)
-            ref.position = X
-            good = der["status"] == kin.OK
-            ref.velocity = np.where(good[:, None, None], der["velocity"], np.nan)
-            ref.acceleration = np.where(good[:, None, None], der["acceleration"], np.nan)
-    except Exception:  # noqa: BLE001 - a changed internal API: keep the unrefined reference
-        moved = math.nan
+    # refinement: one more Newton step everywhere, kept where it lowers the residual
+    model = ref.model
+    _, s, s_dot, s_ddot = kin.driver_motion(model)
+    ok = ref.status == kin.OK
+    if ok.any():
+        q = model.q_of(ref.position[ok])
+        q2, res2, _, _ = kin.newton(model, q, s[ok], 0.0, 1, "analytic")
+        better = res2 <= ref.residual[ok]
+        q2 = np.where(better[:, None], q2, q)
+        moved = float(np.abs(q2 - q).max()) if q.size else 0.0
+        X = ref.position.copy()
+        X[ok] = model.positions(q2)
+        X[:, model.fixed] = model.start_position[model.fixed]
+        der = kin.derivatives(model, np.where(np.isfinite(X), X, 0.0), s, s_dot, s_ddot,
+                              ref.status, True)
+        good = (der["status"] == kin.OK)[:, None, None]
+        ref = dc.replace(ref, position=X,
+                         velocity=np.where(good, der["velocity"], np.nan),
+                         acceleration=np.where(good, der["acceleration"], np.nan))
     if k > 1:
         n_fine = ref.n_steps
         pick = np.arange(0, n_fine, k)
@@ -622,9 +623,15 @@ def _measure(scene: Scene, quick: bool, repeats: int, tell, knobs) -> Ladder:
         rows.append(row)
         try:  # the first run: does the knob run at all (and warms up its code paths)
             result, first = _timed(lambda: solve(variant), 1)
-        except Exception as exc:  # noqa: BLE001 - a knob that cannot run is a row, not a crash
+        except LinkpipeError as exc:  # the scene cannot take this setting: a row that says so
             row.available, row.base = False, False
-            row.note = f"not available: {type(exc).__name__}: {exc}"[:200]
+            row.note = f"not available: {exc}"[:200]
+            tell(f"  {row.label}: {row.note}")
+            continue
+        except Exception as exc:  # noqa: BLE001 - a crashed rung: a row with its error, and
+            row.available, row.base = False, False  # the command's exit status says so
+            row.failure = f"{type(exc).__name__}: {exc}"[:300]
+            row.note = f"FAILED: {row.failure}"
             tell(f"  {row.label}: {row.note}")
             continue
         row.path = str(getattr(result, "solver_method_used", "") or "newton")
@@ -837,4 +844,8 @@ def run_accuracy(path, out: pathlib.Path = pathlib.Path("outputs"), quick: bool 
     store.write_h5(ladder, h5)
     store.write_rrd(ladder, rrd, table_markdown=header(ladder, True) + "\n\n" + table(ladder, True, compact=True))
     print(f"  wrote {h5}, {rrd}")
-    return 0
+    failed = [r.label for r in ladder.rows if r.failure]
+    if failed:
+        print(f"error: {len(failed)} setting(s) failed: {', '.join(failed)} (see their rows)",
+              file=sys.stderr)
+    return 1 if failed else 0

@@ -7,6 +7,7 @@ configuration) live in :mod:`linkpipe.model` and raise the same :class:`SceneErr
 from __future__ import annotations
 
 import math  # isfinite, floor and hypot (a fixed link's drawn length) only: no maths here
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -924,11 +925,30 @@ def parse_scene(text: str, path: str = "<string>") -> Scene:
     return _Parser(data, text, path).parse()
 
 
+#: a scene file larger than this is not a scene (a log, an image, a device): refused unread
+MAX_SCENE_BYTES = 16 * 2**20
+
+
+def _read_regular_file(path: Path) -> bytes:
+    """Return the bytes of a regular file; a FIFO, a device or a socket is refused without
+    being opened (reading one would block or never end), and so is a file over 16 MiB."""
+    info = path.stat()  # FileNotFoundError / PermissionError propagate
+    if stat.S_ISDIR(info.st_mode):
+        raise IsADirectoryError(path)
+    if not stat.S_ISREG(info.st_mode):
+        raise SceneError(str(path), "", None, "is not a regular file (a pipe, device or socket)",
+                         "give the path of a .toml file")
+    if info.st_size > MAX_SCENE_BYTES:
+        raise SceneError(str(path), "", None, f"is {info.st_size / 2**20:.0f} MiB, not a scene",
+                         "give the path of a .toml scene file")
+    return path.read_bytes()
+
+
 def load_scene(path) -> Scene:
     """Read and check the scene file at ``path``; raise :class:`SceneError` on any problem."""
     path = str(path)
     try:
-        raw = Path(path).read_bytes()
+        raw = _read_regular_file(Path(path))
     except FileNotFoundError:
         raise SceneError(path, "", None, "no such scene file",
                          "check the path (scenes live in configs/*.toml)") from None

@@ -299,3 +299,28 @@ def test_method_rows_say_which_path_ran():
     assert dy.available and dy.path == "dyads" and dy.iterations_max == 0
     for q in KINEMATIC:  # the closed-form fast path: as exact as the closed form (rounding)
         assert dy.relative_error[q] <= 1e-14
+
+
+def test_a_rung_that_crashes_is_a_row_with_its_error_and_the_command_fails(tmp_path, monkeypatch, capsys):
+    """No exception is swallowed: the rung's row carries the error (table and .h5), the other
+    rungs are measured, and `accuracy` exits 1."""
+    import h5py
+
+    real_solve = accuracy.solve
+
+    def solve(scene):
+        if scene.solver.tol == 1e-4:
+            raise ZeroDivisionError("injected")
+        return real_solve(scene)
+
+    monkeypatch.setattr(accuracy, "solve", solve)
+    path = CONFIGS / "shear_press.toml"
+    assert main(["accuracy", str(path), "--quick", "--repeats", "1", "--out", str(tmp_path)]) == 1
+    captured = capsys.readouterr()
+    assert "FAILED: ZeroDivisionError: injected" in captured.out
+    assert "1 setting(s) failed: tol=" in captured.err
+    with h5py.File(tmp_path / "shear_press_accuracy.h5") as f:
+        failures = [x.decode() for x in f["failure"][()]]
+        labels = [x.decode() for x in f["row"][()]]
+    assert failures[[i for i, x in enumerate(labels) if x.startswith("tol=") and "04" in x][0]] == "ZeroDivisionError: injected"
+    assert sum(bool(x) for x in failures) == 1

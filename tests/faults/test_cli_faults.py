@@ -1,0 +1,91 @@
+"""Faults at the command line: what is kept, what is cleaned, and that nothing hangs.
+
+Each test runs the real CLI (in-process through ``main`` or as a subprocess when a signal is
+involved) on real files and checks the exit status, the one-line message, the files left.
+"""
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import pytest
+
+from linkpipe.__main__ import main
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+CRANK_ROCKER = ROOT / "configs" / "fourbar_crank_rocker.toml"
+
+
+def _long_scene(tmp_path, steps=3_000_000):
+    """The crank-rocker with a long sweep (seconds of work) and a name of its own."""
+    text = CRANK_ROCKER.read_text().replace("steps = 361", f"steps = {steps}")
+    text = text.replace('name = "fourbar_crank_rocker"', 'name = "long"')
+    path = tmp_path / "long.toml"
+    path.write_text(text)
+    return path
+
+
+def test_two_scenes_with_one_name_stop_before_any_work(tmp_path, capsys):
+    copy = tmp_path / "copy.toml"
+    copy.write_text(CRANK_ROCKER.read_text())
+    out = tmp_path / "out"
+    assert main(["run", str(CRANK_ROCKER), str(copy), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert str(CRANK_ROCKER) in err and str(copy) in err and "fourbar_crank_rocker" in err
+    assert "Traceback" not in err
+    assert not out.exists()  # nothing solved, nothing written
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "folder"])
+def test_a_path_that_is_no_regular_file_is_refused_without_reading(tmp_path, capsys, kind):
+    path = {"device": pathlib.Path("/dev/zero"), "folder": tmp_path}.get(kind, tmp_path / "f.toml")
+    if kind == "fifo":
+        os.mkfifo(path)  # opening it to read would block forever
+    t0 = time.monotonic()
+    for command in ("run", "check"):
+        assert main([command, str(path), "--out", str(tmp_path / "out")][:2 if command == "check" else 4]) == 2
+    assert time.monotonic() - t0 < 5
+    err = capsys.readouterr().err
+    assert err.count("error:") == 2 and "Traceback" not in err and str(path) in err
+
+
+def test_an_output_folder_that_cannot_be_made_is_one_line_exit_1(tmp_path, capsys):
+    out = pathlib.Path("/dev/null/outputs")  # mkdir fails: not a directory (root or not)
+    assert main(["run", str(CRANK_ROCKER), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert str(CRANK_ROCKER) in err and "internal error" not in err
+
+
+@pytest.mark.parametrize("signum, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_stops_the_run_at_once_and_keeps_earlier_outputs(tmp_path, signum, code):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "long.h5").write_bytes(b"the previous run's file")
+    scene = _long_scene(tmp_path)
+    proc = subprocess.Popen([sys.executable, "-m", "linkpipe", "run", str(scene), "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    time.sleep(3.0)  # imports done, deep in the sweep or the writers
+    t0 = time.monotonic()
+    proc.send_signal(signum)
+    stdout, stderr = proc.communicate(timeout=30)
+    assert time.monotonic() - t0 < 5
+    assert proc.returncode == code, stderr
+    assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1, stderr
+    assert (out / "long.h5").read_bytes() == b"the previous run's file"
+    assert sorted(p.name for p in out.iterdir()) == ["long.h5"]  # no temporaries left
+
+
+def test_the_other_scenes_run_after_one_fails_and_the_summary_names_it(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(CRANK_ROCKER.read_text().replace("[[links]]", "[[linkz]]", 1))
+    out = tmp_path / "out"
+    assert main(["run", str(bad), str(CRANK_ROCKER), "--out", str(out), "--no-rrd"]) == 2
+    captured = capsys.readouterr()
+    assert "fourbar_crank_rocker: all 361 steps ok" in captured.out
+    assert f"failed: {bad}" in captured.err
+    with h5py.File(out / "fourbar_crank_rocker.h5") as f:
+        assert (f["status"][()] == 0).all()
