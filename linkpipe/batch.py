@@ -24,6 +24,7 @@ import numpy as np
 
 from . import kinematics as kin
 from .model import Model
+from .model import equations as eq
 
 CHUNK = 8192
 COARSE_NODES = 128  # sequential continuation on at most about this many steps
@@ -57,8 +58,6 @@ class Engine:
                        for col in self.C.T]  # per entry: constant, [(feature, coefficient)]
         self._check()
         self._rows_setup()
-        self._check_soa()
-        self._gamma_checked = False
         self._blocks()
 
     # ------------------------------------------------------------------ the affine map
@@ -171,11 +170,9 @@ class Engine:
         return X2.shape[2]
 
     def _phi_rows(self, X2, sT: np.ndarray, trig: dict | None):
-        """Yield Phi's rows in order, each a new (S,) array (or a float when it is constant).
-
-        Row by row on contiguous coordinate arrays; fixed points enter as scalars.
-        """
-        md = self.model
+        """Yield Phi's rows in order (:func:`linkpipe.model.equations.phi_rows`), each an (S,)
+        array (or a float when it is constant), on contiguous coordinate arrays; fixed points
+        enter as scalars."""
         fx = self._fixed_xy
         if isinstance(X2, dict):  # {moving point: (x (S,), y (S,))}: no copy into (P, 2, S)
             def xy(p):
@@ -183,95 +180,38 @@ class Engine:
         else:
             def xy(p):
                 return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
+        cos_s, sin_s = self._trig(sT, trig)
+        return eq.phi_rows(self.model.rows, xy, sT, cos_s, sin_s)
 
-        for a, b, L in self._dist:
-            ax, ay = xy(a)
-            bx, by = xy(b)
-            dx, dy = bx - ax, by - ay
-            yield (dx * dx + dy * dy - L * L) * (0.5 / L)
-        for a, b, p, u, v in self._loc:  # u, v already divided by L
-            ax, ay = xy(a)
-            bx, by = xy(b)
-            px, py = xy(p)
-            dx, dy = bx - ax, by - ay
-            yield px - ax - (u * dx - v * dy)
-            yield py - ay - (u * dy + v * dx)
-        for p, cx, cy, nx, ny in self._sfix:
-            px, py = xy(p)
-            yield (px - cx) * nx + (py - cy) * ny
-        for p, d, e, L in self._smov:
-            px, py = xy(p)
-            dx, dy = xy(d)
-            ex, ey = xy(e)
-            yield ((ex - dx) * (py - dy) - (ey - dy) * (px - dx)) / L
-        for j in range(md.n_drivers):
-            a = int(md.drv_a[j])
-            if md.drv_angle[j]:
-                ax, ay = xy(a)
-                bx, by = xy(int(md.drv_b[j]))
-                c, s = trig[j] if trig and j in trig else (np.cos(sT[j]), np.sin(sT[j]))
-                yield c * (by - ay) - s * (bx - ax)
-            else:
-                yield xy(a)[int(md.drv_axis[j])] - sT[j]
+    def _trig(self, sT, trig=None):
+        """Return the drivers' cos and sin (lists by driver; None for coordinate drivers)."""
+        cos_s, sin_s = [None] * len(sT), [None] * len(sT)
+        for j in self.angle:
+            cos_s[j], sin_s[j] = trig[j] if trig and j in trig else (np.cos(sT[j]), np.sin(sT[j]))
+        return cos_s, sin_s
 
     def _rows_setup(self):
-        md = self.model
-        X0 = md.start_position
-        self._fixed_xy = {int(p): (float(X0[p, 0]), float(X0[p, 1])) for p in np.flatnonzero(md.fixed)}
-        self._dist = [(int(a), int(b), float(L)) for a, b, L in zip(md.dist_a, md.dist_b, md.dist_len)]
-        self._loc = [(int(a), int(b), int(p), float(u / L), float(v / L)) for a, b, p, u, v, L in zip(
-            md.loc_a, md.loc_b, md.loc_p, md.loc_u, md.loc_v, md.loc_len)]
-        self._sfix = [(int(p), float(c[0]), float(c[1]), float(n[0]), float(n[1]))
-                      for p, c, n in zip(md.sfix_p, md.sfix_c, md.sfix_n)]
-        self._smov = [(int(p), int(d), int(e), float(L)) for p, d, e, L in zip(
-            md.smov_p, md.smov_d, md.smov_e, md.smov_len)]
+        X0 = self.model.start_position
+        self._fixed_xy = {int(p): (float(X0[p, 0]), float(X0[p, 1]))
+                          for p in np.flatnonzero(self.model.fixed)}
 
     def phi_s(self, X2: np.ndarray, sT: np.ndarray) -> np.ndarray:
         """Return dPhi_driver/ds (nd, S)."""
         md = self.model
         out = np.empty((md.n_drivers, X2.shape[2]))
-        for j in range(md.n_drivers):
-            if md.drv_angle[j]:
-                d = X2[md.drv_b[j]] - X2[md.drv_a[j]]
-                out[j] = -(np.cos(sT[j]) * d[0] + np.sin(sT[j]) * d[1])
-            else:
-                out[j] = -1.0
+        cos_s, sin_s = self._trig(sT)
+        for j, row in enumerate(eq.phi_s_rows(md.rows, lambda p: (X2[p, 0], X2[p, 1]), cos_s, sin_s)):
+            out[j] = row
         return out
 
     def gamma(self, X2, V2, sT, sdT, sddT) -> np.ndarray:
         """Return gamma (m, S): Phi_q qdd = gamma, with point velocities V2 (P, 2, S)."""
-        if not self._gamma_checked:
-            self._check_soa(gamma=True)
-            self._gamma_checked = True
-        return self._gamma(X2, V2, sT, sdT, sddT)
-
-    def _gamma(self, X2, V2, sT, sdT, sddT) -> np.ndarray:
-        md = self.model
-        S = X2.shape[2]
-        out = np.zeros((md.n_rows, S))
-        r = 0
-        k = len(md.dist_a)
-        if k:
-            dv = V2[md.dist_b] - V2[md.dist_a]
-            out[r:r + k] = -(dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) / md.dist_len[:, None]
-            r += k
-        r += 2 * len(md.loc_a) + len(md.sfix_p)
-        k = len(md.smov_p)
-        if k:
-            ev = V2[md.smov_e] - V2[md.smov_d]
-            fv = V2[md.smov_p] - V2[md.smov_d]
-            out[r:r + k] = -2.0 * (ev[:, 0] * fv[:, 1] - ev[:, 1] * fv[:, 0]) / md.smov_len[:, None]
-            r += k
-        for j in range(md.n_drivers):
-            if md.drv_angle[j]:
-                th, w, al = sT[j], sdT[j], sddT[j]
-                c, s = np.cos(th), np.sin(th)
-                d = X2[md.drv_b[j]] - X2[md.drv_a[j]]
-                dd = V2[md.drv_b[j]] - V2[md.drv_a[j]]
-                out[r + j] = (al * (c * d[0] + s * d[1]) + w * w * (c * d[1] - s * d[0])
-                              + 2 * w * (c * dd[0] + s * dd[1]))
-            else:
-                out[r + j] = sddT[j]
+        out = np.empty((self.model.n_rows, X2.shape[2]))
+        cos_s, sin_s = self._trig(sT)
+        rows = eq.gamma_rows(self.model.rows, lambda p: (X2[p, 0], X2[p, 1]),
+                             lambda p: (V2[p, 0], V2[p, 1]), sdT, sddT, cos_s, sin_s)
+        for r, row in enumerate(rows):
+            out[r] = row
         return out
 
     def entries_T(self, qT: np.ndarray, sT: np.ndarray) -> np.ndarray:
@@ -301,28 +241,6 @@ class Engine:
                 np.multiply(feats[f], c, out=tmp)
                 row += tmp
         return E
-
-    def _check_soa(self, gamma: bool = False):
-        rng = np.random.default_rng(11)
-        md = self.model
-        S = 3
-        q = rng.normal(size=(S, md.n_q)) * md.size
-        s = rng.uniform(-4, 4, size=(S, md.n_drivers))
-        sd = rng.normal(size=(S, md.n_drivers))
-        sdd = rng.normal(size=(S, md.n_drivers))
-        V = rng.normal(size=(S, md.n_points, 2)) * md.size
-        V[:, md.fixed] = 0.0
-        X = md.positions(q)
-        X2 = self.points(q.T.copy())
-        V2 = np.ascontiguousarray(V.transpose(1, 2, 0))
-        tol = 1e-12 * max(1.0, md.size) ** 2
-        if gamma:  # checked on first use (a run without accelerations never evaluates gamma)
-            pairs = ((md.gamma(X, V, s, sd, sdd), self._gamma(X2, V2, s.T, sd.T, sdd.T)),)
-        else:
-            pairs = ((md.phi(X, s), self.phi(X2, s.T)), (md.phi_s(X, s), self.phi_s(X2, s.T)))
-        for ref, got in pairs:
-            if not np.allclose(ref, got.T, rtol=1e-12, atol=tol):
-                raise EngineUnavailable("the model's rows differ from the engine's")
 
     # ------------------------------------------------------------------ block-triangular order
     def _blocks(self):

@@ -12,6 +12,7 @@ import numpy as np
 
 from .errors import SceneError
 from .model import Model, constraint_source, driver_scale, driver_values
+from .model import equations as eq
 from .status import NO_ASSEMBLY, NOT_CONVERGED, OK, SINGULAR
 
 NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
@@ -474,108 +475,43 @@ def aim_drivers(model: Model, q: np.ndarray, s_row: np.ndarray) -> np.ndarray:
 
 
 class _Step:
-    """One step's Phi, Phi_q and driver check with little overhead (sequential continuation).
+    """One step's Phi, Phi_q and driver check on Python floats (sequential continuation).
 
-    Phi and Phi_q entry by entry on Python floats by the operations of :meth:`Model.phi` and
-    :meth:`Model.jacobian_points` (so the same values, checked at construction). Built once per
-    model.
+    The rows are :mod:`linkpipe.model.equations`' own, evaluated on floats: numpy's per-call
+    overhead would dominate a single step of a few rows (``tests/test_kernels.py`` checks that
+    they equal ``Model.phi`` / ``Model.jacobian`` to the last bit). Built once per model.
     """
 
     def __init__(self, model: Model):
-        md = model
-        self.model = md
-        n, nd, m = md.n_q, md.n_drivers, md.n_rows
-        self.n, self.m = n, m
+        md = self.model = model
+        self.n, self.m = md.n_q, md.n_rows
         self.nc = md.n_constraints
+        self.rows = md.rows
         self.x0 = md.start_position.reshape(-1).tolist()
         self.qpos = [int(2 * p + c) for p in md.moving for c in (0, 1)]
         self.col = [-1] * (2 * md.n_points)  # point coordinate -> column of q (-1: fixed)
         for k, pc in enumerate(self.qpos):
             self.col[pc] = k
-        self.dist = [(2 * int(a), 2 * int(b), float(L) * float(L), 2 * float(L))
-                     for a, b, L in zip(md.dist_a, md.dist_b, md.dist_len)]
-        self.loc = [(2 * int(a), 2 * int(b), 2 * int(p), float(u), float(v), float(L))
-                    for a, b, p, u, v, L in zip(md.loc_a, md.loc_b, md.loc_p, md.loc_u, md.loc_v, md.loc_len)]
-        self.sfix = [(2 * int(p), float(c[0]), float(c[1]), float(nn[0]), float(nn[1]))
-                     for p, c, nn in zip(md.sfix_p, md.sfix_c, md.sfix_n)]
-        self.smov = [(2 * int(p), 2 * int(d), 2 * int(e), float(L))
-                     for p, d, e, L in zip(md.smov_p, md.smov_d, md.smov_e, md.smov_len)]
         self.drv = [(bool(md.drv_angle[j]), 2 * int(md.drv_a[j]), 2 * int(md.drv_b[j]),
-                     int(md.drv_axis[j])) for j in range(nd)]
+                     int(md.drv_axis[j])) for j in range(md.n_drivers)]
         self.angle = np.flatnonzero(md.drv_angle)
-        self.exact = self._check()  # False: the caller uses the model's own functions
 
-    def _check(self) -> bool:
-        """Return whether Phi and Phi_q here equal the model's, to the last bit, at a few shapes."""
-        md = self.model
-        rng = np.random.default_rng(11)
-        for _ in range(3):
-            q = rng.normal(size=md.n_q) * md.size
-            s = rng.uniform(-4, 4, size=md.n_drivers)
-            X = md.positions(q[None])
-            if not (np.array_equal(self.jac(q, s), md.jacobian(X, s[None])[0])
-                    and np.array_equal(self.phi(q, s), md.phi(X, s[None])[0])):
-                return False
-        return True
+    def _xy(self, q):
+        X = self.points(q)
+        return lambda p: (X[2 * p], X[2 * p + 1])
 
     def jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Return Phi_q (m, n) at q (n,) and s (nd,), as :meth:`Model.jacobian` computes it.
-
-        Entry by entry with the same operations (Newton near a double root is sensitive to the
-        last bit: the continuation's branch choices there must not change).
-        """
-        X = self.points(q)
-        n = self.n
+        """Return Phi_q (m, n) at q (n,) and s (nd,), as :meth:`Model.jacobian` computes it."""
+        n, col = self.n, self.col
         J = [0.0] * (self.m * n)
-        col = self.col
-
-        def add(r, p, vx, vy):
-            c = col[p]
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        for r, p, gx, gy in eq.jacobian_terms(self.rows, self._xy(q), cs, sn):
+            c = col[2 * p]
             if c >= 0:
-                J[r * n + c] += vx
-            c = col[p + 1]
+                J[r * n + c] += gx
+            c = col[2 * p + 1]
             if c >= 0:
-                J[r * n + c] += vy
-
-        r = 0
-        for a, b, L2, L2x in self.dist:
-            L = L2x / 2
-            dx, dy = (X[b] - X[a]) / L, (X[b + 1] - X[a + 1]) / L
-            add(r, b, dx, dy)
-            add(r, a, -dx, -dy)
-            r += 1
-        for a, b, p, u, v, L in self.loc:
-            m00, m01, m10, m11 = (u * 1.0 + v * 0.0) / L, (u * 0.0 + v * -1.0) / L, \
-                (u * 0.0 + v * 1.0) / L, (u * 1.0 + v * 0.0) / L
-            add(r, p, 1.0, 0.0)
-            add(r, a, -1.0 + m00, -0.0 + m01)
-            add(r, b, -m00, -m01)
-            add(r + 1, p, 0.0, 1.0)
-            add(r + 1, a, -0.0 + m10, -1.0 + m11)
-            add(r + 1, b, -m10, -m11)
-            r += 2
-        for p, cx, cy, nx, ny in self.sfix:
-            add(r, p, nx, ny)
-            r += 1
-        for p, d, e, L in self.smov:
-            ex, ey = X[e] - X[d], X[e + 1] - X[d + 1]
-            fx, fy = X[p] - X[d], X[p + 1] - X[d + 1]
-            dex, dey = fy / L, -fx / L
-            dfx, dfy = -ey / L, ex / L
-            add(r, e, dex, dey)
-            add(r, p, dfx, dfy)
-            add(r, d, -dex - dfx, -dey - dfy)
-            r += 1
-        if self.drv:
-            cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
-            for j, (ang, a, b, axis) in enumerate(self.drv):
-                if ang:
-                    add(r + j, b, -sn[j], cs[j])
-                    add(r + j, a, -(-sn[j]), -cs[j])
-                else:
-                    c = col[a + axis]
-                    if c >= 0:
-                        J[(r + j) * n + c] += 1.0
+                J[r * n + c] += gy
         return np.array(J, dtype=float).reshape(self.m, n)
 
     def points(self, q) -> list:
@@ -586,30 +522,8 @@ class _Step:
 
     def phi(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Return Phi (m,) at q (n,) and s (nd,), as :meth:`Model.phi` computes it."""
-        X = self.points(q)
-        out = []
-        for a, b, L2, L2x in self.dist:
-            dx, dy = X[b] - X[a], X[b + 1] - X[a + 1]
-            out.append((dx * dx + dy * dy - L2) / L2x)
-        for a, b, p, u, v, L in self.loc:
-            dx, dy = X[b] - X[a], X[b + 1] - X[a + 1]
-            out.append(X[p] - X[a] - (u * dx + v * -dy) / L)
-            out.append(X[p + 1] - X[a + 1] - (u * dy + v * dx) / L)
-        for p, cx, cy, nx, ny in self.sfix:
-            out.append((X[p] - cx) * nx + (X[p + 1] - cy) * ny)
-        for p, d, e, L in self.smov:
-            ex, ey = X[e] - X[d], X[e + 1] - X[d + 1]
-            fx, fy = X[p] - X[d], X[p + 1] - X[d + 1]
-            out.append((ex * fy - ey * fx) / L)
-        if self.drv:
-            cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
-            sl = s.tolist()
-            for j, (ang, a, b, axis) in enumerate(self.drv):
-                if ang:
-                    out.append(cs[j] * (X[b + 1] - X[a + 1]) - sn[j] * (X[b] - X[a]))
-                else:
-                    out.append(X[a + axis] - sl[j])
-        return np.array(out, dtype=float)
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        return np.array(list(eq.phi_rows(self.rows, self._xy(q), s.tolist(), cs, sn)), dtype=float)
 
     def aligned(self, q: np.ndarray, s: np.ndarray) -> bool:
         """:func:`drivers_aligned` at one step."""
@@ -624,12 +538,8 @@ class _Step:
 
     def phi_s(self, q: np.ndarray, s: np.ndarray) -> list:
         """:meth:`Model.phi_s` at one step, as a list (nd,)."""
-        X = self.points(q)
         cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
-        out = []
-        for j, (ang, a, b, _) in enumerate(self.drv):
-            out.append(-(cs[j] * (X[b] - X[a]) + sn[j] * (X[b + 1] - X[a + 1])) if ang else -1.0)
-        return out
+        return list(eq.phi_s_rows(self.rows, self._xy(q), cs, sn))
 
     def fd_jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Return Phi_q (m, n) by central differences, as :func:`fd_jacobian` computes it."""
@@ -674,12 +584,11 @@ class _Step:
                 np.array([conv]))
 
 
-def _step_kernels(model: Model) -> _Step | None:
-    """Return the model's one-step kernels (cached on the model), None where they do not match."""
-    cache = model.__dict__.get("_linkpipe_step", False)
-    if cache is False:
+def _step_kernels(model: Model) -> _Step:
+    """Return the model's one-step kernels (built once per model, kept beside it)."""
+    cache = model.__dict__.get("_linkpipe_step")
+    if cache is None:
         cache = _Step(model)
-        cache = cache if cache.exact else None
         object.__setattr__(model, "_linkpipe_step", cache)
     return cache
 

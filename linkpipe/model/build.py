@@ -1,0 +1,326 @@
+"""Turn a scene into index arrays (names resolved once): the :class:`Model`.
+
+Natural coordinates: the unknowns ``q`` are the x, y of every moving point, in scene point
+order (``q = X[:, moving].reshape(S, -1)``). Positions ``X`` are ``(S, n_points, 2)`` (fixed
+points included), driver values ``(S, n_drivers)`` in internal units (radians for angle
+drivers, lengths for coordinate drivers). The constraint rows themselves are written once, in
+:mod:`linkpipe.model.equations`; ``Model.phi``, ``Model.jacobian``, ``Model.phi_s`` and
+``Model.gamma`` assemble them on whole sweeps.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError
+from ..scene import Scene
+from . import equations as eq
+
+_R90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # d_perp = _R90 @ d
+
+
+@dataclass(frozen=True)
+class Model:
+    """Index arrays of one scene (names resolved to indices once, here)."""
+
+    scene: Scene
+    point_names: tuple[str, ...]
+    start_position: np.ndarray  # (n_points, 2) as written in the scene
+    fixed: np.ndarray  # (n_points,) bool
+    moving: np.ndarray  # (n_moving,) point indices of moving points
+    size: float  # length scale of the mechanism (bounding-box diagonal of the start)
+    # dist rows
+    dist_a: np.ndarray
+    dist_b: np.ndarray
+    dist_len: np.ndarray
+    # local rows (two each)
+    loc_a: np.ndarray
+    loc_b: np.ndarray
+    loc_p: np.ndarray
+    loc_u: np.ndarray
+    loc_v: np.ndarray
+    loc_len: np.ndarray
+    # fixed sliders
+    sfix_p: np.ndarray
+    sfix_c: np.ndarray  # (k, 2)
+    sfix_n: np.ndarray  # (k, 2) unit normal
+    # moving sliders
+    smov_p: np.ndarray
+    smov_d: np.ndarray
+    smov_e: np.ndarray
+    smov_len: np.ndarray
+    # drivers
+    drv_angle: np.ndarray  # (n_drivers,) bool
+    drv_a: np.ndarray  # angle: tail point; coordinate: the point
+    drv_b: np.ndarray  # angle: head point; coordinate: -1
+    drv_axis: np.ndarray  # coordinate: 0/1; angle: -1
+    # link frames (every link, ground links included) for link angles
+    link_a: np.ndarray
+    link_b: np.ndarray
+    # which link each body row belongs to: dist rows, and local pairs (two rows each)
+    dist_link: np.ndarray
+    loc_link: np.ndarray
+    # the same rows as plain numbers, for model/equations.py (built from the arrays above)
+    rows: eq.Rows
+
+    @property
+    def n_points(self) -> int:
+        return len(self.point_names)
+
+    @property
+    def n_q(self) -> int:
+        return 2 * len(self.moving)
+
+    @property
+    def n_drivers(self) -> int:
+        return len(self.drv_angle)
+
+    @property
+    def n_constraints(self) -> int:
+        """Rows without the drivers."""
+        return (len(self.dist_a) + 2 * len(self.loc_a) + len(self.sfix_p) + len(self.smov_p))
+
+    @property
+    def n_rows(self) -> int:
+        return self.n_constraints + self.n_drivers
+
+    @property
+    def driver_rows(self) -> slice:
+        return slice(self.n_constraints, self.n_rows)
+
+    @property
+    def q_columns(self) -> np.ndarray:
+        """Columns of the moving coordinates among all ``2 * n_points`` point coordinates."""
+        return np.stack([2 * self.moving, 2 * self.moving + 1], axis=1).reshape(-1)
+
+    # ------------------------------------------------------------------ conversions
+    def positions(self, q: np.ndarray) -> np.ndarray:
+        """Return all point positions ``(S, n_points, 2)`` from ``q`` ``(S, n_q)``."""
+        q = np.asarray(q, dtype=float)
+        S, mv = q.shape[0], self.moving
+        X = np.empty((S, self.n_points, 2))
+        for p in np.flatnonzero(self.fixed):  # a plain slice per point: no fancy-index write
+            X[:, p] = self.start_position[p]
+        q3 = q.reshape(S, -1, 2)
+        if len(mv) > 8:
+            X[:, mv] = q3
+            return X
+        # runs of consecutive moving points as slices: cheaper than a fancy-index write
+        cut = [0] + [k for k in range(1, len(mv)) if mv[k] != mv[k - 1] + 1] + [len(mv)]
+        for k0, k1 in zip(cut[:-1], cut[1:]):
+            X[:, mv[k0]:mv[k0] + (k1 - k0)] = q3[:, k0:k1]
+        return X
+
+    def q_of(self, X: np.ndarray) -> np.ndarray:
+        """Return ``q`` ``(S, n_q)`` from positions ``(S, n_points, 2)``."""
+        return X[:, self.moving].reshape(X.shape[0], -1)
+
+    def velocities(self, qdot: np.ndarray) -> np.ndarray:
+        """Return point velocities ``(S, n_points, 2)`` (zero at fixed points)."""
+        V = np.zeros((qdot.shape[0], self.n_points, 2))
+        V[:, self.moving] = qdot.reshape(qdot.shape[0], -1, 2)
+        return V
+
+    # ------------------------------------------------------------------ constraints
+    # Each method assembles the rows that model/equations.py writes, on stacked arrays.
+    def phi(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return the constraint residuals ``(S, n_rows)`` at positions X and driver values s."""
+        xy, cos_s, sin_s = _stacked(X, s)
+        out = np.empty((X.shape[0], self.n_rows))
+        for r, row in enumerate(eq.phi_rows(self.rows, xy, s.T, cos_s, sin_s)):
+            out[:, r] = row
+        return out
+
+    def jacobian_points(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return dPhi/dX ``(S, n_rows, n_points, 2)`` over all point coordinates."""
+        xy, cos_s, sin_s = _stacked(X, s)
+        J = np.zeros((X.shape[0], self.n_rows, self.n_points, 2))
+        for r, p, gx, gy in eq.jacobian_terms(self.rows, xy, cos_s, sin_s):
+            J[:, r, p, 0] += gx
+            J[:, r, p, 1] += gy
+        return J
+
+    def jacobian(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi_q ``(S, n_rows, n_q)``: the Jacobian with respect to the unknowns."""
+        J = self.jacobian_points(X, s).reshape(X.shape[0], self.n_rows, -1)
+        return J[:, :, self.q_columns]
+
+    def phi_t(self, X: np.ndarray, s: np.ndarray, s_dot: np.ndarray) -> np.ndarray:
+        """Return dPhi/dt ``(S, n_rows)`` (non-zero only in driver rows)."""
+        out = np.zeros((X.shape[0], self.n_rows))
+        out[:, self.driver_rows] = self.phi_s(X, s) * s_dot
+        return out
+
+    def phi_s(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return dPhi_driver/ds ``(S, n_drivers)`` (each driver row depends on its own value)."""
+        xy, cos_s, sin_s = _stacked(X, s)
+        out = np.empty((X.shape[0], self.n_drivers))
+        for j, row in enumerate(eq.phi_s_rows(self.rows, xy, cos_s, sin_s)):
+            out[:, j] = row
+        return out
+
+    def gamma(self, X, V, s, s_dot, s_ddot) -> np.ndarray:
+        """Return the acceleration right-hand side ``(S, n_rows)``: Phi_q qdd = gamma."""
+        xy, cos_s, sin_s = _stacked(X, s)
+        vxy, _, _ = _stacked(V, s[:, :0])
+        out = np.empty((X.shape[0], self.n_rows))
+        rows = eq.gamma_rows(self.rows, xy, vxy, s_dot.T, s_ddot.T, cos_s, sin_s)
+        for r, row in enumerate(rows):
+            out[:, r] = row
+        return out
+
+    def driver_values_at(self, X: np.ndarray) -> np.ndarray:
+        """Return the driver values ``(S, n_drivers)`` that positions ``X`` (S, n_points, 2) show,
+        in internal units: an angle driver's direction in radians (in (-pi, pi]), a coordinate
+        driver's coordinate."""
+        out = np.empty((X.shape[0], self.n_drivers))
+        for j in range(self.n_drivers):
+            a = X[:, self.drv_a[j]]
+            if self.drv_angle[j]:
+                d = X[:, self.drv_b[j]] - a
+                out[:, j] = np.arctan2(d[:, 1], d[:, 0])
+            else:
+                out[:, j] = a[:, self.drv_axis[j]]
+        return out
+
+    def link_angles(self, X: np.ndarray) -> np.ndarray:
+        """Return each link's direction (first to second point) in radians ``(S, n_links)``."""
+        d = X[:, self.link_b] - X[:, self.link_a]
+        return np.arctan2(d[..., 1], d[..., 0])
+
+
+def _stacked(X: np.ndarray, s: np.ndarray):
+    """Return the accessor ``xy(p) -> (x (S,), y (S,))`` of stacked positions X (S, P, 2) and
+    the drivers' ``cos``, ``sin`` (n_drivers, S) of values s (S, n_drivers)."""
+    def xy(p):
+        return X[:, p, 0], X[:, p, 1]
+
+    sT = s.T
+    return xy, np.cos(sT), np.sin(sT)
+
+
+def build_model(scene: Scene) -> Model:
+    """Resolve names to indices, lengths and local coordinates (from the start where not given)."""
+    names = scene.point_names
+    index = {n: i for i, n in enumerate(names)}
+    X0 = np.array([[p.x, p.y] for p in scene.points], dtype=float)
+    fixed = np.array([p.fixed for p in scene.points], dtype=bool)
+    span = X0.max(axis=0) - X0.min(axis=0) if len(X0) else np.zeros(2)
+    size = float(np.hypot(*span))
+    lens = [float(np.hypot(*(X0[index[l.points[1]]] - X0[index[l.points[0]]]))) for l in scene.links]
+    size = max([size] + lens) or 1.0
+
+    dist_a, dist_b, dist_len, dist_link = [], [], [], []
+    loc = {k: [] for k in ("a", "b", "p", "u", "v", "len", "link")}
+    for li, link in enumerate(scene.links):
+        ia, ib = index[link.points[0]], index[link.points[1]]
+        idx = [index[p] for p in link.points]
+        if all(fixed[i] for i in idx):
+            continue  # a drawn piece of ground: no unknowns, no rows
+        d0 = X0[ib] - X0[ia]
+        L0 = float(np.hypot(*d0))
+        L = float(link.length) if link.length is not None else L0
+        if not fixed[ia] or not fixed[ib]:
+            dist_a.append(ia)
+            dist_b.append(ib)
+            dist_len.append(L)
+            dist_link.append(li)
+        e = d0 / L0
+        ep = _R90 @ e
+        for pname in link.points[2:]:
+            ip = index[pname]
+            if fixed[ip] and fixed[ia] and fixed[ib]:
+                continue
+            if pname in link.local:
+                u, v = link.local[pname]
+            else:
+                r = X0[ip] - X0[ia]
+                u, v = float(r @ e), float(r @ ep)
+            reach = float(np.hypot(u, v)) / L
+            if reach**2 * scene.solver.singular_rcond >= 1.0:
+                # the Jacobian's condition grows as reach^2: every step would count as singular
+                raise SceneError(
+                    scene.path, f'links "{link.name}"', "local" if pname in link.local else "points",
+                    f'point "{pname}" is {reach:.3g} times farther from "{link.points[0]}" than '
+                    f'the link\'s second point "{link.points[1]}": a frame that short cannot hold '
+                    f"it (the constraint Jacobian's condition grows as the square of that ratio, "
+                    f"about {reach**2:.1g} here, and every step would count as singular)",
+                    f'list a far point second so that the frame is long, e.g. points = '
+                    f'["{link.points[0]}", "{pname}", ...] (lengths and local refer to the first '
+                    f"two points)")
+            for key, val in zip(("a", "b", "p", "u", "v", "len", "link"), (ia, ib, ip, u, v, L, li)):
+                loc[key].append(val)
+
+    sfix_p, sfix_c, sfix_n = [], [], []
+    smov = {k: [] for k in ("p", "d", "e", "len")}
+    for sl in scene.sliders:
+        ip = index[sl.point]
+        if sl.moving:
+            idd, ie = index[sl.line_points[0]], index[sl.line_points[1]]
+            smov["p"].append(ip)
+            smov["d"].append(idd)
+            smov["e"].append(ie)
+            smov["len"].append(float(np.hypot(*(X0[ie] - X0[idd]))))
+        else:
+            dvec = np.asarray(sl.direction, dtype=float)
+            dvec = dvec / np.hypot(*dvec)
+            sfix_p.append(ip)
+            sfix_c.append(sl.through)
+            sfix_n.append(_R90 @ dvec)
+
+    drv_angle, drv_a, drv_b, drv_axis = [], [], [], []
+    for dr in scene.drivers:
+        if dr.kind == "angle":
+            drv_angle.append(True)
+            drv_a.append(index[dr.points[0]])
+            drv_b.append(index[dr.points[1]])
+            drv_axis.append(-1)
+        else:
+            drv_angle.append(False)
+            drv_a.append(index[dr.points[0]])
+            drv_b.append(-1)
+            drv_axis.append(int(dr.axis))
+
+    ia = np.array([index[l.points[0]] for l in scene.links], dtype=np.intp)
+    ib = np.array([index[l.points[1]] for l in scene.links], dtype=np.intp)
+
+    def ints(x):
+        return np.asarray(x, dtype=np.intp).reshape(-1)
+
+    def flts(x, shape=(-1,)):
+        return np.asarray(x, dtype=float).reshape(shape)
+
+    arrays = dict(
+        dist_a=ints(dist_a), dist_b=ints(dist_b), dist_len=flts(dist_len),
+        loc_a=ints(loc["a"]), loc_b=ints(loc["b"]), loc_p=ints(loc["p"]),
+        loc_u=flts(loc["u"]), loc_v=flts(loc["v"]), loc_len=flts(loc["len"]),
+        sfix_p=ints(sfix_p), sfix_c=flts(sfix_c, (-1, 2)), sfix_n=flts(sfix_n, (-1, 2)),
+        smov_p=ints(smov["p"]), smov_d=ints(smov["d"]), smov_e=ints(smov["e"]),
+        smov_len=flts(smov["len"]),
+        drv_angle=np.array(drv_angle, dtype=bool), drv_a=ints(drv_a), drv_b=ints(drv_b),
+        drv_axis=ints(drv_axis))
+    return Model(
+        scene=scene, point_names=names, start_position=X0, fixed=fixed,
+        moving=np.flatnonzero(~fixed), size=size, **arrays, link_a=ia, link_b=ib,
+        dist_link=ints(dist_link), loc_link=ints(loc["link"]), rows=eq.rows_of(**arrays),
+    )
+
+
+def driver_values(scene: Scene) -> np.ndarray:
+    """Return every step's driver values ``(n_steps, n_drivers)`` in scene units (degrees)."""
+    cols = []
+    for dr in scene.drivers:
+        i = np.arange(dr.steps, dtype=float)
+        if dr.step is not None:
+            cols.append(dr.from_value + i * dr.step)
+        elif dr.steps == 1:
+            cols.append(np.full(1, float(dr.from_value)))
+        else:
+            cols.append(dr.from_value + i * (dr.to_value - dr.from_value) / (dr.steps - 1))
+    return np.stack(cols, axis=1)
+
+
+def driver_scale(scene: Scene) -> np.ndarray:
+    """Return the factor ``(n_drivers,)`` from scene driver units to internal (deg -> rad)."""
+    return np.array([np.pi / 180.0 if d.kind == "angle" else 1.0 for d in scene.drivers])

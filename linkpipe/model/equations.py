@@ -1,0 +1,173 @@
+"""The constraint equations of the natural-coordinate model: the one place each is written.
+
+Unknowns are the x, y of every moving point. The rows, in this order (each a length with an
+O(1) gradient, so tolerances scale with the mechanism's size):
+
+1. ``dist``   one per link: ``(|b - a|^2 - L^2) / (2 L)``
+2. ``local``  two per further point p of a link: ``p - a - (u d + v d_perp) / L``, d = b - a
+3. ``sfix``   one per fixed-guide slider: ``n . (p - c)``, n the guide's unit normal
+4. ``smov``   one per moving-guide slider: ``cross(e - d, p - d) / L_de``
+5. ``driver`` one per driver: angle ``cross(u(s), b - a)``; coordinate ``p[axis] - s``
+
+Every function here is written once, with + - * / only, on coordinates that may be Python
+floats (one step of the sequential continuation), 1-D arrays over steps (the vectorised
+paths) or strided views of stacked ``(S, n_points, 2)`` arrays (``Model.phi``): the layouts
+evaluate the same expression in the same order, so they agree to the last bit, which
+``tests/test_kernels.py`` checks for every shipped scene. Points are read through an accessor
+``xy(p) -> (x, y)`` (a fixed point may give floats in any layout), driver trigonometry comes
+in as ``cos_s``, ``sin_s`` sequences indexed by driver (the caller computes them once).
+
+Functions yield row values (or Jacobian terms) in row order; callers assemble them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Rows:
+    """The row families of one model as plain Python numbers (point indices and lengths).
+
+    ``dist``: (a, b, L); ``local``: (a, b, p, u, v, L); ``sfix``: (p, cx, cy, nx, ny);
+    ``smov``: (p, d, e, L); ``drivers``: (is_angle, a, b, axis) (b = -1, axis = -1 where unused).
+    """
+
+    dist: tuple
+    local: tuple
+    sfix: tuple
+    smov: tuple
+    drivers: tuple
+
+    @property
+    def n_constraints(self) -> int:
+        return len(self.dist) + 2 * len(self.local) + len(self.sfix) + len(self.smov)
+
+    @property
+    def n_rows(self) -> int:
+        return self.n_constraints + len(self.drivers)
+
+
+def phi_rows(rows: Rows, xy, s, cos_s, sin_s):
+    """Yield Φ's rows in order: the residual of every constraint and driver."""
+    for a, b, L in rows.dist:
+        ax, ay = xy(a)
+        bx, by = xy(b)
+        dx, dy = bx - ax, by - ay
+        yield (dx * dx + dy * dy - L * L) / (2 * L)
+    for a, b, p, u, v, L in rows.local:
+        ax, ay = xy(a)
+        bx, by = xy(b)
+        px, py = xy(p)
+        dx, dy = bx - ax, by - ay
+        yield px - ax - (u * dx - v * dy) / L
+        yield py - ay - (u * dy + v * dx) / L
+    for p, cx, cy, nx, ny in rows.sfix:
+        px, py = xy(p)
+        yield (px - cx) * nx + (py - cy) * ny
+    for p, d, e, L in rows.smov:
+        px, py = xy(p)
+        dx, dy = xy(d)
+        ex, ey = xy(e)
+        yield ((ex - dx) * (py - dy) - (ey - dy) * (px - dx)) / L
+    for j, (is_angle, a, b, axis) in enumerate(rows.drivers):
+        ax, ay = xy(a)
+        if is_angle:
+            bx, by = xy(b)
+            yield cos_s[j] * (by - ay) - sin_s[j] * (bx - ax)
+        else:
+            yield (ax, ay)[axis] - s[j]
+
+
+def jacobian_terms(rows: Rows, xy, cos_s, sin_s):
+    """Yield Φq's non-zero terms ``(row, point, dphi/dx, dphi/dy)`` (a point may recur in a
+    row: add the terms)."""
+    r = 0
+    for a, b, L in rows.dist:
+        ax, ay = xy(a)
+        bx, by = xy(b)
+        gx, gy = (bx - ax) / L, (by - ay) / L
+        yield r, b, gx, gy
+        yield r, a, -gx, -gy
+        r += 1
+    for a, b, p, u, v, L in rows.local:
+        m00, m01 = u / L, -v / L  # (u I + v R90) / L, row by row
+        m10, m11 = v / L, u / L
+        yield r, p, 1.0, 0.0
+        yield r, a, -1.0 + m00, m01
+        yield r, b, -m00, -m01
+        yield r + 1, p, 0.0, 1.0
+        yield r + 1, a, m10, -1.0 + m11
+        yield r + 1, b, -m10, -m11
+        r += 2
+    for p, cx, cy, nx, ny in rows.sfix:
+        yield r, p, nx, ny
+        r += 1
+    for p, d, e, L in rows.smov:
+        px, py = xy(p)
+        dx, dy = xy(d)
+        ex, ey = xy(e)
+        dex, dey = (py - dy) / L, -(px - dx) / L  # d cross / d e
+        dfx, dfy = -(ey - dy) / L, (ex - dx) / L  # d cross / d p
+        yield r, e, dex, dey
+        yield r, p, dfx, dfy
+        yield r, d, -dex - dfx, -dey - dfy
+        r += 1
+    for j, (is_angle, a, b, axis) in enumerate(rows.drivers):
+        if is_angle:
+            yield r + j, b, -sin_s[j], cos_s[j]
+            yield r + j, a, sin_s[j], -cos_s[j]
+        else:
+            yield r + j, a, (1.0, 0.0)[axis], (0.0, 1.0)[axis]
+
+
+def phi_s_rows(rows: Rows, xy, cos_s, sin_s):
+    """Yield dΦ_driver/ds, one per driver (each driver row depends on its own value only)."""
+    for j, (is_angle, a, b, axis) in enumerate(rows.drivers):
+        if is_angle:
+            ax, ay = xy(a)
+            bx, by = xy(b)
+            yield -(cos_s[j] * (bx - ax) + sin_s[j] * (by - ay))
+        else:
+            yield -1.0
+
+
+def gamma_rows(rows: Rows, xy, vxy, s_dot, s_ddot, cos_s, sin_s):
+    """Yield γ's rows in order (Φq q̈ = γ), with point velocities read through ``vxy``."""
+    for a, b, L in rows.dist:
+        avx, avy = vxy(a)
+        bvx, bvy = vxy(b)
+        dvx, dvy = bvx - avx, bvy - avy
+        yield -(dvx * dvx + dvy * dvy) / L
+    for _ in range(2 * len(rows.local) + len(rows.sfix)):
+        yield 0.0  # linear in the coordinates: no velocity terms
+    for p, d, e, L in rows.smov:
+        pvx, pvy = vxy(p)
+        dvx, dvy = vxy(d)
+        evx, evy = vxy(e)
+        yield -2.0 * ((evx - dvx) * (pvy - dvy) - (evy - dvy) * (pvx - dvx)) / L
+    for j, (is_angle, a, b, axis) in enumerate(rows.drivers):
+        if not is_angle:
+            yield s_ddot[j]
+            continue
+        c, s, w, al = cos_s[j], sin_s[j], s_dot[j], s_ddot[j]
+        ax, ay = xy(a)
+        bx, by = xy(b)
+        avx, avy = vxy(a)
+        bvx, bvy = vxy(b)
+        dx, dy, ddx, ddy = bx - ax, by - ay, bvx - avx, bvy - avy
+        yield al * (c * dx + s * dy) + w * w * (c * dy - s * dx) + 2 * w * (c * ddx + s * ddy)
+
+
+def rows_of(dist_a, dist_b, dist_len, loc_a, loc_b, loc_p, loc_u, loc_v, loc_len, sfix_p, sfix_c,
+            sfix_n, smov_p, smov_d, smov_e, smov_len, drv_angle, drv_a, drv_b, drv_axis) -> Rows:
+    """Return the :class:`Rows` of a model's index arrays (plain ints and floats)."""
+    return Rows(
+        dist=tuple((int(a), int(b), float(L)) for a, b, L in zip(dist_a, dist_b, dist_len)),
+        local=tuple((int(a), int(b), int(p), float(u), float(v), float(L)) for a, b, p, u, v, L
+                    in zip(loc_a, loc_b, loc_p, loc_u, loc_v, loc_len)),
+        sfix=tuple((int(p), float(c[0]), float(c[1]), float(n[0]), float(n[1]))
+                   for p, c, n in zip(sfix_p, sfix_c, sfix_n)),
+        smov=tuple((int(p), int(d), int(e), float(L))
+                   for p, d, e, L in zip(smov_p, smov_d, smov_e, smov_len)),
+        drivers=tuple((bool(g), int(a), int(b), int(x))
+                      for g, a, b, x in zip(drv_angle, drv_a, drv_b, drv_axis)))

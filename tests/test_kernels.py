@@ -1,0 +1,123 @@
+"""The layouts of the one set of equations agree: what used to be checked at run time.
+
+``linkpipe/model/equations.py`` writes every constraint row once. ``Model`` evaluates the rows
+on stacked sweeps, the sequential continuation's one-step kernels (``kinematics._Step``) on
+Python floats, and the sparse engine (``batch.Engine``) on per-coordinate arrays. Here, for
+every shipped scene and for hypothesis-drawn four-bars, slider-cranks and six-bars:
+
+* Φ, Φq, Φs of the float kernels equal the model's to the last bit (the continuation's branch
+  choices at a double root depend on the last bit);
+* the engine's Φ, Φs and γ equal the model's to the last bit, and its affine reconstruction of
+  Φq equals the model's to rounding of the affine coefficients (1e-13 of the largest entry);
+* Φq is the derivative of Φ and Φs its derivative in the driver (central differences, to
+  their truncation error), and γ = −d(Φq q̇)/dt · (second differences along a motion).
+"""
+import pathlib
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import linkpipe
+from linkpipe import batch, kinematics
+from linkpipe.model import build_model
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "hard"))
+import hard_scenes as hs  # noqa: E402
+
+SCENES = sorted((ROOT / "configs").glob("*.toml")) + sorted((ROOT / "configs" / "hard").glob("*.toml"))
+
+
+def _samples(model, n=4, seed=3):
+    """Random shapes of the mechanism's size and driver values (not assembled: equality of
+    the layouts holds everywhere, not only on the constraint manifold)."""
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, model.n_q)) * model.size
+    s = rng.uniform(-4, 4, size=(n, model.n_drivers))
+    v = rng.normal(size=(n, model.n_points, 2)) * model.size
+    v[:, model.fixed] = 0.0
+    return q, s, v, rng.normal(size=(n, model.n_drivers)), rng.normal(size=(n, model.n_drivers))
+
+
+def _layouts_agree(model):
+    q, s, V, s_dot, s_ddot = _samples(model)
+    X = model.positions(q)
+    step = kinematics._step_kernels(model)
+    for i in range(len(q)):  # one step at a time: the float kernels against the model at S = 1
+        np.testing.assert_array_equal(step.phi(q[i], s[i]), model.phi(X[i:i + 1], s[i:i + 1])[0])
+        np.testing.assert_array_equal(step.jac(q[i], s[i]), model.jacobian(X[i:i + 1], s[i:i + 1])[0])
+        np.testing.assert_array_equal(step.phi_s(q[i], s[i]), model.phi_s(X[i:i + 1], s[i:i + 1])[0])
+    eng = batch.engine(model)
+    if eng is None:  # non-square (redundant) scenes take the dense path, by declaration
+        assert model.n_rows != model.n_q
+        return
+    X2 = eng.points(np.ascontiguousarray(q.T))
+    V2 = np.ascontiguousarray(V.transpose(1, 2, 0))
+    np.testing.assert_array_equal(eng.phi(X2, s.T).T, model.phi(X, s))
+    np.testing.assert_array_equal(eng.phi_s(X2, s.T).T, model.phi_s(X, s))
+    np.testing.assert_array_equal(eng.gamma(X2, V2, s.T, s_dot.T, s_ddot.T).T,
+                                  model.gamma(X, V, s, s_dot, s_ddot))
+    J = model.jacobian(X, s)
+    Je = eng.dense(eng.entries(q, s))
+    assert np.abs(Je - J).max() <= 1e-13 * max(1.0, np.abs(J).max())
+
+
+def _derivatives_agree(model):
+    """Φq and Φs are the derivatives of Φ; γ closes Φq q̈ = γ along a smooth motion."""
+    q, s, _, _, _ = _samples(model, n=2, seed=5)
+    h = 1e-6 * model.size
+    for i in range(len(q)):
+        X, si = model.positions(q[i:i + 1]), s[i:i + 1]
+        J = model.jacobian(X, si)[0]
+        fd = np.empty_like(J)
+        for k in range(model.n_q):
+            dq = np.zeros(model.n_q)
+            dq[k] = h
+            fd[:, k] = (model.phi(model.positions(q[i:i + 1] + dq), si)[0]
+                        - model.phi(model.positions(q[i:i + 1] - dq), si)[0]) / (2 * h)
+        assert np.abs(fd - J).max() <= 1e-7 * max(1.0, np.abs(J).max())
+    # along q(t) = q0 + q1 t + q2 t^2 / 2 and s(t) likewise: d2/dt2 Phi = Phi_q q'' - gamma = 0
+    # at t = 0 means gamma = Phi_q q2 - d2Phi/dt2
+    rng = np.random.default_rng(8)
+    q0, q1, q2 = (rng.normal(size=model.n_q) * model.size for _ in range(3))
+    s0, s1, s2 = (rng.uniform(-1, 1, size=model.n_drivers) for _ in range(3))
+    dt = 1e-4
+
+    def phi_at(t):
+        return model.phi(model.positions((q0 + q1 * t + q2 * t * t / 2)[None]),
+                         (s0 + s1 * t + s2 * t * t / 2)[None])[0]
+
+    d2 = (phi_at(dt) - 2 * phi_at(0.0) + phi_at(-dt)) / dt**2
+    X0 = model.positions(q0[None])
+    V0 = model.velocities(q1[None])
+    J = model.jacobian(X0, s0[None])[0]
+    g = model.gamma(X0, V0, s0[None], s1[None], s2[None])[0]
+    # d2Phi/dt2 = Phi_q q2 - gamma (gamma holds every other term, the driver's -Phi_s s'' too)
+    expected = J @ q2 - g
+    scale = max(1.0, np.abs(J @ q2).max(), np.abs(g).max())
+    assert np.abs(d2 - expected).max() <= 1e-5 * scale
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
+def test_layouts_agree_for_every_shipped_scene(path):
+    model = build_model(linkpipe.load_scene(str(path)))
+    _layouts_agree(model)
+    _derivatives_agree(model)
+
+
+@settings(max_examples=25, deadline=None)
+@given(family=st.sampled_from(["fourbar", "slider_crank", "six_bar"]),
+       a=st.floats(0.3, 1.5), b=st.floats(2.0, 4.0), c=st.floats(2.0, 4.0), d=st.floats(2.5, 4.5),
+       scale=st.sampled_from([1e-3, 1.0, 1e3]), start=st.floats(0.0, 360.0))
+def test_layouts_agree_for_families_of_mechanisms(family, a, b, c, d, scale, start):
+    if family == "fourbar":
+        text = hs.fourbar_text(1.0, 3.5, 3.0, 4.0, start, start + 10, 3, scale=scale,
+                               coupler_uv=(a, b - 2))
+    elif family == "slider_crank":
+        text = hs.slider_crank_text(a, b + 1, c - 2.5, start, start + 10, 3, scale=scale)
+    else:
+        text = hs.six_bar_text(1.0, 3.5, 3.0, 4.0, (1.2, 0.9), (5.5, 3.0), (4.6, 4.2), 0.0, 10.0, 3)
+    model = build_model(linkpipe.parse_scene(text, f"{family}.toml"))
+    _layouts_agree(model)
