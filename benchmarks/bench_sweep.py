@@ -10,8 +10,9 @@ returns positions, velocities and accelerations of all five points, arrays (S, 5
 * linkpipe fast path: ``linkpipe.batch.stage1`` with ``method = "auto"`` (what the pipeline's
   stage 1 runs: the dyad chain, the start assembly, the branch check, the residuals, the
   statuses, and the dyads' velocities and accelerations);
-* linkpipe general path: ``linkpipe.batch.solve_newton`` (coarse sequential continuation, then
-  batched Newton from Hermite predictions, velocities and accelerations by sparse solves);
+* linkpipe general path: ``linkpipe.batch.stage1`` with ``method = "newton"`` and
+  ``linkpipe.batch.derivatives``, as the pipeline runs them (coarse sequential continuation,
+  then batched Newton from Hermite predictions; velocities and accelerations by sparse solves);
 * the closed form: Norton's four-bar written out in plain numpy for this one mechanism (circle
   intersection, then the 2x2 velocity and acceleration systems by Cramer's rule), whole arrays;
 * pylinkage 1.3 ``step_fast_with_kinematics`` (numba), when installed (``pip install -e .[bench]``).
@@ -127,8 +128,11 @@ def linkpipe_newton(model, theta):
     from linkpipe import batch
 
     S = len(theta)
-    out = batch.solve_newton(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
-    return model.positions(out["q"]), out["velocity"], out["acceleration"]
+    s, s_dot, s_ddot = theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1))
+    out = batch.stage1(model, s, s_dot, s_ddot, order=2)  # positions, as the pipeline runs them
+    assert out["method"] == "newton"
+    der = batch.derivatives(model, out["position"], s, s_dot, s_ddot, out["status"], True)
+    return out["position"], der["velocity"], der["acceleration"]
 
 
 def pylinkage_available() -> str:

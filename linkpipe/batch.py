@@ -204,16 +204,6 @@ class Engine:
             out[j] = row
         return out
 
-    def gamma(self, X2, V2, sT, sdT, sddT) -> np.ndarray:
-        """Return gamma (m, S): Phi_q qdd = gamma, with point velocities V2 (P, 2, S)."""
-        out = np.empty((self.model.n_rows, X2.shape[2]))
-        cos_s, sin_s = self._trig(sT)
-        rows = eq.gamma_rows(self.model.rows, lambda p: (X2[p, 0], X2[p, 1]),
-                             lambda p: (V2[p, 0], V2[p, 1]), sdT, sddT, cos_s, sin_s)
-        for r, row in enumerate(rows):
-            out[r] = row
-        return out
-
     def entries_T(self, qT: np.ndarray, sT: np.ndarray) -> np.ndarray:
         """Return the Jacobian's entries (nnz, S) from qT (n_q, S) and sT (nd, S).
 
@@ -479,7 +469,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     A = np.full((S, model.n_points, 2), np.nan) if need_acceleration else None
     vres = np.full(S, np.nan)
     ares = np.full(S, np.nan) if need_acceleration else None
-    rcond = kin.effective_rcond(model)
+    rcond = model.scene.solver.singular_rcond
     eye = np.eye(m)
     mv = model.moving
     for lo in range(0, S, chunk):
@@ -557,14 +547,13 @@ def _colmax(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: int = 0,
-                 coarse: int = COARSE_NODES, chunk: int = CHUNK, start=None):
+def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk: int = CHUNK,
+                 start=None):
     """Solve the sweep by the general path, vectorised; return a dict.
 
     Keys: q (S, n_q) NaN at failed steps, residual, iterations, status (as
     :func:`linkpipe.kinematics.solve_positions`), ``sequential`` (S,) bool where the sequential
-    continuation solved the step, and with ``order`` >= 1 velocity (and 2 acceleration)
-    (S, n_points, 2) from the engine's solves (NaN where not OK). Falls back to the sequential
+    continuation solved the step. Falls back to the sequential
     path for every step when the model has no engine, the scene asks for a finite-difference
     Jacobian, or the driver values are not evenly spaced. ``start``: the
     :func:`linkpipe.kinematics.start_state` at ``s[0]`` when the caller has it already.
@@ -580,7 +569,7 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         q0, slope0 = start if start is not None else (None, None)
         q, res, it, st = kin.solve_positions(model, s, q_start=q0, start_slope=slope0)
         out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
-        return _with_derivatives(model, eng, out, s, s_dot, s_ddot, order, chunk)
+        return out
     tol_abs = sc.tol * model.size
     nodes = np.r_[np.arange(0, S - 1, k), S - 1]
     if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
@@ -607,7 +596,7 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
             cond = eng.norm1(E) * np.abs(np.stack(eng.solve(E, [np.eye(model.n_rows)[r][:, None]
                                                                for r in range(model.n_rows)]))
                                          ).sum(axis=0).max(axis=0)
-        near_singular = ~(cond * kin.effective_rcond(model) < 1e-3)
+        near_singular = ~(cond * model.scene.solver.singular_rcond < 1e-3)
         okn[np.flatnonzero(okn)[near_singular]] = False
     okn &= np.isfinite(slope).all(axis=1)
     # fine steps of intervals between two regular nodes
@@ -618,9 +607,6 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
     fine = np.ones(S, dtype=bool)
     fine[nodes] = False
     steps = np.flatnonzero(fine & np.r_[interval_ok[seg], False])
-    V = np.full((S, model.n_points, 2), np.nan) if order >= 1 else None
-    A = np.full((S, model.n_points, 2), np.nan) if order >= 2 else None
-    done = np.zeros(S, dtype=bool)  # derivatives computed in the fused pass
     # per interval, coordinates first (the chunks below work on contiguous (n_q, k) arrays):
     # the Hermite data (values and slopes per unit t) and the largest motion of a coordinate
     h_int = lengths[:, None].astype(float)
@@ -633,7 +619,7 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         t = (ii - nodes[g]) / lengths[g]
         predT = _hermite_T(*(np.take(a, g, axis=1) for a in hermite_T), t)
         sT = np.ascontiguousarray(s[ii].T)
-        qT, res, its, conv, E = _newton_soa(eng, predT.copy(), sT, tol_abs,
+        qT, res, its, conv, _ = _newton_soa(eng, predT.copy(), sT, tol_abs,
                                             min(NEWTON_ITERATIONS, sc.max_iter))
         moved = _colmax(np.abs(qT - predT)) if qT.shape[0] else np.zeros(len(ii))
         span = span_int[g]
@@ -645,10 +631,6 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         residual[ii] = res
         iterations[ii] = its
         bad_interval[np.unique(g[~accept])] = True
-        if order >= 1:
-            _derivatives_soa(model, eng, qT, sT, s_dot[ii], s_ddot[ii] if order >= 2 else None,
-                             E, ii, V, A)
-            done[ii[accept]] = True
     # runs of intervals the vectorised refinement could not do: the sequential continuation,
     # from the run's first node (or the last assembled step before it)
     last = len(nodes) - 1
@@ -661,30 +643,13 @@ def solve_newton(model: Model, s: np.ndarray, s_dot=None, s_ddot=None, order: in
         q[a + 1:b + 1], residual[a + 1:b + 1] = qs[1:], rs[1:]
         iterations[a + 1:b + 1], status[a + 1:b + 1] = its[1:], sts[1:]
         sequential[a + 1:b + 1] = True
-        done[a + 1:b + 1] = False
         if j1 + 1 < last and not _same(qs[-1], qn[j1 + 1], model):
             # the coarse continuation went elsewhere at this node: continue sequentially
             qs, rs, its, sts = _sequential_from_before(model, s, q, b, S - 1, start)
             q[b + 1:], residual[b + 1:], iterations[b + 1:], status[b + 1:] = qs[1:], rs[1:], its[1:], sts[1:]
             sequential[b + 1:] = True
-            done[b + 1:] = False
             break
     out.update(q=q, residual=residual, iterations=iterations, status=status, sequential=sequential)
-    if order >= 1:
-        rest = np.flatnonzero((status == kin.OK) & ~done)
-        for lo in range(0, len(rest), chunk):
-            ii = rest[lo:lo + chunk]
-            qT = np.ascontiguousarray(q[ii].T)
-            sT = np.ascontiguousarray(s[ii].T)
-            _derivatives_soa(model, eng, qT, sT, s_dot[ii], s_ddot[ii] if order >= 2 else None,
-                             eng.entries_T(qT, sT), ii, V, A)
-        bad = status != kin.OK
-        V[bad] = np.nan
-        V[:, model.fixed] = 0.0
-        if A is not None:
-            A[bad] = np.nan
-            A[:, model.fixed] = 0.0
-        out["velocity"], out["acceleration"] = V, A
     return out
 
 
@@ -729,32 +694,6 @@ def _newton_soa(eng, qT, sT, tol_abs, max_iter: int = NEWTON_ITERATIONS):
     return qT, res, its, res <= tol_abs, eng.entries_T(qT, sT)
 
 
-def _derivatives_soa(model, eng, qT, sT, s_dot, s_ddot, E, ii, V, A):
-    """Write velocities (and accelerations when s_ddot is given) of steps ii into V, A."""
-    X2 = eng.points(qT)
-    m, nd = model.n_rows, model.n_drivers
-    sdT = np.ascontiguousarray(s_dot.T)
-    rhs = [0.0] * m
-    ps = eng.phi_s(X2, sT)
-    for j in range(nd):
-        rhs[m - nd + j] = -ps[j] * sdT[j]
-    qd = np.stack(eng.solve(E, rhs))  # (n, k)
-    mv = model.moving
-    cols = model.q_columns  # one coordinate at a time: far cheaper than a 2-D fancy write
-    Vf = V.reshape(V.shape[0], -1)
-    for k, c in enumerate(cols):
-        Vf[ii, c] = qd[k]
-    if A is None or s_ddot is None:
-        return
-    V2 = np.zeros_like(X2)
-    V2[mv] = qd.reshape(len(mv), 2, -1)
-    g = eng.gamma(X2, V2, sT, sdT, np.ascontiguousarray(s_ddot.T))
-    qdd = np.stack(eng.solve(E, list(g)))
-    Af = A.reshape(A.shape[0], -1)
-    for k, c in enumerate(cols):
-        Af[ii, c] = qdd[k]
-
-
 def _polish(eng, q, s, ok, residual):
     """One more Newton step at the steps ``ok`` (the sequential path stops at ``tol``, up to
     ~1e-12 of the size away); kept where it lowers the residual."""
@@ -790,41 +729,6 @@ def _sequential_from_before(model, s, q, a, b, start):
     qs, rs, its, sts = kin.solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else None,
                                            start_slope=slope)
     return qs[a - p:], rs[a - p:], its[a - p:], sts[a - p:]
-
-
-def _with_derivatives(model, eng, out, s, s_dot, s_ddot, order, chunk):
-    """Add velocity (order >= 1) and acceleration (order 2) from the engine's solves."""
-    if order < 1:
-        return out
-    q, status = out["q"], out["status"]
-    S = q.shape[0]
-    V = np.full((S, model.n_points, 2), np.nan)
-    A = np.full((S, model.n_points, 2), np.nan) if order >= 2 else None
-    ok = np.flatnonzero(status == kin.OK)
-    for lo in range(0, len(ok), chunk):
-        ii = ok[lo:lo + chunk]
-        X = model.positions(q[ii])
-        if eng is None:
-            J = model.jacobian(X, s[ii])
-            qd = kin._lin_solve(J, -model.phi_t(X, s[ii], s_dot[ii]))
-        else:
-            E = eng.entries(q[ii], s[ii])
-            qd = np.stack(eng.solve(E, _rows(-model.phi_t(X, s[ii], s_dot[ii]))), axis=1)
-        Vi = model.velocities(qd)
-        V[ii] = Vi
-        if A is not None:
-            g = model.gamma(X, Vi, s[ii], s_dot[ii], s_ddot[ii])
-            qdd = kin._lin_solve(J, g) if eng is None else np.stack(eng.solve(E, _rows(g)), axis=1)
-            A[ii] = model.velocities(qdd)
-    V[:, model.fixed] = 0.0
-    if A is not None:
-        A[:, model.fixed] = 0.0
-    out["velocity"], out["acceleration"] = V, A
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# Stage 1: which path runs
 
 
 def residuals(model: Model, X: np.ndarray, s: np.ndarray, chunk: int = CHUNK) -> np.ndarray:

@@ -30,17 +30,6 @@ def driver_motion(model: Model):
     return value, value * scale, np.broadcast_to(rate, (S, len(rate))).copy(), np.broadcast_to(acc, (S, len(acc))).copy()
 
 
-def effective_rcond(model: Model) -> float:
-    """Return the reciprocal condition below which a step's Jacobian counts as singular.
-
-    The scene's ``singular_rcond`` (default 1e-6). At a change point or an assembly limit the
-    root is double: Newton converges only linearly, and even iterated to rounding level
-    (:func:`_polish`) the position along the near-null direction is off by about
-    ``sqrt(eps) * size``, so the Jacobian there keeps a smallest singular value near 1e-8.
-    """
-    return float(model.scene.solver.singular_rcond)
-
-
 def jacobian_condition(J: np.ndarray) -> np.ndarray:
     """Return the condition (S,) of Jacobians (S, m, n) as derivatives() measures it.
 
@@ -316,22 +305,8 @@ CARRY_ANGLE_STEP = np.deg2rad(2.0)
 CARRY_LENGTH_STEP = 0.005
 
 
-def assemble_start(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) -> np.ndarray:
-    """Assemble the first step from the start configuration as written; SceneError if impossible.
-
-    When the points are drawn at other driver values than the sweep's first (read off the
-    drawing: an angle driver's direction, a coordinate driver's coordinate), the drawn pose is
-    assembled there and carried to ``s0`` by the sweep's own continuation, so the sweep starts
-    in the assembly the drawing shows; one jump by Newton could land in the other (a
-    parallelogram drawn at -60 deg and started at +40 deg came out crossed). Where that path
-    leaves the assembly range, or the drawing is already at ``s0``, Newton runs from the
-    drawing directly at ``s0``.
-    """
-    return start_state(model, s0, tol_abs, max_iter)[0]
-
-
 def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
-    """Return (q (n_q,), slope): :func:`assemble_start`'s q and, when the drawn pose was carried
+    """Return (q (n_q,), slope): the assembled start's q and, when the drawn pose was carried
     to ``s0`` by a one-driver path, dq/ds (n_q, 1) along that path's last step (a secant), else
     None. The sweep's first predictor uses it: a sweep that starts on a change point then leaves
     it on the branch the path arrived on instead of on a side chosen by rounding."""
@@ -365,7 +340,7 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
         if conv2[0]:
             return qq[0]
     path = model.scene.path
-    if model.n_q and not jacobian_condition(jac(sol.x)[None])[0] * effective_rcond(model) < 1.0:
+    if model.n_q and not jacobian_condition(jac(sol.x)[None])[0] * model.scene.solver.singular_rcond < 1.0:
         # stuck on a singular shape (links in line): Newton and least squares cannot leave a
         # mirror-symmetric guess; if either side of it assembles, the guess is just ambiguous
         v, roots = _null_line_roots(model, sol.x[None], s0)
@@ -660,7 +635,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     # (a singular start is then left by trying either side, below)
     last_dq = start_slope if predictor != "none" else None
     last_d2q = None
-    rcond = effective_rcond(model)
+    rcond = model.scene.solver.singular_rcond
     square = model.n_rows == nq
     # one-step kernels: the same Newton, Phi and checks with less overhead per step
     # (the finite-difference Jacobian knob changes Newton's iteration matrix only: the condition
@@ -885,7 +860,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
             inv, cond = _pinv_cond(J)
         condition[idx] = cond
         Jinv[idx] = inv
-        sing = ~(cond * effective_rcond(model) < 1.0)
+        sing = ~(cond * model.scene.solver.singular_rcond < 1.0)
         status[idx[sing]] = SINGULAR
         Jinv[idx[sing]] = np.nan
     good = status == OK

@@ -6,9 +6,13 @@ that the comparison measures the fast path, not Newton's stopping point). A mech
 not decompose runs Newton under ``auto`` and is a SceneError under ``dyads``.
 """
 import dataclasses as dc
+import pathlib
+import sys
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st_h
 
 import linkpipe
 from linkpipe import status as st
@@ -115,8 +119,10 @@ def test_vectorised_general_path_on_a_long_sweep():
     scene = with_steps(linkpipe.load_scene(str(CONFIG_DIR / "fourbar_crank_rocker.toml")), 3001)
     model = build_model(scene)
     value, s, sd, sdd = kin.driver_motion(model)
-    out = batch.solve_newton(model, s, sd, sdd, order=2)
+    out = batch.solve_newton(model, s)
     assert (out["status"] == st.OK).all()
+    der = batch.derivatives(model, model.positions(out["q"]), s, sd, sdd, out["status"], True)
+    out.update(velocity=der["velocity"], acceleration=der["acceleration"])
     assert out["sequential"].sum() < 200  # the coarse nodes only: the rest went vectorised
     cf = fourbar(1.0, 3.5, 3.0, 4.0, s[:, 0], 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
     X = model.positions(out["q"])
@@ -241,3 +247,52 @@ def test_dyads_without_assembly_give_nan_and_no_assembly():
     assert (r.status[inside] == st.OK).all()
     assert np.isnan(r.position[outside][:, r.point_names.index("B")]).all()
     np.testing.assert_array_equal(r.position[outside][:, r.point_names.index("O4")], [[3.5, 0.0]] * outside.sum())
+
+
+# ------------------------------------------------------------------ the fast path shares the model
+_HARD = pathlib.Path(__file__).resolve().parent / "hard"
+if str(_HARD) not in sys.path:
+    sys.path.insert(0, str(_HARD))
+
+
+@settings(max_examples=30, deadline=None)
+@given(family=st_h.sampled_from(["fourbar", "slider_crank", "six_bar"]),
+       a=st_h.floats(0.5, 1.2), b=st_h.floats(3.0, 4.0), c=st_h.floats(2.5, 3.5),
+       start=st_h.floats(0.0, 360.0), branch=st_h.sampled_from([1, -1]),
+       scale=st_h.sampled_from([1e-3, 1.0, 1e3]))
+def test_dyads_satisfy_the_models_equations_and_equal_newton(family, a, b, c, start, branch, scale):
+    """The closed-form dyads solve the model's own equations (model/equations.py): Φ = 0,
+    Φq v = −Φt, Φq a = γ to 1e-12 of the size (and of the velocities' and accelerations'
+    scales), and equal the general Newton path to 1e-12 relative, on families of four-bars
+    (Grashof crank-rockers: a + 4 < b + c), offset slider-cranks and Watt six-bars."""
+    import hard_scenes as hs
+
+    if family == "fourbar":
+        text = hs.fourbar_text(a, b, c, 4.0, start, start + 90.0, 31, branch=branch, scale=scale,
+                               coupler_uv=(1.2, 0.7))
+    elif family == "slider_crank":
+        text = hs.slider_crank_text(a, b, 0.3 * a, start, start + 90.0, 31, branch=branch, scale=scale)
+    else:
+        text = hs.six_bar_text(1.0, 3.5, 3.0, 4.0, (1.2, 0.9), (5.5, 3.0), (4.6, 4.2),
+                               start, start + 20.0, 21, branch=branch)
+    scene = linkpipe.parse_scene(text, f"{family}.toml")
+    fast = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="dyads")))
+    ok = fast.status == st.OK
+    assume(ok.all())  # a six-bar drawn at random may leave its assembly range
+    model = fast.model
+    _, s, s_dot, s_ddot = kin.driver_motion(model)
+    X, V, A = fast.position, fast.velocity, fast.acceleration
+    size = model.size
+    assert np.abs(model.phi(X, s)).max() <= 1e-12 * size
+    J = model.jacobian(X, s)
+    v_scale = max(np.abs(V).max(), 1e-300)
+    a_scale = max(np.abs(A).max(), 1e-300)
+    vel_res = np.einsum("sij,sj->si", J, model.q_of(V)) + model.phi_t(X, s, s_dot)
+    acc_res = np.einsum("sij,sj->si", J, model.q_of(A)) - model.gamma(X, V, s, s_dot, s_ddot)
+    assert np.abs(vel_res).max() <= 1e-12 * v_scale
+    assert np.abs(acc_res).max() <= 1e-11 * a_scale  # gamma's terms are products of two rates
+    slow = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton")))
+    np.testing.assert_array_equal(slow.status, fast.status)
+    assert np.abs(slow.position - X).max() <= 1e-12 * size
+    assert np.abs(slow.velocity - V).max() <= 1e-12 * v_scale
+    assert np.abs(slow.acceleration - A).max() <= 1e-11 * a_scale
