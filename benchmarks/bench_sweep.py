@@ -7,11 +7,11 @@ Part 1, the crank-rocker of ``configs/fourbar_crank_rocker.toml`` (crank 1, coup
 3, ground 4, coupler point P), one crank turn at 10 rad/s in 36k and 360k steps; every tool
 returns positions, velocities and accelerations of all five points, arrays (S, 5, 2):
 
-* linkpipe fast path: ``linkpipe.batch.stage1`` with ``method = "auto"`` (what the pipeline's
+* linkpipe fast path: ``linkpipe.kinematics.solve_sweep`` with ``method = "auto"`` (what the pipeline's
   stage 1 runs: the dyad chain, the start assembly, the branch check, the residuals, the
   statuses, and the dyads' velocities and accelerations);
-* linkpipe general path: ``linkpipe.batch.stage1`` with ``method = "newton"`` and
-  ``linkpipe.batch.derivatives``, as the pipeline runs them (coarse sequential continuation,
+* linkpipe general path: ``linkpipe.kinematics.solve_sweep`` with ``method = "newton"`` and
+  ``linkpipe.kinematics.derivatives``, as the pipeline runs them (coarse sequential continuation,
   then batched Newton from Hermite predictions; velocities and accelerations by sparse solves);
 * the closed form: Norton's four-bar written out in plain numpy for this one mechanism (circle
   intersection, then the 2x2 velocity and acceleration systems by Cramer's rule), whole arrays;
@@ -116,20 +116,20 @@ def linkpipe_model(S: int, method: str = "auto"):
 
 
 def linkpipe_fast(model, theta):
-    from linkpipe import batch
+    from linkpipe import kinematics as batch
 
     S = len(theta)
-    out = batch.stage1(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
+    out = batch.solve_sweep(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
     assert out["method"] == "dyads"
     return out["position"], out["velocity"], out["acceleration"]
 
 
 def linkpipe_newton(model, theta):
-    from linkpipe import batch
+    from linkpipe import kinematics as batch
 
     S = len(theta)
     s, s_dot, s_ddot = theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1))
-    out = batch.stage1(model, s, s_dot, s_ddot, order=2)  # positions, as the pipeline runs them
+    out = batch.solve_sweep(model, s, s_dot, s_ddot, order=2)  # positions, as the pipeline runs them
     assert out["method"] == "newton"
     der = batch.derivatives(model, out["position"], s, s_dot, s_ddot, out["status"], True)
     return out["position"], der["velocity"], der["acceleration"]

@@ -47,6 +47,7 @@ from . import closed_forms
 from . import kinematics as kin
 from .pipeline import solve
 from .errors import LinkpipeError
+from .status import OK
 from .result import Variable
 from .scene import Scene, load_scene
 
@@ -419,7 +420,7 @@ def _extended(scene: Scene, steps: int, base_steps: int):
     # refinement: one more Newton step everywhere, kept where it lowers the residual
     model = ref.model
     _, s, s_dot, s_ddot = kin.driver_motion(model)
-    ok = ref.status == kin.OK
+    ok = ref.status == OK
     if ok.any():
         q = model.q_of(ref.position[ok])
         q2, res2, _, _ = kin.newton(model, q, s[ok], 0.0, 1, "analytic")
@@ -429,9 +430,9 @@ def _extended(scene: Scene, steps: int, base_steps: int):
         X = ref.position.copy()
         X[ok] = model.positions(q2)
         X[:, model.fixed] = model.start_position[model.fixed]
-        der = kin.derivatives(model, np.where(np.isfinite(X), X, 0.0), s, s_dot, s_ddot,
+        der = kin.dense_derivatives(model, np.where(np.isfinite(X), X, 0.0), s, s_dot, s_ddot,
                               ref.status, True)
-        good = (der["status"] == kin.OK)[:, None, None]
+        good = (der["status"] == OK)[:, None, None]
         ref = dc.replace(ref, position=X,
                          velocity=np.where(good, der["velocity"], np.nan),
                          acceleration=np.where(good, der["acceleration"], np.nan))
@@ -469,12 +470,12 @@ class References:
         self.checks["refinement_moved"] = moved
         self.size = float(ext.model.size)
         self.form = closed_forms.detect(self.scene, ext.position[0]) if (
-            ext.status[0] == kin.OK) else None
+            ext.status[0] == OK) else None
         self.kind = "extended checks (tol 1e-15, analytic Jacobian, linear derivatives, " \
                     "second-order predictor, one Newton refinement step)"
         if self.form is not None:
             X, V, A = self._closed(self.scene)
-            ok = ext.status == kin.OK
+            ok = ext.status == OK
             dev = {}
             for name, cf, ex in (("position", X, ext.position), ("velocity", V, ext.velocity),
                                  ("acceleration", A, ext.acceleration)):
@@ -503,7 +504,7 @@ class References:
         if self.form is not None:
             X, V, A = self._closed(scene)
             values.update(position=X, velocity=V, acceleration=A)
-        ok = ext.status == kin.OK
+        ok = ext.status == OK
         for name in ("position", "velocity", "acceleration"):
             values[name] = np.where(ok[:, None, None], values[name], np.nan)
         return Reference(values, self.size)

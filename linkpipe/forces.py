@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .batch import engine
+from .kinematics.linalg import engine
 from .result import Forces, Motion
 from .status import NO_LEVERAGE, OK
 from .model import Model, _R90

@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import batch
 from . import kinematics as kin
 from .model import build_model, check_mobility
 from .result import Motion, Result, units_of
@@ -108,10 +107,10 @@ def solve(scene: Scene | str, progress=None) -> Result:
     tell("positions")
     t0 = _time.perf_counter()
     value, s, s_dot, s_ddot = kin.driver_motion(model)
-    # closed-form dyads or the general Newton path, as [solver] method says (see batch.stage1);
+    # closed-form dyads or the general Newton path, as [solver] method says (see kinematics.solve_sweep);
     # the dyad path also gives velocities and accelerations here
     order = 2 if stages.acceleration else 1 if stages.velocity else 0
-    k1 = batch.stage1(model, s, s_dot, s_ddot, order)
+    k1 = kin.solve_sweep(model, s, s_dot, s_ddot, order)
     X = k1["position"]
     link_angle = kin.link_angles_unwrapped(model, X)
     seconds["positions"] = _time.perf_counter() - t0
@@ -119,7 +118,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
     tell("jacobian")
     t0 = _time.perf_counter()
     Xz = np.where(np.isfinite(X), X, 0.0)
-    der = batch.derivatives(model, Xz, s, s_dot, s_ddot, k1["status"], stages.acceleration,
+    der = kin.derivatives(model, Xz, s, s_dot, s_ddot, k1["status"], stages.acceleration,
                             velocity=k1["velocity"], acceleration=k1["acceleration"],
                             need_inverse=stages.forces)
     kinematic_status = der["status"]

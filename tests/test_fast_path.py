@@ -16,7 +16,8 @@ from hypothesis import strategies as st_h
 
 import linkpipe
 from linkpipe import status as st
-from linkpipe import batch, dyads
+from linkpipe import kinematics as batch
+from linkpipe.kinematics import dyads
 from linkpipe import kinematics as kin
 from linkpipe.errors import SceneError
 from linkpipe.model import build_model
@@ -84,7 +85,7 @@ def test_engine_derivatives_match_the_dense_ones(pair):
     X = np.where(np.isfinite(r.position), r.position, 0.0)
     status = np.where(np.isfinite(r.position).all(axis=(1, 2)), st.OK, st.NO_ASSEMBLY).astype(np.int8)
     a = batch.derivatives(model, X, s, sd, sdd, status, True)
-    b = kin.derivatives(model, X, s, sd, sdd, status, True)
+    b = kin.dense_derivatives(model, X, s, sd, sdd, status, True)
     np.testing.assert_array_equal(a["status"], b["status"])
     for key in ("velocity", "acceleration", "jacobian_inverse"):
         assert rel_err(a[key], b[key]) <= REL, key
@@ -106,7 +107,7 @@ def test_max_abs_phi_is_the_models_residual(path):
     s = rng.uniform(-3, 3, size=(S, model.n_drivers))
     want = np.abs(model.phi(X, s)).max(axis=1)
     pts = {int(p): (X[:, p, 0].copy(), X[:, p, 1].copy()) for p in model.moving}
-    got = batch.max_abs_phi(model)(pts, np.ascontiguousarray(s.T))
+    got = batch.vectorised.max_abs_phi(model)(pts, np.ascontiguousarray(s.T))
     assert np.isnan(got[7]) and np.isnan(want[7])
     keep = np.arange(S) != 7
     # the same rows by the same operations up to association: a few roundings of the size
@@ -119,7 +120,7 @@ def test_vectorised_general_path_on_a_long_sweep():
     scene = with_steps(linkpipe.load_scene(str(CONFIG_DIR / "fourbar_crank_rocker.toml")), 3001)
     model = build_model(scene)
     value, s, sd, sdd = kin.driver_motion(model)
-    out = batch.solve_newton(model, s)
+    out = batch.vectorised.solve_newton(model, s)
     assert (out["status"] == st.OK).all()
     der = batch.derivatives(model, model.positions(out["q"]), s, sd, sdd, out["status"], True)
     out.update(velocity=der["velocity"], acceleration=der["acceleration"])
@@ -135,7 +136,7 @@ def test_vectorised_general_path_on_a_long_sweep():
     # and the dyads on the same sweep
     plan = dyads.decompose(model)
     dyads.set_branches(plan, X[0], s[0])
-    sw = dyads.solve(plan, s, sd, sdd)
+    sw = dyads.solve_chain(plan, s, sd, sdd)
     assert rel_err(sw.position, X) <= REL
     assert rel_err(sw.acceleration, out["acceleration"]) <= REL
 

@@ -2,7 +2,7 @@
 
 ``linkpipe/model/equations.py`` writes every constraint row once. ``Model`` evaluates the rows
 on stacked sweeps, the sequential continuation's one-step kernels (``kinematics._Step``) on
-Python floats, and the sparse engine (``batch.Engine``) on per-coordinate arrays. Here, for
+Python floats, and the sparse engine (``batch.linalg.Engine``) on per-coordinate arrays. Here, for
 every shipped scene and for hypothesis-drawn four-bars, slider-cranks and six-bars:
 
 * Φ, Φq, Φs of the float kernels equal the model's to the last bit (the continuation's branch
@@ -20,7 +20,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import linkpipe
-from linkpipe import batch, kinematics
+from linkpipe import kinematics
+from linkpipe import kinematics as batch
 from linkpipe.model import build_model
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -44,12 +45,12 @@ def _samples(model, n=4, seed=3):
 def _layouts_agree(model):
     q, s, V, s_dot, s_ddot = _samples(model)
     X = model.positions(q)
-    step = kinematics._step_kernels(model)
+    step = kinematics.step._step_kernels(model)
     for i in range(len(q)):  # one step at a time: the float kernels against the model at S = 1
         np.testing.assert_array_equal(step.phi(q[i], s[i]), model.phi(X[i:i + 1], s[i:i + 1])[0])
         np.testing.assert_array_equal(step.jac(q[i], s[i]), model.jacobian(X[i:i + 1], s[i:i + 1])[0])
         np.testing.assert_array_equal(step.phi_s(q[i], s[i]), model.phi_s(X[i:i + 1], s[i:i + 1])[0])
-    eng = batch.engine(model)
+    eng = batch.linalg.engine(model)
     if eng is None:  # non-square (redundant) scenes take the dense path, by declaration
         assert model.n_rows != model.n_q
         return

@@ -34,18 +34,16 @@ numpy only.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from .model import Model
+from ..model import Model
+from dataclasses import dataclass, field
+
 
 CHUNK = 8192  # steps per chunk: the working set stays in cache
+
+
 BRANCH_MARGIN = 2.0  # a dyad's roots must stay this many steps' motion apart (see branch_check)
-
-
-# --------------------------------------------------------------------------------------------
-# The decomposition (once per model)
 
 
 @dataclass
@@ -74,7 +72,7 @@ class Line:
 
 
 @dataclass
-class Step:
+class Dyad:
     """One closed-form step. ``kind`` as in the module docstring; ``targets`` the new points."""
 
     kind: str
@@ -112,11 +110,11 @@ class Step:
 
 
 @dataclass
-class Plan:
+class DyadChain:
     """A scene's dyad decomposition: ``steps`` in order, or ``reason`` why there is none."""
 
     model: Model
-    steps: list[Step]
+    steps: list[Dyad]
     reason: str = ""
 
     @property
@@ -160,8 +158,8 @@ def bodies_of(model: Model) -> list[Body]:
     return out
 
 
-def decompose(model: Model) -> Plan:
-    """Return the scene's closed-form plan (``Plan.ok`` False with a reason when none exists).
+def decompose(model: Model) -> DyadChain:
+    """Return the scene's closed-form plan (``DyadChain.ok`` False with a reason when none exists).
 
     Greedy: repeatedly place whatever can be placed (bodies with two known points, bodies
     turned by an angle driver, points with two usable constraints) until every moving point is
@@ -177,7 +175,7 @@ def decompose(model: Model) -> Plan:
     used_moving = [False] * len(sliders_moving)
     nd = model.n_drivers
     used_driver = [False] * nd
-    steps: list[Step] = []
+    steps: list[Dyad] = []
 
     def known_of(b: Body):
         return [k for k, p in enumerate(b.points) if known[p]]
@@ -204,7 +202,7 @@ def decompose(model: Model) -> Plan:
                         z = complex(*(b.local[k] - li)) / dl
                         tg.append(p)
                         ab.append((z.real, z.imag))
-                steps.append(Step("linear", tg, i=b.points[i], j=b.points[j], ab=ab))
+                steps.append(Dyad("linear", tg, i=b.points[i], j=b.points[j], ab=ab))
                 known[tg] = True
                 progress = True
         if progress:
@@ -229,7 +227,7 @@ def decompose(model: Model) -> Plan:
                             r = b.local[k] - b.local[ck]
                             tg.append(p)
                             ws.append((float(c0 * r[0] - s0 * r[1]), float(s0 * r[0] + c0 * r[1])))
-                    steps.append(Step("angle", tg, c=b.points[ck], driver=jd, w=ws))
+                    steps.append(Dyad("angle", tg, c=b.points[ck], driver=jd, w=ws))
                     known[tg] = True
                     used_driver[jd] = True
                     progress = True
@@ -262,13 +260,13 @@ def decompose(model: Model) -> Plan:
                     lines.append((Line("coord", t=(0.0, 1.0) if ax == 0 else (1.0, 0.0), driver=jd, axis=ax),
                                   "d", jd))
             if len(lines) >= 2:
-                st = Step("lines", [p], line1=lines[0][0], line2=lines[1][0])
+                st = Dyad("lines", [p], line1=lines[0][0], line2=lines[1][0])
                 use = lines[:2]
             elif len(lines) == 1 and circles:
-                st = Step("circle_line", [p], c1=circles[0][0], r1=circles[0][1], line1=lines[0][0])
+                st = Dyad("circle_line", [p], c1=circles[0][0], r1=circles[0][1], line1=lines[0][0])
                 use = lines[:1]
             elif len(circles) >= 2:
-                st = Step("circles", [p], c1=circles[0][0], r1=circles[0][1], c2=circles[1][0],
+                st = Dyad("circles", [p], c1=circles[0][0], r1=circles[0][1], c2=circles[1][0],
                           r2=circles[1][1])
                 use = []
             else:
@@ -286,15 +284,15 @@ def decompose(model: Model) -> Plan:
             break  # bodies may now have two known points: back to rule 1
     if not known.all():
         left = [model.point_names[p] for p in range(P) if not known[p]]
-        return Plan(model, steps, f"no closed-form dyad places point(s) {', '.join(left)} "
+        return DyadChain(model, steps, f"no closed-form dyad places point(s) {', '.join(left)} "
                                   "(a loop that needs simultaneous solution)")
     if not all(used_driver):
         left = [model.scene.drivers[j].name for j in range(nd) if not used_driver[j]]
-        return Plan(model, steps, f"driver(s) {', '.join(left)} do not fit a closed-form dyad")
-    return Plan(model, steps)
+        return DyadChain(model, steps, f"driver(s) {', '.join(left)} do not fit a closed-form dyad")
+    return DyadChain(model, steps)
 
 
-def set_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray) -> None:
+def set_branches(plan: DyadChain, X0: np.ndarray, s0: np.ndarray) -> None:
     """Take each dyad's branch (sign) from the configuration ``X0`` (n_points, 2) at driver values s0."""
     size = plan.model.size
     for st in plan.steps:
@@ -305,7 +303,7 @@ def set_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray) -> None:
         st.ambiguous = bool(abs(val) <= 1e-9 * size)
 
 
-def refine_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray, X1: np.ndarray,
+def refine_branches(plan: DyadChain, X0: np.ndarray, s0: np.ndarray, X1: np.ndarray,
                     s1: np.ndarray) -> None:
     """Re-take the sign of each dyad that starts nearer its singular shape than one step's change.
 
@@ -324,7 +322,7 @@ def refine_branches(plan: Plan, X0: np.ndarray, s0: np.ndarray, X1: np.ndarray,
             st.ambiguous = True
 
 
-def _branch_value(st: Step, X: np.ndarray, s: np.ndarray):
+def _branch_value(st: Dyad, X: np.ndarray, s: np.ndarray):
     """Return the signed side of a two-root dyad's point at configuration X (None: no branches)."""
     p = st.targets[0]
     if st.kind == "circles":
@@ -347,10 +345,6 @@ def _line_at(line: Line, X: np.ndarray, s: np.ndarray):
         return o, np.array(line.t)
     d = X[line.e] - X[line.d]
     return X[line.d], d / np.hypot(*d)
-
-
-# --------------------------------------------------------------------------------------------
-# The vectorised evaluation
 
 
 class _Chunk:
@@ -412,7 +406,7 @@ def _dot(ax, ay, bx, by):
     return ax * bx + ay * by
 
 
-def _position(st: Step, ch: _Chunk) -> None:
+def _position(st: Dyad, ch: _Chunk) -> None:
     px, py = ch.px, ch.py
     if st.kind == "angle":
         th = ch.s[st.driver]
@@ -484,7 +478,7 @@ def _line_geometry(line: Line, ch: _Chunk):
     return dx, dy, wx * n, wy * n
 
 
-def _derivative(st: Step, ch: _Chunk, order: int) -> None:
+def _derivative(st: Dyad, ch: _Chunk, order: int) -> None:
     """Velocities (order 1) or accelerations (order 2) of the step's targets."""
     px, py = ch.px, ch.py
     if order == 1:
@@ -548,7 +542,7 @@ def _derivative(st: Step, ch: _Chunk, order: int) -> None:
     oy[p] = _cramer(b2, g1x, b1, g2x, idet)
 
 
-def _derivative_pass(plan: Plan, ch: _Chunk, order: int, moving, buf: np.ndarray, n: int):
+def _derivative_pass(plan: DyadChain, ch: _Chunk, order: int, moving, buf: np.ndarray, n: int):
     """Velocities (order 1) or accelerations (2) of every step of the chunk, into ``buf[:n]``."""
     for st in plan.steps:
         _derivative(st, ch, order)
@@ -583,8 +577,8 @@ def _add(a, b):
 
 
 @dataclass
-class Sweep:
-    """What :func:`solve` returns. Arrays step-axis first; velocity/acceleration None when not asked.
+class ChainSweep:
+    """What :func:`solve_chain` returns. Arrays step-axis first; velocity/acceleration None when not asked.
 
     ``ok`` (S,) every point finite; ``residual`` (S,) max |Phi| when ``max_abs_phi`` was given;
     ``gap`` (S,) with ``gaps=True``: the smallest over the dyads and the step pairs (i-1, i)
@@ -600,8 +594,8 @@ class Sweep:
     gap: np.ndarray | None = None
 
 
-def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
-          order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK) -> Sweep:
+def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
+          order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK) -> ChainSweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
@@ -694,17 +688,17 @@ def solve(plan: Plan, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np
             A[np.ix_(bad, moving)] = np.nan
         if residual is not None:
             residual[bad] = np.nan
-    return Sweep(X, V, A, ok, residual, gap)
+    return ChainSweep(X, V, A, ok, residual, gap)
 
 
-def branch_check(plan: Plan, sweep: Sweep) -> bool:
+def branch_check(plan: DyadChain, sweep: ChainSweep) -> bool:
     """Return True when fixed-sign dyads surely follow the same branch as Newton continuation.
 
     Newton continuation from step i-1 lands in the basin of the root on its side of the dyad's
     centre line (half the roots' distance from either root); a guess less than one step's motion
     from the root (even without a predictor) stays there as long as the two roots are farther
     apart than ``BRANCH_MARGIN`` steps' motion. A step without assembly also returns False
-    (Newton's re-entry after a gap follows its own rules). Needs ``solve(..., gaps=True)``.
+    (Newton's re-entry after a gap follows its own rules). Needs ``solve_chain(..., gaps=True)``.
     """
     if not sweep.ok.all():
         return False

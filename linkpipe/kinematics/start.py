@@ -1,0 +1,130 @@
+"""The first step: the drawn pose assembled, and carried to the sweep's first driver value."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import SceneError
+from ..model import Model, constraint_source
+from .linalg import jacobian_condition
+from .newton import _null_line_roots, drivers_aligned, newton
+from .step import _step_kernels
+
+
+#: largest driver move per step when the drawn pose is carried to the sweep's first value:
+#: 2 degrees for an angle driver, 0.5 % of the mechanism's size for a coordinate driver
+CARRY_ANGLE_STEP = np.deg2rad(2.0)
+
+
+CARRY_LENGTH_STEP = 0.005
+
+
+def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
+    """Return (q (n_q,), slope): the assembled start's q and, when the drawn pose was carried
+    to ``s0`` by a one-driver path, dq/ds (n_q, 1) along that path's last step (a secant), else
+    None. The sweep's first predictor uses it: a sweep that starts on a change point then leaves
+    it on the branch the path arrived on instead of on a side chosen by rounding."""
+    carried = _carry_drawn_pose(model, s0, tol_abs, max_iter)
+    if carried is not None:
+        return carried
+    return _assemble_directly(model, s0, tol_abs, max_iter), None
+
+
+def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) -> np.ndarray:
+    """Newton (then least squares) at ``s0`` from the drawing itself; SceneError if impossible."""
+    q0 = model.q_of(model.start_position[None])
+    fast = _step_kernels(model) if model.n_q else None  # the same Newton on plain floats
+    q, res, _, conv = (fast.newton(q0[0], s0, tol_abs, max(max_iter, 50)) if fast is not None
+                       else newton(model, q0, s0[None], tol_abs, max(max_iter, 50)))
+    if conv[0]:
+        return q[0]
+    # Newton may wander from a poor guess: a least-squares solve tells whether a solution exists.
+    def fun(qq):
+        return model.phi(model.positions(qq[None]), s0[None])[0]
+
+    def jac(qq):
+        return model.jacobian(model.positions(qq[None]), s0[None])[0]
+
+    from scipy.optimize import least_squares  # here: importing scipy.optimize costs ~0.3 s
+
+    sol = least_squares(fun, q0[0], jac=jac, method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                        max_nfev=500)
+    if np.abs(sol.fun).max() <= tol_abs:
+        qq, res2, _, conv2 = newton(model, sol.x[None], s0[None], tol_abs, max_iter)
+        if conv2[0]:
+            return qq[0]
+    path = model.scene.path
+    if model.n_q and not jacobian_condition(jac(sol.x)[None])[0] * model.scene.solver.singular_rcond < 1.0:
+        # stuck on a singular shape (links in line): Newton and least squares cannot leave a
+        # mirror-symmetric guess; if either side of it assembles, the guess is just ambiguous
+        v, roots = _null_line_roots(model, sol.x[None], s0)
+        for t in roots:
+            _, _, _, conv3 = newton(model, (sol.x + t * v)[None], s0[None], tol_abs, max_iter)
+            if conv3[0]:
+                k = int(np.argmax(np.hypot(*v.reshape(-1, 2).T)))
+                name = model.point_names[model.moving[k]]
+                raise SceneError(path, "points", name,
+                                 "the start positions put links in line (a singular "
+                                 "configuration), so they do not say which of the mirror-image "
+                                 "assemblies is meant",
+                                 f"move {name} a little off the line, to the side of the "
+                                 "assembly you want")
+    worst = float(np.abs(sol.fun).max())
+    if worst <= 1e-13 * model.size:
+        # assembled to rounding level: it is the tolerance that cannot be met, not the scene
+        raise SceneError(path, "solver", "tol",
+                         f"tol = {model.scene.solver.tol:g} ({tol_abs:.3g} for this mechanism's "
+                         f"size) is below what double precision reaches here: the start "
+                         f"assembles to {worst:.3g} and no closer",
+                         "use tol >= 1e-15 (a solved step's residual is rounded to about 1e-16 "
+                         "of the size)")
+    table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
+    length = dict(model.scene.units).get("length", "length units")
+    where = f"[{table}]" + (f" {key}" if key else "")
+    raise SceneError(path, "points", None,
+                     f"the start configuration cannot be assembled at the first driver value: "
+                     f"at the best fit the constraint of {where} is still off by {worst:.3g} "
+                     f"{length} (tolerance {tol_abs:.3g})",
+                     "check the link lengths, the `local` coordinates and the drivers' `from`; "
+                     "the points' x, y must be close to an assembled position")
+
+
+def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
+    """Return (q (n_q,), slope) at ``s0`` carried by continuation from the drawn pose, or None.
+
+    None when the drawing is within one carrying step of ``s0``, when it cannot be assembled at
+    its own driver values, or when the path to ``s0`` leaves the assembly range. ``slope`` as
+    :func:`start_state` says (None with several drivers: one path gives one direction only).
+    """
+    from .continuation import solve_positions  # the continuation starts here: a cycle
+
+    if not model.n_drivers or not model.n_q:
+        return None
+    s_drawn = model.driver_values_at(model.start_position[None])[0]
+    delta = s0 - s_drawn
+    angle = model.drv_angle
+    delta[angle] = (delta[angle] + np.pi) % (2 * np.pi) - np.pi  # the shorter way round
+    step = np.where(angle, CARRY_ANGLE_STEP, CARRY_LENGTH_STEP * model.size)
+    n = int(np.ceil(np.max(np.abs(delta) / step)))
+    if n <= 1:
+        return None
+    start = s0 - delta  # the drawn values, next to s0 for the angles
+    q0 = model.q_of(model.start_position[None])
+    fast = _step_kernels(model)
+    q_drawn, _, _, conv = (fast.newton(q0[0], start, tol_abs, max(max_iter, 50)) if fast is not None
+                           else newton(model, q0, start[None], tol_abs, max(max_iter, 50)))
+    if not conv[0] or not drivers_aligned(model, q_drawn, start[None])[0]:
+        return None
+    path = start + np.linspace(0.0, 1.0, min(n, 2000) + 1)[:, None] * delta
+    path[-1] = s0
+    # the carry's own settings, not the scene's knobs (a low max_iter or no predictor must not
+    # send the start back to the one-jump assembly); it stops at its first failed step
+    q, residual, _, _ = solve_positions(model, path, tol=model.scene.solver.tol,
+                                        max_iter=max(max_iter, 50), predictor="first",
+                                        jacobian="analytic", q_start=q_drawn[0],
+                                        stop_on_failure=True)
+    if not (np.isfinite(q).all() and (residual <= tol_abs).all()):
+        return None  # a step without assembly on the way (or one that did not converge)
+    slope = None
+    if model.n_drivers == 1:
+        slope = ((q[-1] - q[-2]) / (path[-1, 0] - path[-2, 0]))[:, None]
+    return q[-1], slope

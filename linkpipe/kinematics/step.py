@@ -1,0 +1,129 @@
+"""One step's Phi and Phi_q on Python floats, for the sequential continuation (numpy's
+per-call overhead would dominate a single step of a few rows)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Model
+from ..model import equations as eq
+from .linalg import _lin_solve
+from .newton import NEWTON_STALL
+
+
+class _Step:
+    """One step's Phi, Phi_q and driver check on Python floats (sequential continuation).
+
+    The rows are :mod:`linkpipe.model.equations`' own, evaluated on floats: numpy's per-call
+    overhead would dominate a single step of a few rows (``tests/test_kernels.py`` checks that
+    they equal ``Model.phi`` / ``Model.jacobian`` to the last bit). Built once per model.
+    """
+
+    def __init__(self, model: Model):
+        md = self.model = model
+        self.n, self.m = md.n_q, md.n_rows
+        self.nc = md.n_constraints
+        self.rows = md.rows
+        self.x0 = md.start_position.reshape(-1).tolist()
+        self.qpos = [int(2 * p + c) for p in md.moving for c in (0, 1)]
+        self.col = [-1] * (2 * md.n_points)  # point coordinate -> column of q (-1: fixed)
+        for k, pc in enumerate(self.qpos):
+            self.col[pc] = k
+        self.drv = [(bool(md.drv_angle[j]), 2 * int(md.drv_a[j]), 2 * int(md.drv_b[j]),
+                     int(md.drv_axis[j])) for j in range(md.n_drivers)]
+        self.angle = np.flatnonzero(md.drv_angle)
+
+    def _xy(self, q):
+        X = self.points(q)
+        return lambda p: (X[2 * p], X[2 * p + 1])
+
+    def jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi_q (m, n) at q (n,) and s (nd,), as :meth:`Model.jacobian` computes it."""
+        n, col = self.n, self.col
+        J = [0.0] * (self.m * n)
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        for r, p, gx, gy in eq.jacobian_terms(self.rows, self._xy(q), cs, sn):
+            c = col[2 * p]
+            if c >= 0:
+                J[r * n + c] += gx
+            c = col[2 * p + 1]
+            if c >= 0:
+                J[r * n + c] += gy
+        return np.array(J, dtype=float).reshape(self.m, n)
+
+    def points(self, q) -> list:
+        X = list(self.x0)
+        for k, v in zip(self.qpos, q.tolist()):
+            X[k] = v
+        return X
+
+    def phi(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi (m,) at q (n,) and s (nd,), as :meth:`Model.phi` computes it."""
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        return np.array(list(eq.phi_rows(self.rows, self._xy(q), s.tolist(), cs, sn)), dtype=float)
+
+    def aligned(self, q: np.ndarray, s: np.ndarray) -> bool:
+        """:func:`drivers_aligned` at one step."""
+        if not len(self.angle):
+            return True
+        X = self.points(q)
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        for j, (ang, a, b, _) in enumerate(self.drv):
+            if ang and not (X[b] - X[a]) * cs[j] + (X[b + 1] - X[a + 1]) * sn[j] > 0:
+                return False
+        return True
+
+    def phi_s(self, q: np.ndarray, s: np.ndarray) -> list:
+        """:meth:`Model.phi_s` at one step, as a list (nd,)."""
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        return list(eq.phi_s_rows(self.rows, self._xy(q), cs, sn))
+
+    def fd_jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return Phi_q (m, n) by central differences, as :func:`fd_jacobian` computes it."""
+        h = np.cbrt(np.finfo(float).eps) * self.model.size
+        cols = []
+        for k in range(self.n):
+            dq = np.zeros(self.n)
+            dq[k] = h
+            cols.append((self.phi(q + dq, s) - self.phi(q - dq, s)) / (2 * h))
+        return np.stack(cols, axis=1) if cols else np.zeros((self.m, 0))
+
+    def newton(self, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,
+               jacobian: str = "analytic"):
+        """:func:`newton` at one step; same returns, shapes (1, n), (1,)."""
+        jac = self.jac if jacobian == "analytic" else self.fd_jac
+        q = np.array(q, dtype=float).reshape(-1)
+        best = prev = np.inf
+        stall = 0
+        it_done = 0
+        res = np.inf
+        step_cap = 0.5 * self.model.size
+        for it in range(max_iter + 1):
+            F = self.phi(q, s)
+            r = float(np.abs(F).max()) if F.shape[0] else 0.0
+            res = r
+            progress = (r < best) or (r < 0.5 * prev)
+            stall = 0 if progress else stall + 1
+            best = min(best, r) if r == r else best  # np.fmin: NaN does not replace a number
+            prev = r
+            done = not (r > tol_abs)
+            bad = not np.isfinite(r) or stall >= NEWTON_STALL
+            if it == max_iter or done or bad:
+                break
+            dq = _lin_solve(jac(q, s)[None], -F[None])[0]
+            big = np.abs(dq).max()
+            if big > step_cap:
+                dq = dq * (step_cap / big)
+            q = q + dq
+            it_done += 1
+        conv = res <= tol_abs
+        return (q[None], np.array([res]), np.array([it_done], dtype=np.int32),
+                np.array([conv]))
+
+
+def _step_kernels(model: Model) -> _Step:
+    """Return the model's one-step kernels (built once per model, kept beside it)."""
+    cache = model.__dict__.get("_linkpipe_step")
+    if cache is None:
+        cache = _Step(model)
+        object.__setattr__(model, "_linkpipe_step", cache)
+    return cache

@@ -1,0 +1,268 @@
+"""The general (Newton) path, vectorised: a coarse sequential continuation (every k-th step,
+which pins the branch), then every other step at once by Newton from a cubic Hermite
+prediction between its two coarse neighbours (their positions and slopes); a step that does
+not converge in a few iterations or moves far from its prediction sends its whole interval
+back to the sequential continuation. Also the constraint residual of whole sweeps."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Model
+from .continuation import solve_positions
+from .linalg import _rows, engine
+from .start import start_state
+from ..status import OK
+
+
+CHUNK = 8192
+
+
+COARSE_NODES = 128  # sequential continuation on at most about this many steps
+
+
+VECTORISE_FROM = 1000  # shorter sweeps run the sequential continuation on every step
+
+
+NEWTON_ITERATIONS = 4  # per fine step before its interval goes back to the sequential path
+
+
+OFF_BRANCH = 0.01  # a fine step may move at most this part of its interval's motion (or
+
+
+OFF_BRANCH_ABS = 1e-6  # this times the size) from its prediction; farther is another branch
+
+
+def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk: int = CHUNK,
+                 start=None):
+    """Solve the sweep by the general path, vectorised; return a dict.
+
+    Keys: q (S, n_q) NaN at failed steps, residual, iterations, status (as
+    :func:`linkpipe.kinematics.solve_positions`), ``sequential`` (S,) bool where the sequential
+    continuation solved the step. Falls back to the sequential
+    path for every step when the model has no engine, the scene asks for a finite-difference
+    Jacobian, or the driver values are not evenly spaced. ``start``: the
+    :func:`linkpipe.kinematics.start_state` at ``s[0]`` when the caller has it already.
+    """
+    sc = model.scene.solver
+    S = s.shape[0]
+    eng = engine(model)
+    k = max(1, int(np.ceil((S - 1) / max(1, coarse))))
+    even = S < 3 or np.allclose(np.diff(s, axis=0), (s[-1] - s[0]) / (S - 1),
+                                rtol=0, atol=1e-9 * max(1.0, float(np.abs(s).max())))
+    out = {}
+    if eng is None or sc.jacobian != "analytic" or S < VECTORISE_FROM or not even:
+        q0, slope0 = start if start is not None else (None, None)
+        q, res, it, st = solve_positions(model, s, q_start=q0, start_slope=slope0)
+        out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
+        return out
+    tol_abs = sc.tol * model.size
+    nodes = np.r_[np.arange(0, S - 1, k), S - 1]
+    if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
+        start = start_state(model, s[0], tol_abs, sc.max_iter)
+    qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
+    qn, resn = _polish_soa(eng, qn, s[nodes], stn == OK, resn)
+    q = np.full((S, model.n_q), np.nan)
+    residual = np.full(S, np.nan)
+    iterations = np.zeros(S, dtype=np.int32)
+    status = np.zeros(S, dtype=np.int8)
+    sequential = np.zeros(S, dtype=bool)
+    q[nodes], residual[nodes], iterations[nodes], status[nodes] = qn, resn, itn, stn
+    sequential[nodes] = True
+    # slopes dq/dstep at the nodes, from the engine
+    ds = (s[-1] - s[0]) / (S - 1)  # driver increment per step (nd,)
+    okn = stn == OK
+    slope = np.full_like(qn, np.nan)
+    if okn.any():
+        Xn = model.positions(qn[okn])
+        E = eng.entries(qn[okn], s[nodes][okn])
+        rhs = -model.phi_t(Xn, s[nodes][okn], np.broadcast_to(ds, (okn.sum(), len(ds))))
+        slope[okn] = np.stack(eng.solve(E, _rows(rhs)), axis=1)
+        with np.errstate(invalid="ignore"):
+            cond = eng.norm1(E) * np.abs(np.stack(eng.solve(E, [np.eye(model.n_rows)[r][:, None]
+                                                               for r in range(model.n_rows)]))
+                                         ).sum(axis=0).max(axis=0)
+        near_singular = ~(cond * model.scene.solver.singular_rcond < 1e-3)
+        okn[np.flatnonzero(okn)[near_singular]] = False
+    okn &= np.isfinite(slope).all(axis=1)
+    # fine steps of intervals between two regular nodes
+    interval_ok = okn[:-1] & okn[1:]
+    bad_interval = ~interval_ok
+    lengths = np.diff(nodes)
+    seg = np.repeat(np.arange(len(nodes) - 1), lengths)  # interval of steps 0..S-2
+    fine = np.ones(S, dtype=bool)
+    fine[nodes] = False
+    steps = np.flatnonzero(fine & np.r_[interval_ok[seg], False])
+    # per interval, coordinates first (the chunks below work on contiguous (n_q, k) arrays):
+    # the Hermite data (values and slopes per unit t) and the largest motion of a coordinate
+    h_int = lengths[:, None].astype(float)
+    hermite_T = [np.ascontiguousarray(a.T) for a in (qn[:-1], slope[:-1] * h_int, qn[1:],
+                                                        slope[1:] * h_int)]
+    span_int = (np.abs(qn[1:] - qn[:-1]).max(axis=1) if model.n_q else np.zeros(len(lengths)))
+    for lo in range(0, len(steps), chunk):
+        ii = steps[lo:lo + chunk]
+        g = seg[ii]
+        t = (ii - nodes[g]) / lengths[g]
+        predT = _hermite_T(*(np.take(a, g, axis=1) for a in hermite_T), t)
+        sT = np.ascontiguousarray(s[ii].T)
+        qT, res, its, conv, _ = _newton_soa(eng, predT.copy(), sT, tol_abs,
+                                            min(NEWTON_ITERATIONS, sc.max_iter))
+        moved = _colmax(np.abs(qT - predT)) if qT.shape[0] else np.zeros(len(ii))
+        span = span_int[g]
+        accept = conv & (moved <= np.maximum(OFF_BRANCH * span, OFF_BRANCH_ABS * model.size))
+        accept &= _aligned(eng, qT, sT)
+        ia = ii[accept]
+        for c in range(qT.shape[0]):  # one coordinate at a time: cheaper than a 2-D fancy write
+            q[ia, c] = qT[c, accept]
+        residual[ii] = res
+        iterations[ii] = its
+        bad_interval[np.unique(g[~accept])] = True
+    # runs of intervals the vectorised refinement could not do: the sequential continuation,
+    # from the run's first node (or the last assembled step before it)
+    last = len(nodes) - 1
+    bad = np.flatnonzero(bad_interval)
+    runs = np.split(bad, np.flatnonzero(np.diff(bad) > 1) + 1) if len(bad) else []
+    for run in runs:
+        j0, j1 = run[0], run[-1]
+        a, b = nodes[j0], nodes[j1 + 1]
+        qs, rs, its, sts = _sequential_from_before(model, s, q, a, b, start)
+        q[a + 1:b + 1], residual[a + 1:b + 1] = qs[1:], rs[1:]
+        iterations[a + 1:b + 1], status[a + 1:b + 1] = its[1:], sts[1:]
+        sequential[a + 1:b + 1] = True
+        if j1 + 1 < last and not _same(qs[-1], qn[j1 + 1], model):
+            # the coarse continuation went elsewhere at this node: continue sequentially
+            qs, rs, its, sts = _sequential_from_before(model, s, q, b, S - 1, start)
+            q[b + 1:], residual[b + 1:], iterations[b + 1:], status[b + 1:] = qs[1:], rs[1:], its[1:], sts[1:]
+            sequential[b + 1:] = True
+            break
+    out.update(q=q, residual=residual, iterations=iterations, status=status, sequential=sequential)
+    return out
+
+
+def _hermite_T(q0, d0, q1, d1, t):
+    """Cubic Hermite on [0, 1], coordinates first: q0, q1 values and d0, d1 slopes per unit t,
+    each (n, k); t (k,). Returns (n, k)."""
+    t2 = t * t
+    t3 = t2 * t
+    h00 = 2 * t3 - 3 * t2 + 1
+    h10 = t3 - 2 * t2 + t
+    h01 = -2 * t3 + 3 * t2
+    h11 = t3 - t2
+    return h00 * q0 + h10 * d0 + h01 * q1 + h11 * d1
+
+
+def _colmax(a: np.ndarray) -> np.ndarray:
+    """Return ``a.max(axis=0)`` of a (m, k) array (NaN propagates) row by row: no strided reduce."""
+    out = a[0].copy()
+    for row in a[1:]:
+        np.maximum(out, row, out=out)
+    return out
+
+
+def _aligned(eng, qT, sT):
+    """kinematics.drivers_aligned on SoA arrays: every angle driver's vector along its angle."""
+    md = eng.model
+    X2 = eng.points(qT)
+    ok = np.ones(qT.shape[1], dtype=bool)
+    for j in np.flatnonzero(md.drv_angle):
+        d = X2[md.drv_b[j]] - X2[md.drv_a[j]]
+        ok &= d[0] * np.cos(sT[j]) + d[1] * np.sin(sT[j]) > 0
+    return ok
+
+
+def _newton_soa(eng, qT, sT, tol_abs, max_iter: int = NEWTON_ITERATIONS):
+    """Newton on a chunk from predictions qT (n_q, k); return (qT, residual, its, converged, E).
+
+    At most ``max_iter`` iterations (the scene's cap, if lower than NEWTON_ITERATIONS). E: the
+    Jacobian's entries at the returned positions (for the derivatives)."""
+    k = qT.shape[1]
+    its = np.zeros(k, dtype=np.int32)
+    res = np.full(k, np.inf)
+    E = None
+    step = np.full(k, np.inf)  # the last correction: Newton goes on while it is not tiny
+    small = 1e-8 * eng.model.size  # (quadratic convergence: the next one is at rounding level)
+    for it in range(max_iter + 1):
+        F = eng.phi(eng.points(qT), sT)
+        r = _colmax(np.abs(F)) if F.shape[0] else np.zeros(k)
+        res = r
+        keep = (r > tol_abs) | (step > small)  # NaN: not kept, not converged
+        keep &= np.isfinite(r)
+        if it == max_iter or not keep.any():
+            break
+        E = eng.entries_T(qT, sT)
+        dq = np.stack(eng.solve(E, list(-F)))
+        if keep.all():
+            qT += dq
+        else:
+            qT[:, keep] += dq[:, keep]
+        step = np.where(keep, _colmax(np.abs(dq)) if dq.shape[0] else 0.0, 0.0)
+        its[keep] += 1
+    return qT, res, its, res <= tol_abs, eng.entries_T(qT, sT)
+
+
+def _polish_soa(eng, q, s, ok, residual):
+    """One more Newton step at the steps ``ok`` (the sequential path stops at ``tol``, up to
+    ~1e-12 of the size away); kept where it lowers the residual."""
+    idx = np.flatnonzero(ok & np.isfinite(q).all(axis=1))
+    if not len(idx):
+        return q, residual
+    qT = np.ascontiguousarray(q[idx].T)
+    sT = np.ascontiguousarray(s[idx].T)
+    F = eng.phi(eng.points(qT), sT)
+    qn = qT + np.stack(eng.solve(eng.entries_T(qT, sT), list(-F)))
+    rn = np.abs(eng.phi(eng.points(qn), sT)).max(axis=0) if F.shape[0] else np.zeros(len(idx))
+    better = rn < np.abs(F).max(axis=0)
+    q, residual = q.copy(), residual.copy()
+    q[idx[better]] = qn.T[better]
+    residual[idx[better]] = rn[better]
+    return q, residual
+
+
+def _same(a, b, model) -> bool:
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return bool(np.isfinite(a).all() == np.isfinite(b).all())
+    return bool(np.abs(a - b).max() <= 1e-8 * model.size)
+
+
+def _sequential_from_before(model, s, q, a, b, start):
+    """Run the sequential continuation over steps a..b from the last assembled step at or before a.
+
+    ``start``: :func:`linkpipe.kinematics.start_state` at step 0 (its slope is the first
+    predictor when the run starts there)."""
+    prev = np.flatnonzero(np.isfinite(q[:a + 1]).all(axis=1))
+    p = prev[-1] if len(prev) else 0
+    slope = start[1] if p == 0 else None
+    qs, rs, its, sts = solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else None,
+                                           start_slope=slope)
+    return qs[a - p:], rs[a - p:], its[a - p:], sts[a - p:]
+
+
+def residuals(model: Model, X: np.ndarray, s: np.ndarray, chunk: int = CHUNK) -> np.ndarray:
+    """Return max |Phi| (S,) at positions X (S, n_points, 2), in cache-sized chunks."""
+    S = X.shape[0]
+    out = np.empty(S)
+    for lo in range(0, S, chunk):
+        hi = min(S, lo + chunk)
+        F = model.phi(X[lo:hi], s[lo:hi])
+        out[lo:hi] = np.abs(F).max(axis=1) if F.shape[1] else 0.0
+    return out
+
+
+def max_abs_phi(model: Model):
+    """Return ``f(points {moving p: (x (S,), y (S,))}, sT (nd, S), trig=None) -> (S,)``: max |Phi|.
+
+    The engine's in-place row accumulation when the model has an engine, else the dense
+    :func:`residuals` on the points put back into (S, n_points, 2).
+    """
+    eng = engine(model)
+    if eng is not None:
+        return eng.max_abs_phi
+    return lambda pts, sT, trig=None: residuals(model, _points_array(model, pts, sT.shape[1]), sT.T)
+
+
+def _points_array(model: Model, pts: dict, S: int) -> np.ndarray:
+    """Return positions (S, P, 2) from {moving point: (x (S,), y (S,))}."""
+    X = np.broadcast_to(model.start_position, (S, model.n_points, 2)).copy()
+    for p, (x, y) in pts.items():
+        X[:, p, 0] = x
+        X[:, p, 1] = y
+    return X
