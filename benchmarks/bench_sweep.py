@@ -120,8 +120,8 @@ def linkpipe_fast(model, theta):
 
     S = len(theta)
     out = batch.solve_sweep(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
-    assert out["method"] == "dyads"
-    return out["position"], out["velocity"], out["acceleration"]
+    assert out.method == "dyads"
+    return out.position, out.velocity, out.acceleration
 
 
 def linkpipe_newton(model, theta):
@@ -130,9 +130,9 @@ def linkpipe_newton(model, theta):
     S = len(theta)
     s, s_dot, s_ddot = theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1))
     out = batch.solve_sweep(model, s, s_dot, s_ddot, order=2)  # positions, as the pipeline runs them
-    assert out["method"] == "newton"
-    der = batch.derivatives(model, out["position"], s, s_dot, s_ddot, out["status"], True)
-    return out["position"], der["velocity"], der["acceleration"]
+    assert out.method == "newton"
+    der = batch.derivatives(model, out.position, s, s_dot, s_ddot, out.status, True)
+    return out.position, der["velocity"], der["acceleration"]
 
 
 def pylinkage_available() -> str:

@@ -110,17 +110,17 @@ def solve(scene: Scene | str, progress=None) -> Result:
     # closed-form dyads or the general Newton path, as [solver] method says (see kinematics.solve_sweep);
     # the dyad path also gives velocities and accelerations here
     order = 2 if stages.acceleration else 1 if stages.velocity else 0
-    k1 = kin.solve_sweep(model, s, s_dot, s_ddot, order)
-    X = k1["position"]
+    sweep = kin.solve_sweep(model, s, s_dot, s_ddot, order)
+    X = sweep.position
     link_angle = kin.link_angles_unwrapped(model, X)
     seconds["positions"] = _time.perf_counter() - t0
 
     tell("jacobian")
     t0 = _time.perf_counter()
     Xz = np.where(np.isfinite(X), X, 0.0)
-    der = kin.derivatives(model, Xz, s, s_dot, s_ddot, k1["status"], stages.acceleration,
-                            velocity=k1["velocity"], acceleration=k1["acceleration"],
-                            need_inverse=stages.forces)
+    der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
+                          velocity=sweep.velocity, acceleration=sweep.acceleration,
+                          need_inverse=stages.forces)
     kinematic_status = der["status"]
     seconds["jacobian"] = _time.perf_counter() - t0
     if scene.solver.derivatives == "finite_difference" and stages.velocity:
@@ -151,7 +151,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
     return Result(
         scene=scene, model=model, mobility=mobility, driver_value=value, time=time,
         time_note=time_note, position=X, link_angle=link_angle, status=status,
-        residual=k1["residual"], iterations=k1["iterations"], condition=der["condition"],
+        residual=sweep.residual, iterations=sweep.iterations, condition=der["condition"],
         velocity=velocity, acceleration=acceleration,
         link_angular_velocity=link_rates[0], link_angular_acceleration=link_rates[1],
         velocity_residual=der["velocity_residual"] if stages.velocity else None,
@@ -159,7 +159,7 @@ def solve(scene: Scene | str, progress=None) -> Result:
         forces=forces.variables if forces else None,
         force_coords=forces.coords if forces else {},
         seconds=seconds, message=message(status),
-        solver_method_used=k1["method"], solver_note=k1["note"])
+        solver_method_used=sweep.method, solver_note=sweep.note)
 
 
 def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration) -> dict:

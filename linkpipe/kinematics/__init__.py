@@ -10,6 +10,8 @@ dense solves, condition), :mod:`.derivatives` (velocities, accelerations, link r
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..errors import SceneError
@@ -20,72 +22,97 @@ from .vectorised import max_abs_phi, solve_newton
 from ..status import NO_ASSEMBLY, OK
 
 
-def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, order: int = 0):
-    """Solve a sweep's positions (and, on the dyad path, velocities/accelerations) by the scene's method.
+@dataclass(frozen=True)
+class Sweep:
+    """Stage 1's answer, step axis first: ``position`` (S, n_points, 2) NaN at failed steps;
+    ``residual`` (S,) max |Φ| after the solve; ``iterations`` (S,) Newton iterations;
+    ``status`` (S,) int8 (ok / no_assembly / not_converged: singular steps are found by the
+    derivative stage); ``method`` the path that ran ("dyads" or "newton"); ``note`` why (the
+    dyad chain, or why auto chose Newton); ``velocity``, ``acceleration`` (S, n_points, 2)
+    where the path computed them (the dyads), else None."""
 
-    ``[solver] method``: ``auto`` takes the closed-form dyads when the scene decomposes and
-    :func:`linkpipe.branch_check` finds that they follow Newton's branch, else the
-    general path; ``newton`` the general path (:func:`solve_newton`); ``dyads`` requires the
-    fast path (SceneError when the scene does not decompose). Returns a dict: position
-    (S, n_points, 2) NaN at failed steps, residual, iterations, status, method ("dyads" or
-    "newton"), note (why auto chose what it chose), and on the dyad path velocity and
-    acceleration (order >= 1, 2) or None.
-    """
+    position: np.ndarray
+    residual: np.ndarray
+    iterations: np.ndarray
+    status: np.ndarray
+    method: str
+    note: str
+    velocity: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
 
+
+def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
+    """The closed-form fast path: ``(Sweep, start)``, or ``(None, note)`` saying why the path
+    does not apply (auto then runs Newton; ``forced``, i.e. method = "dyads", raises
+    SceneError where the scene does not decompose and keeps the dyads' own branches)."""
     sc = model.scene.solver
-    method = sc.method
-    note = ""
-    S = s.shape[0]
-    start = None  # the start state, once assembled (the Newton path reuses it)
-    if method in ("auto", "dyads"):
-        plan = decompose(model)
-        if not plan.ok:
-            if method == "dyads":
-                raise SceneError(model.scene.path, "solver", "method",
-                                 f'method = "dyads" but the mechanism does not decompose into '
-                                 f"closed-form dyads: {plan.reason}",
-                                 'use method = "auto" (closed-form dyads where the scene '
-                                 'decomposes, else Newton) or "newton"')
-            note = f"auto: {plan.reason}; general Newton path"
-        elif method == "auto" and sc.jacobian != "analytic":
-            note = f"auto: jacobian = {sc.jacobian!r} asks for Newton; general Newton path"
-        else:
-            tol_abs = sc.tol * model.size
-            start = start_state(model, s[0], tol_abs, sc.max_iter)
-            q0, slope0 = start
-            set_branches(plan, model.positions(q0[None])[0], s[0])
-            if slope0 is not None and S > 1:
-                # a start on a dyad's singular shape (a change point) takes that dyad's sign a
-                # step along the path the drawing was carried on
-                q1 = q0 + slope0 @ (s[1] - s[0])
-                refine_branches(plan, model.positions(q0[None])[0], s[0],
-                                      model.positions(q1[None])[0], s[1])
-            sw = solve_chain(plan, s, s_dot, s_ddot, order=order, gaps=method == "auto",
-                             max_abs_phi=max_abs_phi(model))
-            if method == "dyads" or branch_check(plan, sw):
-                X = sw.position
-                residual = sw.residual
-                ok = sw.ok
-                bad = ok & ~(residual <= 10 * tol_abs)  # a redundant constraint not met
-                if bad.any():
-                    X[np.ix_(bad, model.moving)] = np.nan
-                    for arr in (sw.velocity, sw.acceleration):
-                        if arr is not None:
-                            arr[np.ix_(bad, model.moving)] = np.nan
-                status = np.where(ok & ~bad, OK, NO_ASSEMBLY).astype(np.int8)
-                return dict(position=X, residual=residual, iterations=np.zeros(S, dtype=np.int32),
-                            status=status, method="dyads", note=note or plan.describe(),
-                            velocity=sw.velocity, acceleration=sw.acceleration)
-            note = ("auto: a dyad passes near its singular configuration or cannot be assembled "
-                    "at some step; general Newton path")
+    chain = decompose(model)
+    if not chain.ok:
+        if forced:
+            raise SceneError(model.scene.path, "solver", "method",
+                             f'method = "dyads" but the mechanism does not decompose into '
+                             f"closed-form dyads: {chain.reason}",
+                             'use method = "auto" (closed-form dyads where the scene '
+                             'decomposes, else Newton) or "newton"')
+        return None, f"auto: {chain.reason}; general Newton path", None
+    if not forced and sc.jacobian != "analytic":
+        return None, f"auto: jacobian = {sc.jacobian!r} asks for Newton; general Newton path", None
+    tol_abs = sc.tol * model.size
+    start = start_state(model, s[0], tol_abs, sc.max_iter)
+    q0, slope0 = start
+    X0 = model.positions(q0[None])[0]
+    set_branches(chain, X0, s[0])
+    if slope0 is not None and s.shape[0] > 1:
+        # a start on a dyad's singular shape (a change point) takes that dyad's sign a step
+        # along the path the drawing was carried on
+        q1 = q0 + slope0 @ (s[1] - s[0])
+        refine_branches(chain, X0, s[0], model.positions(q1[None])[0], s[1])
+    sw = solve_chain(chain, s, s_dot, s_ddot, order=order, gaps=not forced,
+                     max_abs_phi=max_abs_phi(model))
+    if not (forced or branch_check(chain, sw)):
+        return None, ("auto: a dyad passes near its singular configuration or cannot be "
+                      "assembled at some step; general Newton path"), start
+    bad = sw.ok & ~(sw.residual <= 10 * tol_abs)  # a redundant constraint not met
+    for arr in (sw.position, sw.velocity, sw.acceleration):
+        if arr is not None and bad.any():
+            arr[np.ix_(bad, model.moving)] = np.nan
+    status = np.where(sw.ok & ~bad, OK, NO_ASSEMBLY).astype(np.int8)
+    return Sweep(sw.position, sw.residual, np.zeros(s.shape[0], dtype=np.int32), status,
+                 "dyads", chain.describe(), sw.velocity, sw.acceleration), "", start
+
+
+def solve_with_newton(model: Model, s, note: str = "", start=None) -> Sweep:
+    """The general path (coarse continuation + batched Newton; step by step for short
+    sweeps): positions only, the derivative stage gives velocities and accelerations."""
     out = solve_newton(model, s, start=start)
     q = out["q"]
-    fin = np.isfinite(q).all(axis=1)
     X = model.positions(np.where(np.isfinite(q), q, 0.0))
-    X[~fin] = np.nan
+    X[~np.isfinite(q).all(axis=1)] = np.nan
     X[:, model.fixed] = model.start_position[model.fixed]
-    return dict(position=X, residual=out["residual"], iterations=out["iterations"],
-                status=out["status"], method="newton", note=note, velocity=None, acceleration=None)
+    return Sweep(X, out["residual"], out["iterations"], out["status"], "newton", note)
+
+
+#: the paths of stage 1, by the name ``[solver] method`` gives them ("auto" chooses)
+METHODS = {"dyads": solve_with_dyads, "newton": solve_with_newton}
+
+
+def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,
+                order: int = 0) -> Sweep:
+    """Solve a sweep by the scene's ``[solver] method``; driver values and rates ``s``,
+    ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units; ``order`` the highest derivative
+    the scene needs (the dyads compute them on the way).
+
+    ``auto`` takes the closed-form dyads when the scene decomposes and :func:`branch_check`
+    finds that they follow Newton's branch, else the general path, with a note saying why;
+    ``newton`` the general path; ``dyads`` requires the fast path.
+    """
+    method = model.scene.solver.method
+    note, start = "", None
+    if method in ("auto", "dyads"):
+        sweep, note, start = solve_with_dyads(model, s, s_dot, s_ddot, order, method == "dyads")
+        if sweep is not None:
+            return sweep
+    return solve_with_newton(model, s, note, start)
 
 
 from .derivatives import (dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
