@@ -277,7 +277,7 @@ def test_ground_reactions_balance_the_mechanism(tmp_path):
     X, A = r.position, r.acceleration
     names = r.point_names
     total = np.zeros((r.n_steps, 2))
-    from linkpipe.forces import _center, center_frame
+    from linkpipe.forces.applied import body_point as _center, center_frame
 
     for m in r.scene.masses:
         ia, ib, u, v, L = center_frame(r.model, m.link, m.center)
@@ -306,7 +306,7 @@ def test_pin_forces_satisfy_each_body_newton_euler(tmp_path):
     """Pin forces on each body, with its weight, couples and the actuator torque, give m a_G
     and I alpha about G (Newton-Euler per body: an independent check of the multipliers)."""
     r = linkpipe.solve(scene_from(EVERY_EFFECT, tmp_path))
-    from linkpipe.forces import _center, center_frame
+    from linkpipe.forces.applied import body_point as _center, center_frame
 
     F = r.forces["joint_force"][1]
     joints = _joint_names(r)
@@ -336,7 +336,7 @@ def test_pin_forces_satisfy_each_body_newton_euler(tmp_path):
 
 
 def _joint_names(r):
-    from linkpipe.forces import joints
+    from linkpipe.forces.lagrange import joints
 
     return [f"{r.point_names[p]}@{r.scene.links[li].name}" for li, p in joints(r.model)]
 

@@ -154,7 +154,7 @@ def test_plain_parallelogram_has_no_flags():
 def test_flagged_rows_are_the_left_null_space_and_lambda_is_minimum_norm():
     """Independently of force_stage: the self-stress is J's left null vector; the multipliers
     J^T lambda = Q with the least norm have no component along it."""
-    from linkpipe.forces import undetermined_rows
+    from linkpipe.forces.lagrange import undetermined_rows
 
     scene = linkpipe.load_scene(str(CONFIG))
     model = build_model(scene)

@@ -1,0 +1,88 @@
+"""Applied forces as arrays: where a body point's force lands on the body's basic points, link
+couples as force pairs, and the frame of a mass centre. Everything is vectorised over steps:
+point forces ``(S, n_points, 2)``, link couples ``(S, n_links)``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import Model, _R90
+
+
+@dataclass(frozen=True)
+class Applied:
+    """One effect's applied loads: ``point_forces`` (S, n_points, 2) and ``couples``
+    (S, n_links), CCW positive."""
+
+    point_forces: np.ndarray
+    couples: np.ndarray
+
+
+def link_index(model: Model, name: str) -> int:
+    return [link.name for link in model.scene.links].index(name)
+
+
+def center_frame(model: Model, link_name: str, center) -> tuple[int, int, float, float, float]:
+    """Return (ia, ib, u, v, L) of a mass centre given as a point name or local (u, v)."""
+    link = model.scene.links[link_index(model, link_name)]
+    names = model.point_names
+    ia, ib = names.index(link.points[0]), names.index(link.points[1])
+    X0 = model.start_position
+    L0 = float(np.hypot(*(X0[ib] - X0[ia])))
+    L = float(link.length) if link.length is not None else L0
+    if isinstance(center, str):
+        ip = names.index(center)
+        if ip == ia:
+            return ia, ib, 0.0, 0.0, L
+        if ip == ib:
+            return ia, ib, L, 0.0, L
+        hit = np.flatnonzero((model.loc_a == ia) & (model.loc_b == ib) & (model.loc_p == ip))
+        if len(hit):
+            return ia, ib, float(model.loc_u[hit[0]]), float(model.loc_v[hit[0]]), L
+        e = (X0[ib] - X0[ia]) / L0
+        r = X0[ip] - X0[ia]
+        return ia, ib, float(r @ e), float(r @ (_R90 @ e)), L
+    u, v = center
+    return ia, ib, float(u), float(v), L
+
+
+def body_point(X, ia, ib, u, v, L):
+    """Return a body point ``a + (u I + v R)(b - a)/L`` for stacks (S, P, 2) -> (S, 2)."""
+    d = X[:, ib] - X[:, ia]
+    return X[:, ia] + (u * d + v * perp(d)) / L
+
+
+def perp(d):
+    """Return d turned +90 degrees, for stacks (..., 2) (d @ _R90.T without a matmul)."""
+    return np.stack([-d[..., 1], d[..., 0]], axis=-1)
+
+
+def scatter_pairs(point_forces, ia, ib, f):
+    """point_forces[:, ia[k]] += f[:, k] and [:, ib[k]] -= f[:, k] for each k, in place."""
+    for k in range(f.shape[1]):
+        point_forces[:, ia[k]] += f[:, k]
+        point_forces[:, ib[k]] -= f[:, k]
+
+
+def add_at_body_point(point_forces, force, ia, ib, u, v, L):
+    """Distribute a force at body point (u, v) onto the basic points: N_G^T f, in place."""
+    force = np.broadcast_to(force, (point_forces.shape[0], 2))
+    C = (u * np.eye(2) + v * _R90) / L  # r_G = (I - C) r_a + C r_b
+    # force @ M written out: BLAS' threaded matmul of (S, 2) x (2, 2) is slow on a busy machine
+    for idx, M in ((ia, np.eye(2) - C), (ib, C)):
+        point_forces[:, idx, 0] += force[:, 0] * M[0, 0] + force[:, 1] * M[1, 0]
+        point_forces[:, idx, 1] += force[:, 0] * M[0, 1] + force[:, 1] * M[1, 1]
+
+
+def with_couples_as_pairs(model: Model, point_forces, couples, X):
+    """Return forces at every point (S, P, 2): point forces plus link couples as force pairs."""
+    out = point_forces.copy()
+    d = X[:, model.link_b] - X[:, model.link_a]
+    n2 = np.einsum("slj,slj->sl", d, d)
+    # a couple tau on a link = forces tau R d / L^2 on b and -tau R d / L^2 on a (failed
+    # steps arrive zero-filled: 0 / 0 there, NaN, masked later like every failed step)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = (couples / n2)[..., None] * perp(d)
+    scatter_pairs(out, model.link_b, model.link_a, f)
+    return out

@@ -1,0 +1,198 @@
+"""The effects a scene may name, one small function each, and their registry :data:`EFFECTS`.
+
+Each effect takes the :class:`Context` of a solved sweep and returns an :class:`Effect`: the
+loads it applies (for virtual work), what it adds to the Lagrange side ``Q - M qdd`` where that
+differs (inertia enters there through the mass matrix), what it adds to each body's own
+``M_k Xdd - Q_k`` (for the pin forces) and the output variables it stores. Adding an effect or a
+spring kind is one function here and one entry in :data:`EFFECTS`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model import Model
+from ..result import Motion
+from .applied import Applied, add_at_body_point, body_point, center_frame, link_index, scatter_pairs
+
+
+@dataclass(frozen=True)
+class Context:
+    """A solved sweep as the effects see it: positions, velocities and accelerations
+    (S, n_points, 2; zeros where the scene needs none), the scene's units and effects, and
+    each mass with the frame of its centre ``(ia, ib, u, v, L)``."""
+
+    model: Model
+    motion: Motion
+    units: dict
+    effects: frozenset
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    masses: tuple
+
+    @classmethod
+    def of(cls, model: Model, motion: Motion, units: dict) -> "Context":
+        X = motion.position
+        zeros = np.zeros_like(X)
+        masses = tuple((m, center_frame(model, m.link, m.center)) for m in model.scene.masses)
+        return cls(model, motion, units, frozenset(model.scene.effects), X,
+                   motion.velocity if motion.velocity is not None else zeros,
+                   motion.acceleration if motion.acceleration is not None else zeros, masses)
+
+    @property
+    def n_steps(self) -> int:
+        return self.position.shape[0]
+
+    def zeros_points(self) -> np.ndarray:
+        return np.zeros((self.n_steps, self.model.n_points, 2))
+
+    def zeros_links(self) -> np.ndarray:
+        return np.zeros((self.n_steps, len(self.model.scene.links)))
+
+
+@dataclass
+class Effect:
+    """What one effect contributes. ``lagrange``: its point forces on the Lagrange side when
+    they differ from ``applied`` (None: the applied loads themselves); ``bodies``: {link index:
+    (S, P, 2)} added to that body's ``M_k Xdd - Q_k``; ``variables``: output variables."""
+
+    applied: Applied
+    lagrange: np.ndarray | None = None
+    bodies: dict = field(default_factory=dict)
+    variables: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SpringGeometry:
+    """Every spring's end points, length (S, n_springs), unit vector a->b (S, n_springs, 2),
+    free length and preload (n_springs,) and stiffness."""
+
+    ia: np.ndarray
+    ib: np.ndarray
+    length: np.ndarray
+    unit: np.ndarray
+    free_length: np.ndarray
+    preload: np.ndarray
+    k: np.ndarray
+
+    @classmethod
+    def of(cls, ctx: Context) -> "SpringGeometry":
+        model, springs = ctx.model, ctx.model.scene.springs
+        names = model.point_names
+        ia = np.array([names.index(sp.between[0]) for sp in springs])
+        ib = np.array([names.index(sp.between[1]) for sp in springs])
+        d = ctx.position[:, ib] - ctx.position[:, ia]
+        length = np.hypot(d[..., 0], d[..., 1])
+        start_len = np.hypot(*(model.start_position[ib] - model.start_position[ia]).T)
+        free = np.array([sp.free_length if sp.free_length is not None else start_len[i]
+                         for i, sp in enumerate(springs)])
+        preload = np.array([0.0 if sp.free_length is not None else sp.preload for sp in springs])
+        unit = d / np.where(length > 0, length, np.nan)[..., None]
+        return cls(ia, ib, length, unit, free, preload, np.array([sp.k for sp in springs], dtype=float))
+
+    def tension(self) -> np.ndarray:
+        """(S, n_springs) the elastic tension (positive pulls the ends together)."""
+        return self.preload + self.k * (self.length - self.free_length)
+
+    def damping_force(self, ctx: Context) -> np.ndarray:
+        """(S, n_springs) the damper's force, c times the rate of lengthening."""
+        c = np.array([sp.damping for sp in ctx.model.scene.springs], dtype=float)
+        rate = np.einsum("skj,skj->sk", ctx.velocity[:, self.ib] - ctx.velocity[:, self.ia], self.unit)
+        return c * rate
+
+    def as_point_forces(self, ctx: Context, force: np.ndarray) -> Applied:
+        point_forces = ctx.zeros_points()
+        scatter_pairs(point_forces, self.ia, self.ib, force[..., None] * self.unit)
+        return Applied(point_forces, ctx.zeros_links())
+
+
+def springs(ctx: Context) -> Effect:
+    """Linear springs: tension ``k (length - free_length)`` (or the preload at the start)."""
+    geo = SpringGeometry.of(ctx)
+    F, L = ctx.units["force"], ctx.units["length"]
+    tension = geo.tension()
+    stretch = geo.length - geo.free_length
+    energy = geo.preload * stretch + 0.5 * geo.k * stretch ** 2
+    unloaded = np.where(geo.k > 0, geo.free_length - geo.preload / np.where(geo.k > 0, geo.k, 1),
+                        geo.free_length)
+    total = tension + (geo.damping_force(ctx) if "damping" in ctx.effects else 0.0)
+    return Effect(geo.as_point_forces(ctx, tension), variables={
+        "spring_length": (("step", "spring"), geo.length, L),
+        "spring_extension": (("step", "spring"), geo.length - unloaded, L),
+        "spring_energy": (("step", "spring"), energy, f"{F}*{L}"),
+        "spring_force": (("step", "spring"), total, F)})
+
+
+def damping(ctx: Context) -> Effect:
+    """Dampers beside the springs: force ``damping * d(length)/dt`` along the spring."""
+    geo = SpringGeometry.of(ctx)
+    force = geo.damping_force(ctx)
+    return Effect(geo.as_point_forces(ctx, force), variables={
+        "spring_damping_force": (("step", "spring"), force, ctx.units["force"])})
+
+
+def gravity(ctx: Context) -> Effect:
+    """Each mass's weight ``m g`` at its centre; its potential energy."""
+    model, g = ctx.model, np.asarray(ctx.model.scene.gravity, dtype=float)
+    bodies = {}
+    for m, frame in ctx.masses:
+        li = link_index(model, m.link)
+        bodies.setdefault(li, ctx.zeros_points())
+        add_at_body_point(bodies[li], -m.mass * g, *frame)  # -Q_k: the weight on the body
+    potential = np.zeros(ctx.n_steps)
+    for m, frame in ctx.masses:
+        G = body_point(ctx.position, *frame)
+        potential -= m.mass * (G[:, 0] * g[0] + G[:, 1] * g[1])
+    return Effect(Applied(-sum(bodies.values()), ctx.zeros_links()), bodies=bodies, variables={
+        "gravity_energy": (("step",), potential, f"{ctx.units['force']}*{ctx.units['length']}")})
+
+
+def loads(ctx: Context) -> Effect:
+    """Constant point forces (global frame) and couples on links (CCW positive)."""
+    model = ctx.model
+    point_forces, couples = ctx.zeros_points(), ctx.zeros_links()
+    for ld in model.scene.loads:
+        if ld.point is not None:
+            point_forces[:, model.point_names.index(ld.point)] += np.asarray(ld.force, dtype=float)
+        else:
+            couples[:, link_index(model, ld.link)] += float(ld.torque)
+    return Effect(Applied(point_forces, couples))
+
+
+def inertia(ctx: Context) -> Effect:
+    """d'Alembert forces ``-m a_G`` at each centre and ``-I alpha`` on its link (virtual work);
+    on the Lagrange side ``-M qdd`` with each body's constant natural-coordinate mass matrix."""
+    model, A = ctx.model, ctx.acceleration
+    point_forces, couples, m_qdd = ctx.zeros_points(), ctx.zeros_links(), ctx.zeros_points()
+    bodies = {}
+    for m, (ia, ib, u, v, L) in ctx.masses:
+        a_center = body_point(A, ia, ib, u, v, L)
+        add_at_body_point(point_forces, -m.mass * a_center, ia, ib, u, v, L)
+        li = link_index(model, m.link)
+        couples[:, li] += -m.inertia * ctx.motion.link_angular_acceleration[:, li]
+        body_m_qdd = ctx.zeros_points()  # M_k Xdd of this body
+        add_at_body_point(body_m_qdd, m.mass * a_center, ia, ib, u, v, L)
+        dd = A[:, ib] - A[:, ia]
+        body_m_qdd[:, ib] += m.inertia / L**2 * dd
+        body_m_qdd[:, ia] -= m.inertia / L**2 * dd
+        m_qdd += body_m_qdd
+        bodies.setdefault(li, ctx.zeros_points())
+        bodies[li] += body_m_qdd
+    return Effect(Applied(point_forces, couples), lagrange=-m_qdd, bodies=bodies)
+
+
+def applies(name: str, ctx: Context) -> bool:
+    """Whether the named effect has anything to act on in this scene."""
+    scene = ctx.model.scene
+    if name in ("springs", "damping"):
+        return bool(scene.springs)
+    if name in ("gravity", "inertia"):
+        return bool(scene.masses)
+    return bool(scene.loads)
+
+
+#: the effects, in the order they are summed and reported (HDF5 ``effect`` dimension)
+EFFECTS = {"springs": springs, "damping": damping, "gravity": gravity, "loads": loads,
+           "inertia": inertia}

@@ -1,0 +1,157 @@
+"""The Lagrange multipliers of ``Φqᵀλ = Q − M·q̈`` (an independent solve beside virtual work)
+and what they give: the input force again, link and slider forces, ground reactions and the
+force of every pin on every body."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..kinematics.linalg import engine
+from ..model import Model
+
+CHUNK = 8192  # steps per block of solves
+
+
+def multipliers(model: Model, Xz, s, generalized_q, ok):
+    """Return (λ (S, n_rows) NaN where not ok, undetermined (n_rows,) bool).
+
+    Square Jacobians go through the sparse engine's transposed block solve; redundant scenes
+    (more rows than unknowns) take the minimum-norm solution, and the rows a self-stress can
+    change are flagged ``undetermined``."""
+    n_steps = Xz.shape[0]
+    lam = np.full((n_steps, model.n_rows), np.nan)
+    undetermined = np.zeros(model.n_rows, dtype=bool)
+    if not ok.any():
+        return lam, undetermined
+    eng = engine(model)
+    if eng is not None:
+        idx = np.flatnonzero(ok)
+        for lo in range(0, len(idx), CHUNK):
+            ii = idx[lo:lo + CHUNK]
+            E = eng.entries(model.q_of(Xz[ii]), s[ii])
+            rhs = list(np.ascontiguousarray(generalized_q[ii].T))
+            lam[ii] = np.stack(eng.solve_transpose(E, rhs), axis=1)
+        return lam, undetermined
+    J = model.jacobian(Xz[ok], s[ok])
+    JT = np.swapaxes(J, 1, 2)
+    if J.shape[1] == J.shape[2]:
+        lam[ok] = np.linalg.solve(JT, generalized_q[ok][..., None])[..., 0]
+    else:
+        lam[ok] = np.einsum("sij,sj->si", np.linalg.pinv(JT, rcond=1e-12), generalized_q[ok])
+    return lam, undetermined_rows(J)
+
+
+def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:
+    """Return (n_rows,) True for multipliers that redundant constraints leave undetermined.
+
+    ``J`` (S, n_rows, n_q) at solved (not singular) steps. With more rows than columns the
+    left null space of J (the last ``n_rows - n_q`` left singular vectors) holds self-stresses:
+    adding any of them to ``lambda`` still solves ``J^T lambda = Q``. A row with a component in
+    it at any step is not unique there; the reported value is the minimum-norm choice.
+    """
+    S, m, n = J.shape
+    if m <= n or S == 0:
+        return np.zeros(m, dtype=bool)
+    U = np.linalg.svd(J)[0]  # (S, m, m)
+    return np.abs(U[:, :, n:]).max(axis=(0, 2)) > tol
+
+
+def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict]:
+    """Return (variables, coords): ``link_force`` (tension positive, from each link's distance
+    row), ``slider_force`` (the guide's normal force) and, under redundancy, which are unique."""
+    scene, force_unit = model.scene, units["force"]
+    n_links = len(scene.links)
+    n_dist = len(model.dist_a)
+    row_of_link, r = {}, 0
+    for li in range(n_links):
+        if r < n_dist and model.dist_a[r] == model.link_a[li] and model.dist_b[r] == model.link_b[li]:
+            row_of_link[li] = r
+            r += 1
+    link_force = np.full((lam.shape[0], n_links), np.nan)
+    for li, r in row_of_link.items():
+        link_force[:, li] = lam[:, r]
+    out, coords = {"link_force": (("step", "link"), link_force, force_unit)}, {}
+    if undetermined.any():  # redundant constraints: the minimum-norm choice, not the answer
+        unique = np.ones(n_links, dtype=np.int8)
+        for li, r in row_of_link.items():
+            unique[li] = 0 if undetermined[r] else 1
+        out["link_force_unique"] = (("link",), unique, "1")
+    if not scene.sliders:
+        return out, coords
+    first = n_dist + 2 * len(model.loc_a)
+    fixed_i = [i for i, x in enumerate(scene.sliders) if not x.moving]
+    moving_i = [i for i, x in enumerate(scene.sliders) if x.moving]
+    rows = [first + k for k in range(len(fixed_i) + len(moving_i))]  # fixed guides' rows first
+    slider_force = np.full((lam.shape[0], len(scene.sliders)), np.nan)
+    for i, r in zip(fixed_i + moving_i, rows):
+        slider_force[:, i] = -lam[:, r]
+    out["slider_force"] = (("step", "slider"), slider_force, force_unit)
+    if undetermined.any():
+        unique = np.ones(len(scene.sliders), dtype=np.int8)
+        for i, r in zip(fixed_i + moving_i, rows):
+            unique[i] = 0 if undetermined[r] else 1
+        out["slider_force_unique"] = (("slider",), unique, "1")
+    coords["slider"] = [x.name for x in scene.sliders]
+    return out, coords
+
+
+def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
+    """Return ground reactions (S, n_fixed, 2) and pin forces on bodies (S, n_joints, 2).
+
+    Ground: a fixed point is a coordinate held by one more constraint; its multiplier mu follows
+    from that coordinate's row of the equations of motion, ``-mu = Phi_X^T lambda - (Q - M Xdd)``
+    (``point_forces`` (S, P, 2) holds ``Q - M Xdd`` at every point, fixed ones included).
+    Pins: the force the pin at point P exerts on body k is ``(M_k Xdd - Q_k)_P + sum over the
+    body's own rows of lambda_r dPhi_r/dX_P`` (``bodies``: {link: M_k Xdd - Q_k at the points}),
+    for the pairs of :func:`joints`. NaN at steps that are not ok.
+    """
+    fixed = np.flatnonzero(model.fixed)
+    pairs = joints(model)
+    row_link = body_rows(model)
+    S = X.shape[0]
+    R = np.full((S, len(fixed), 2), np.nan)
+    F = np.full((S, len(pairs), 2), np.nan)
+    idx = np.flatnonzero(ok)
+    rows_of = {li: np.flatnonzero(row_link == li) for li in sorted({li for li, _ in pairs})}
+    for lo in range(0, len(idx), CHUNK):
+        ii = idx[lo:lo + CHUNK]
+        Jp = model.jacobian_points(X[ii], s[ii])  # (s, rows, P, 2)
+        if len(fixed):
+            R[ii] = np.einsum("sr,srfj->sfj", lam[ii], Jp[:, :, fixed]) - point_forces[ii][:, fixed]
+        for li, rs in rows_of.items():
+            own = np.einsum("sr,srpj->spj", lam[ii][:, rs], Jp[:, rs])
+            if li in bodies:
+                own = own + bodies[li][ii]
+            for k, (lj, p) in enumerate(pairs):
+                if lj == li:
+                    F[ii, k] = own[:, p]
+    return R, F
+
+
+def body_rows(model: Model) -> np.ndarray:
+    """Return (n_rows,) the link index of each body row, -1 elsewhere.
+
+    Body rows: each link's distance and local rows, and an angle driver whose two points lie on
+    one link (its multiplier is the actuator's couple on that body, reacted by the ground).
+    Slider rows and coordinate drivers act on points (pins), not on a body.
+    """
+    out = np.full(model.n_rows, -1, dtype=np.intp)
+    nd = len(model.dist_a)
+    out[:nd] = model.dist_link
+    out[nd:nd + 2 * len(model.loc_a)] = np.repeat(model.loc_link, 2)
+    names = model.point_names
+    with_rows = set(out[out >= 0].tolist())
+    for j in np.flatnonzero(model.drv_angle):
+        ends = {names[model.drv_a[j]], names[model.drv_b[j]]}
+        for li, link in enumerate(model.scene.links):
+            if li in with_rows and ends <= set(link.points):
+                out[model.n_constraints + j] = li
+                break
+    return out
+
+
+def joints(model: Model) -> list[tuple[int, int]]:
+    """Return the (link index, point index) pairs of every point of every link with rows."""
+    names = model.point_names
+    has_rows = set(body_rows(model).tolist())
+    return [(li, names.index(p)) for li, link in enumerate(model.scene.links) if li in has_rows
+            for p in link.points]

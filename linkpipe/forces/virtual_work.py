@@ -1,0 +1,69 @@
+"""The input force by virtual work: influence coefficients ``dq/ds`` of the solved sweep, the
+generalized force of every effect, its power, and the input along the actuator's direction."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model import Model
+from ..status import NO_LEVERAGE, OK
+
+LEVERAGE_RTOL = 1e-9  # |n . dr_H/ds| below this times the mechanism size: no leverage
+
+
+@dataclass(frozen=True)
+class Influence:
+    """How the mechanism moves per unit driver value, at every step: ``points`` (S, n_points,
+    2, n_drivers) = dX/ds (zero at fixed points), ``link_angles`` (S, n_links, n_drivers) =
+    dtheta/ds, ``phi_s`` (S, n_drivers) = dPhi_driver/ds."""
+
+    points: np.ndarray
+    link_angles: np.ndarray
+    phi_s: np.ndarray
+
+    @classmethod
+    def of(cls, model: Model, X, Xz, s, jacobian_inverse) -> "Influence":
+        """``K = dq/ds = -J^-1 Phi_s`` over the driver rows (defined at rate 0)."""
+        n_steps, n_drivers = X.shape[0], model.n_drivers
+        phi_s = model.phi_s(Xz, s)
+        dq_ds = -jacobian_inverse[:, :, model.driver_rows] * phi_s[:, None, :]  # (S, n_q, nd)
+        points = np.zeros((n_steps, model.n_points, 2, n_drivers))
+        points[:, model.moving] = dq_ds.reshape(n_steps, -1, 2, n_drivers)
+        d = X[:, model.link_b] - X[:, model.link_a]  # dtheta/ds = cross(d, dd/ds) / L^2
+        dd = points[:, model.link_b] - points[:, model.link_a]
+        link_angles = ((d[..., 0, None] * dd[..., 1, :] - d[..., 1, None] * dd[..., 0, :])
+                       / np.einsum("slj,slj->sl", d, d)[..., None])
+        return cls(points, link_angles, phi_s)
+
+    def generalized(self, applied) -> np.ndarray:
+        """(S, n_drivers) the work of ``applied`` loads per unit driver value: Q . dq/ds."""
+        return (np.einsum("spj,spjd->sd", applied.point_forces, self.points)
+                + np.einsum("sl,sld->sd", applied.couples, self.link_angles))
+
+
+def along_input_directions(model: Model, influence: Influence, forces: list, status, units: dict):
+    """Divide each driver's generalized forces by its input point's leverage ``n . dr_H/ds``
+    where the scene gives ``input``; a step where that leverage vanishes gets NO_LEVERAGE (and
+    NaN); any step not ok gets NaN. Returns (status, unit of the input force)."""
+    force_unit, length_unit = units["force"], units["length"]
+    status = status.copy()
+    unit_by_driver = []
+    for j, driver in enumerate(model.scene.drivers):
+        if driver.input is None:
+            unit_by_driver.append(f"{force_unit}*{length_unit}" if driver.kind == "angle" else force_unit)
+            continue
+        n = np.asarray(driver.input.direction, dtype=float)
+        n = n / np.hypot(*n)
+        ip = model.point_names.index(driver.input.point)
+        leverage = influence.points[:, ip, 0, j] * n[0] + influence.points[:, ip, 1, j] * n[1]
+        scale = model.size if driver.kind == "angle" else 1.0  # length/rad, or length/length
+        flat = np.abs(leverage) < LEVERAGE_RTOL * scale
+        status[flat & (status == OK)] = NO_LEVERAGE
+        safe = np.where(flat, np.nan, leverage)
+        for force in forces:
+            force[:, j] = force[:, j] / safe
+        unit_by_driver.append(force_unit)
+    for force in forces:
+        force[status != OK] = np.nan
+    return status, unit_by_driver[0] if len(set(unit_by_driver)) == 1 else "mixed"
