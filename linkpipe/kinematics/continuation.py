@@ -4,6 +4,8 @@ assembly branch it starts on. A step that cannot be solved gets NaN and a status
 goes on."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..model import Model
@@ -41,221 +43,305 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     is reported as not_converged, never finished by other iterations.
     """
     sc = model.scene.solver
-    tol = sc.tol if tol is None else tol
-    max_iter = sc.max_iter if max_iter is None else max_iter
-    predictor = sc.predictor if predictor is None else predictor
-    jacobian = sc.jacobian if jacobian is None else jacobian
-    tol_abs = tol * model.size
-    S = s.shape[0]
-    nq = model.n_q
-    q = np.full((S, nq), np.nan)
-    residual = np.full(S, np.nan)
-    iterations = np.zeros(S, dtype=np.int32)
-    status = np.zeros(S, dtype=np.int8)
-
+    run = _Continuation(model, sc.tol if tol is None else tol,
+                        sc.max_iter if max_iter is None else max_iter,
+                        sc.predictor if predictor is None else predictor,
+                        sc.jacobian if jacobian is None else jacobian, subdivide)
     if q_start is None:
-        q_start, start_slope = start_state(model, s[0], tol_abs, max_iter)
-    last_q = q_start
-    last_s = s[0]
-    # dq/ds along the sweep (n_q, nd); without a predictor the start slope is not used either
-    # (a singular start is then left by trying either side, below)
-    last_dq = start_slope if predictor != "none" else None
-    last_d2q = None
-    rcond = model.scene.solver.singular_rcond
-    square = model.n_rows == nq
-    # one-step kernels: the same Newton, Phi and checks with less overhead per step
-    # (the finite-difference Jacobian knob changes Newton's iteration matrix only: the condition
-    # and the slopes below use the analytic one either way)
-    fast = _step_kernels(model) if nq else None
-    last_sign = 0.0  # sign of det(Phi_q) at the last regular step: the assembly mode
-    gap = False  # a failed step since the last assembled one
-    mode_pending = False  # a failed step since the last regular one: its mode to be kept
-    gap_shape = None  # least-squares shape of the last failed step
-    for i in range(S):
-        ds = s[i] - last_s
-        guess = last_q.copy()
-        if predictor != "none" and last_dq is not None:
-            guess += last_dq @ ds
-            if predictor == "second" and last_d2q is not None:
-                guess += 0.5 * np.einsum("qij,i,j->q", last_d2q, ds, ds)
-        if last_dq is None:
-            guess = aim_drivers(model, guess, s[i])
-        it_lm = 0
-        if gap and nq:
-            # after a failed step most steps fail too: damped least squares, which stops as soon
-            # as the residual stops falling, decides first (Newton only polishes a root it finds).
-            # It starts from the last assembled shape and, failing that, from the previous
-            # step's least-squares shape, which moves on through the gap and may become a root
-            # where the sweep re-enters the range (either can sit in a local minimum alone)
-            q_lm, r_lm, it_lm = _lm_root(model, guess, s[i], tol_abs)
-            if not r_lm <= 10 * tol_abs and gap_shape is not None:
-                q2, r2, it2 = _lm_root(model, aim_drivers(model, gap_shape, s[i]), s[i], tol_abs)
-                it_lm += it2
-                if r2 < r_lm or not np.all(np.isfinite(q_lm)):
-                    q_lm, r_lm = q2, r2
-            if np.all(np.isfinite(q_lm)):
-                gap_shape = q_lm
-            if not r_lm <= 10 * tol_abs:
-                residual[i], iterations[i], status[i] = r_lm, it_lm, NO_ASSEMBLY
-                continue
-            guess = q_lm
-        conv = np.zeros(1, dtype=bool)
-        iterations[i] = it_lm
-        if last_dq is None and not gap and nq and np.any(s[i] != last_s):
-            # leaving a singular shape without a slope (a start at a dead centre or change
-            # point): which side Newton takes from it is up to rounding, so start on either side
-            # of it instead, the side nearer the start configuration as written first
-            Jg = model.jacobian(model.positions(last_q[None]), s[i][None])
-            if not jacobian_condition(Jg)[0] * rcond < 1.0:
-                v, roots = _null_line_roots(model, last_q[None], s[i])
-                written = model.q_of(model.start_position[None])[0]
-                for t in sorted(roots, key=lambda t: np.abs(last_q + t * v - written).max()):
-                    qc, res, itc, convc = newton(model, (last_q + t * v)[None], s[i][None], tol_abs,
-                                                 max_iter, jacobian)
-                    iterations[i] += itc[0]
-                    residual[i] = res[0]
-                    if convc[0] and drivers_aligned(model, qc, s[i][None])[0]:
-                        qi, conv = qc, convc
-                        break
-        capped = False  # Newton reached max_iter while converging (see _converging_at_cap)
-        if not conv[0]:
-            if fast is not None:
-                qi, res, it, conv = fast.newton(guess, s[i], tol_abs, max_iter, jacobian)
-            else:
-                qi, res, it, conv = newton(model, guess[None], s[i][None], tol_abs, max_iter, jacobian)
-            residual[i] = res[0]
-            iterations[i] += it[0]
-            capped = _converging_at_cap(model, fast, guess, s[i], it[0], res[0], conv[0], max_iter)
-            if conv[0] and not (fast.aligned(qi[0], s[i]) if fast is not None
-                                else drivers_aligned(model, qi, s[i][None])[0]):
-                # the angle constraint's other root (vector pointing backwards): not this step's
-                # mechanism; retry with the driven point aimed along the driven direction
-                qi, res, it2, conv = newton(model, aim_drivers(model, guess, s[i])[None],
-                                            s[i][None], tol_abs, max_iter, jacobian)
-                iterations[i] += it2[0]
-                residual[i] = res[0]
-                conv = conv & drivers_aligned(model, qi, s[i][None])
-                capped = _converging_at_cap(model, fast, aim_drivers(model, guess, s[i]), s[i],
-                                            it2[0], res[0], conv[0], max_iter)
-        lm_residual = None
-        if not conv[0] and nq and not capped:
-            # Newton gave up (it stalled, failed, or wandered to the cap): slow or wandering at
-            # a singular root, or no root at all. Damped least squares from the same guess tells
-            # which, and reaches a singular root. A Newton run that reached max_iter while
-            # converging is not rescued this way: the step is not_converged, as max_iter says.
-            q_lm, lm_residual, it_lm = _lm_root(model, guess, s[i], tol_abs)
-            iterations[i] += it_lm
-            if lm_residual <= tol_abs and drivers_aligned(model, q_lm[None], s[i][None])[0]:
-                qi, conv, residual[i] = q_lm[None], np.ones(1, dtype=bool), lm_residual
-        if not conv[0] and nq and not gap and subdivide > 0 and i > 0:
-            # failing from an assembled step, the step may just be too long for the continuation
-            # (a dyad that moves fast there): retry it in sub-steps (each Newton run capped at
-            # max_iter too) before calling it a failure
-            sub = last_s + np.linspace(0.0, 1.0, SUBSTEPS + 1)[:, None] * (s[i] - last_s)
-            sub[-1] = s[i]
-            qs, rs, its, _ = solve_positions(model, sub, tol, max_iter, predictor, jacobian,
-                                             q_start=last_q, start_slope=last_dq,
-                                             stop_on_failure=True, subdivide=subdivide - 1)
-            iterations[i] += int(its.sum())
-            if np.isfinite(qs[-1]).all() and rs[-1] <= tol_abs:
-                qi, conv, residual[i] = qs[-1][None], np.ones(1, dtype=bool), rs[-1]
-                lm_residual, capped = None, False
-        if conv[0]:
-            X = None if fast is not None else model.positions(qi)
-            J = fast.jac(qi[0], s[i])[None] if fast is not None else model.jacobian(X, s[i][None])
-            inv = None
-            if fast is not None and square:
-                cond, inv = _cond_inverse(J[0])
-            else:
-                cond = jacobian_condition(J)[0]
-            if not cond * rcond < 1e-3:
-                # within 1000 of the singular threshold: at a double root Newton stops at tol on
-                # a slow (linear) approach, with the Jacobian less singular than at the root;
-                # iterate on to rounding level before deciding
-                qi, residual[i], extra = _polish(model, qi, s[i], max_iter)
-                iterations[i] += extra
-                X = model.positions(qi)
-                J = model.jacobian(X, s[i][None])
-                cond, inv = jacobian_condition(J)[0], None
-            regular = bool(cond * rcond < 1.0)  # as dense_derivatives() decides
-            if square and regular and mode_pending and last_sign:
-                # re-entering after a gap: no path connects the two sides, so keep the assembly
-                # mode (sign of det Phi_q) of the last regular step, if it exists here
-                if np.linalg.slogdet(J[0])[0] != last_sign:
-                    def same_mode(qq, si=s[i]):
-                        Jq = model.jacobian(model.positions(qq), si[None])
-                        return bool(np.linalg.slogdet(Jq[0])[0] == last_sign
-                                    and jacobian_condition(Jq)[0] * rcond < 1.0)
+        q_start, start_slope = start_state(model, s[0], run.tol_abs, run.max_iter)
+    return run.sweep(s, q_start, start_slope, stop_on_failure)
 
-                    alt, extra = _mirror_root(model, qi, s[i], tol_abs, max_iter, jacobian,
-                                              same_mode, guesses=(guess,))
-                    iterations[i] += extra
-                    if alt is not None:
-                        qi, X = alt, model.positions(alt)
-                        J = model.jacobian(X, s[i][None])
-                        inv = None
-                        residual[i] = float(np.abs(model.phi(X, s[i][None])).max())
-            gap, gap_shape = False, None
-            if cond * rcond < 1e-4:
-                # well clear of a limit (condition below 100 at the default rcond): the mode is
-                # settled. A re-entry on or next to the limit
-                # (its two modes about to meet) leaves the check to the steps after it
-                mode_pending = False
-            if square and regular:
-                last_sign = np.linalg.slogdet(J[0])[0]
-            q[i] = qi[0]
-            # influence coefficients dq/ds_j, one column per driver
-            if inv is not None:
-                # Phi_q dq_j = -Phi_t with unit rate of driver j: only driver row j is non-zero
-                ps = fast.phi_s(qi[0], s[i])
-                dq = inv[:, fast.nc:] * -np.array(ps)[None, :]
-            else:
-                if X is None:
-                    X = model.positions(qi)
-                cols = []
-                for j in range(model.n_drivers):
-                    e = np.zeros((1, model.n_drivers))
-                    e[0, j] = 1.0
-                    cols.append(_velocity_one(model, X, s[i][None], e, J))
-                dq = np.stack(cols, axis=1)
-            if regular and np.all(np.isfinite(dq)) and np.abs(dq).max() < 1e8 * model.size:
-                if predictor == "second":
-                    # curvature along the sweep: gamma with unit driver rate, zero acceleration
-                    if X is None:
-                        X = model.positions(qi)
-                    d2 = np.zeros((nq, model.n_drivers, model.n_drivers))
-                    for j in range(model.n_drivers):
-                        e = np.zeros((1, model.n_drivers))
-                        e[0, j] = 1.0
-                        V = model.velocities(dq[:, j][None])
-                        g = model.gamma(X, V, s[i][None], e, np.zeros_like(e))
-                        d2[:, j, j] = _lin_solve(J, g)[0]
-                    last_d2q = d2
-                last_dq = dq
-            # else a singular step (change point, dead centre): its tangent is undefined, so keep
-            # the slope from before it; predicting across with that slope keeps the branch
-            last_q, last_s = qi[0], s[i]
-        else:
-            root = None
-            if lm_residual is None:
-                tries = (guess, qi, last_q) if capped else (guess,)
-                status[i], root = _classify_failure(model, tries, s[i], tol_abs)
-            else:
-                status[i] = NOT_CONVERGED if lm_residual <= 10 * tol_abs else NO_ASSEMBLY
-            if stop_on_failure:
-                break
-            if status[i] == NOT_CONVERGED and capped:
-                # a root exists, the cap stopped Newton: the step stays not_converged (NaN), and
-                # the sweep goes on predicting from that root (found to tell the two failures
-                # apart) with the slope from before, not by a least-squares restart
-                if root is not None:
-                    last_q, last_s = root, s[i]
+
+@dataclass
+class _Path:
+    """What the continuation carries from step to step: the last assembled shape ``q`` (n_q,)
+    at driver values ``s`` (nd,), its slope ``dq`` (n_q, nd) and curvature ``d2q`` (None: not
+    known), the assembly mode ``sign`` (sign of det Φq at the last regular step), whether a
+    step failed since the last assembled one (``gap``) or since the last regular one
+    (``mode_pending``: its mode to be kept), and the least-squares shape of the last failure."""
+
+    q: np.ndarray
+    s: np.ndarray
+    dq: np.ndarray | None
+    d2q: np.ndarray | None = None
+    sign: float = 0.0
+    gap: bool = False
+    mode_pending: bool = False
+    gap_shape: np.ndarray | None = None
+
+
+@dataclass
+class _Attempt:
+    """One step's solve: its predicted ``guess``, the root ``q`` (1, n_q) once ``converged``,
+    the residual and iterations so far, whether Newton reached ``max_iter`` while converging
+    (``capped``), and the damped least squares' residual and shape where that ran."""
+
+    guess: np.ndarray
+    q: np.ndarray | None = None
+    converged: bool = False
+    residual: float = np.nan
+    iterations: int = 0
+    capped: bool = False
+    lm_residual: float | None = None
+    q_lm: np.ndarray | None = None
+
+
+class _Continuation:
+    """The steps of :func:`solve_positions`: predict, correct, rescue, accept or classify."""
+
+    def __init__(self, model: Model, tol, max_iter, predictor, jacobian, subdivide):
+        self.model, self.tol, self.max_iter = model, tol, max_iter
+        self.predictor, self.jacobian, self.subdivide = predictor, jacobian, subdivide
+        self.tol_abs = tol * model.size
+        self.rcond = model.scene.solver.singular_rcond
+        self.square = model.n_rows == model.n_q
+        # one-step kernels: the same Newton, Phi and checks with less overhead per step (the
+        # finite-difference Jacobian knob changes Newton's iteration matrix only: the
+        # condition and the slopes use the analytic one either way)
+        self.fast = _step_kernels(model) if model.n_q else None
+
+    def sweep(self, s, q_start, start_slope, stop_on_failure):
+        n_steps, nq = s.shape[0], self.model.n_q
+        q = np.full((n_steps, nq), np.nan)
+        residual = np.full(n_steps, np.nan)
+        iterations = np.zeros(n_steps, dtype=np.int32)
+        status = np.zeros(n_steps, dtype=np.int8)
+        # without a predictor the start slope is not used either (a singular start is then
+        # left by trying either side, in leave_singular_start)
+        path = _Path(q_start, s[0], start_slope if self.predictor != "none" else None)
+        for i in range(n_steps):
+            att = _Attempt(self.predict(path, s[i]))
+            if path.gap and nq and not self.through_gap(att, path, s[i]):
+                residual[i], iterations[i], status[i] = att.residual, att.iterations, NO_ASSEMBLY
                 continue
-            gap = mode_pending = True
-            if lm_residual is not None and np.all(np.isfinite(q_lm)):
-                gap_shape = q_lm
-            last_dq, last_d2q = None, None  # after a gap, restart from the last assembled shape
-    return q, residual, iterations, status
+            self.leave_singular_start(att, path, s[i])
+            if not att.converged:
+                self.correct(att, s[i])
+            if not att.converged and nq:
+                self.rescue(att, path, s[i])
+            if att.converged:
+                self.accept(att, path, s[i])
+                q[i] = att.q[0]
+            else:
+                status[i] = self.classify(att, path, s[i])
+            residual[i], iterations[i] = att.residual, att.iterations
+            if not att.converged and stop_on_failure:
+                break
+        return q, residual, iterations, status
+
+    def predict(self, path: _Path, s_i) -> np.ndarray:
+        """The guess: the last shape moved along its slope (and curvature), or aimed."""
+        guess = path.q.copy()
+        ds = s_i - path.s
+        if self.predictor != "none" and path.dq is not None:
+            guess += path.dq @ ds
+            if self.predictor == "second" and path.d2q is not None:
+                guess += 0.5 * np.einsum("qij,i,j->q", path.d2q, ds, ds)
+        if path.dq is None:
+            guess = aim_drivers(self.model, guess, s_i)
+        return guess
+
+    def through_gap(self, att: _Attempt, path: _Path, s_i) -> bool:
+        """After a failed step most steps fail too: damped least squares, which stops as soon as
+        the residual stops falling, decides first (Newton only polishes a root it finds). It
+        starts from the last assembled shape and, failing that, from the previous step's
+        least-squares shape, which moves on through the gap and may become a root where the
+        sweep re-enters the range (either can sit in a local minimum alone). Returns whether
+        the step has a root (then the guess)."""
+        model = self.model
+        q_lm, r_lm, it_lm = _lm_root(model, att.guess, s_i, self.tol_abs)
+        if not r_lm <= 10 * self.tol_abs and path.gap_shape is not None:
+            q2, r2, it2 = _lm_root(model, aim_drivers(model, path.gap_shape, s_i), s_i, self.tol_abs)
+            it_lm += it2
+            if r2 < r_lm or not np.all(np.isfinite(q_lm)):
+                q_lm, r_lm = q2, r2
+        if np.all(np.isfinite(q_lm)):
+            path.gap_shape = q_lm
+        att.residual, att.iterations = r_lm, it_lm
+        if not r_lm <= 10 * self.tol_abs:
+            return False
+        att.guess = q_lm
+        return True
+
+    def leave_singular_start(self, att: _Attempt, path: _Path, s_i) -> None:
+        """Leaving a singular shape without a slope (a start at a dead centre or change point):
+        which side Newton takes from it is up to rounding, so start on either side of it
+        instead, the side nearer the start configuration as written first."""
+        model = self.model
+        if not (path.dq is None and not path.gap and model.n_q and np.any(s_i != path.s)):
+            return
+        Jg = model.jacobian(model.positions(path.q[None]), s_i[None])
+        if jacobian_condition(Jg)[0] * self.rcond < 1.0:
+            return
+        v, roots = _null_line_roots(model, path.q[None], s_i)
+        written = model.q_of(model.start_position[None])[0]
+        for t in sorted(roots, key=lambda t: np.abs(path.q + t * v - written).max()):
+            qc, res, itc, convc = newton(model, (path.q + t * v)[None], s_i[None], self.tol_abs,
+                                         self.max_iter, self.jacobian)
+            att.iterations += itc[0]
+            att.residual = res[0]
+            if convc[0] and drivers_aligned(model, qc, s_i[None])[0]:
+                att.q, att.converged = qc, True
+                return
+
+    def correct(self, att: _Attempt, s_i) -> None:
+        """Newton from the guess; a root with an angle driver's vector pointing backwards (the
+        angle constraint's other root) is retried with the driven point aimed forwards."""
+        model, fast, tol_abs, max_iter = self.model, self.fast, self.tol_abs, self.max_iter
+        if fast is not None:
+            qi, res, it, conv = fast.newton(att.guess, s_i, tol_abs, max_iter, self.jacobian)
+        else:
+            qi, res, it, conv = newton(model, att.guess[None], s_i[None], tol_abs, max_iter,
+                                       self.jacobian)
+        att.q, att.residual, att.converged = qi, res[0], bool(conv[0])
+        att.iterations += it[0]
+        att.capped = _converging_at_cap(model, fast, att.guess, s_i, it[0], res[0], conv[0], max_iter)
+        aligned = (fast.aligned(qi[0], s_i) if fast is not None
+                   else drivers_aligned(model, qi, s_i[None])[0])
+        if att.converged and not aligned:
+            aimed = aim_drivers(model, att.guess, s_i)
+            qi, res, it2, conv = newton(model, aimed[None], s_i[None], tol_abs, max_iter,
+                                        self.jacobian)
+            att.iterations += it2[0]
+            att.q, att.residual = qi, res[0]
+            att.converged = bool((conv & drivers_aligned(model, qi, s_i[None]))[0])
+            att.capped = _converging_at_cap(model, fast, aimed, s_i, it2[0], res[0],
+                                            att.converged, max_iter)
+
+    def rescue(self, att: _Attempt, path: _Path, s_i) -> None:
+        """Newton gave up (it stalled, failed, or wandered to the cap): slow or wandering at a
+        singular root, or no root at all. Damped least squares from the same guess tells which,
+        and reaches a singular root (not after a run that reached max_iter while converging:
+        that step is not_converged, as max_iter says). Failing right after an assembled step,
+        the step may just be too long for the continuation: it is retried in sub-steps."""
+        model = self.model
+        if not att.capped:
+            att.q_lm, att.lm_residual, it_lm = _lm_root(model, att.guess, s_i, self.tol_abs)
+            att.iterations += it_lm
+            if (att.lm_residual <= self.tol_abs
+                    and drivers_aligned(model, att.q_lm[None], s_i[None])[0]):
+                att.q, att.converged, att.residual = att.q_lm[None], True, att.lm_residual
+                return
+        if path.gap or self.subdivide <= 0 or path.s is None or not np.any(s_i != path.s):
+            return
+        sub = path.s + np.linspace(0.0, 1.0, SUBSTEPS + 1)[:, None] * (s_i - path.s)
+        sub[-1] = s_i
+        inner = _Continuation(model, self.tol, self.max_iter, self.predictor, self.jacobian,
+                              self.subdivide - 1)
+        qs, rs, its, _ = inner.sweep(sub, path.q, path.dq, stop_on_failure=True)
+        att.iterations += int(its.sum())
+        if np.isfinite(qs[-1]).all() and rs[-1] <= self.tol_abs:
+            att.q, att.converged, att.residual = qs[-1][None], True, rs[-1]
+            att.lm_residual, att.capped = None, False
+
+    def accept(self, att: _Attempt, path: _Path, s_i) -> None:
+        """A converged step: polish it near a singular shape, keep the assembly mode across a
+        gap, and move the path on (with the step's slope where the step is regular)."""
+        model = self.model
+        qi, J, cond, inv = att.q, *self._condition(att.q, s_i)
+        if not cond * self.rcond < 1e-3:
+            # within 1000 of the singular threshold: at a double root Newton stops at tol on a
+            # slow (linear) approach, with the Jacobian less singular than at the root;
+            # iterate on to rounding level before deciding
+            qi, att.residual, extra = _polish(model, qi, s_i, self.max_iter)
+            att.iterations += extra
+            J = model.jacobian(model.positions(qi), s_i[None])
+            cond, inv = jacobian_condition(J)[0], None
+        regular = bool(cond * self.rcond < 1.0)  # as dense_derivatives() decides
+        if self.square and regular and path.mode_pending and path.sign:
+            qi, J, inv = self._keep_mode(att, path, qi, J, inv, s_i)
+        path.gap, path.gap_shape = False, None
+        if cond * self.rcond < 1e-4:
+            # well clear of a limit (condition below 100 at the default rcond): the mode is
+            # settled; a re-entry on or next to the limit leaves the check to the steps after it
+            path.mode_pending = False
+        if self.square and regular:
+            path.sign = np.linalg.slogdet(J[0])[0]
+        att.q = qi
+        dq = self._slope(qi, J, inv, s_i)
+        if regular and np.all(np.isfinite(dq)) and np.abs(dq).max() < 1e8 * model.size:
+            if self.predictor == "second":
+                path.d2q = self._curvature(qi, J, dq, s_i)
+            path.dq = dq
+        # else a singular step (change point, dead centre): its tangent is undefined, so keep
+        # the slope from before it; predicting across with that slope keeps the branch
+        path.q, path.s = qi[0], s_i
+
+    def _condition(self, qi, s_i):
+        """(Φq (1, m, n), its condition, its inverse or None) at a root."""
+        fast = self.fast
+        if fast is not None:
+            J = fast.jac(qi[0], s_i)[None]
+        else:
+            J = self.model.jacobian(self.model.positions(qi), s_i[None])
+        if fast is not None and self.square:
+            cond, inv = _cond_inverse(J[0])
+            return J, cond, inv
+        return J, jacobian_condition(J)[0], None
+
+    def _keep_mode(self, att: _Attempt, path: _Path, qi, J, inv, s_i):
+        """Re-entering after a gap: no path connects the two sides, so keep the assembly mode
+        (sign of det Φq) of the last regular step, if it exists here."""
+        model = self.model
+        if np.linalg.slogdet(J[0])[0] == path.sign:
+            return qi, J, inv
+
+        def same_mode(qq, si=s_i):
+            Jq = model.jacobian(model.positions(qq), si[None])
+            return bool(np.linalg.slogdet(Jq[0])[0] == path.sign
+                        and jacobian_condition(Jq)[0] * self.rcond < 1.0)
+
+        alt, extra = _mirror_root(model, qi, s_i, self.tol_abs, self.max_iter, self.jacobian,
+                                  same_mode, guesses=(att.guess,))
+        att.iterations += extra
+        if alt is None:
+            return qi, J, inv
+        X = model.positions(alt)
+        att.residual = float(np.abs(model.phi(X, s_i[None])).max())
+        return alt, model.jacobian(X, s_i[None]), None
+
+    def _slope(self, qi, J, inv, s_i) -> np.ndarray:
+        """The influence coefficients dq/ds_j (n_q, nd), one column per driver."""
+        model = self.model
+        if inv is not None:  # Φq dq_j = -Φt with unit rate of driver j: only row j is non-zero
+            ps = self.fast.phi_s(qi[0], s_i)
+            return inv[:, self.fast.nc:] * -np.array(ps)[None, :]
+        X = model.positions(qi)
+        return np.stack([_velocity_one(model, X, s_i[None], np.eye(model.n_drivers)[j][None], J)
+                         for j in range(model.n_drivers)], axis=1)
+
+    def _curvature(self, qi, J, dq, s_i) -> np.ndarray:
+        """d2q/ds2 (n_q, nd, nd) along the sweep: γ with unit driver rate, zero acceleration."""
+        model = self.model
+        X = model.positions(qi)
+        d2 = np.zeros((model.n_q, model.n_drivers, model.n_drivers))
+        for j in range(model.n_drivers):
+            e = np.zeros((1, model.n_drivers))
+            e[0, j] = 1.0
+            g = model.gamma(X, model.velocities(dq[:, j][None]), s_i[None], e, np.zeros_like(e))
+            d2[:, j, j] = _lin_solve(J, g)[0]
+        return d2
+
+    def classify(self, att: _Attempt, path: _Path, s_i) -> int:
+        """A failed step: not_converged where a root exists (the cap stopped Newton), else
+        no_assembly; the path goes on from that root, or restarts after the gap."""
+        root = None
+        if att.lm_residual is None:
+            tries = (att.guess, att.q, path.q) if att.capped else (att.guess,)
+            status, root = _classify_failure(self.model, tries, s_i, self.tol_abs)
+        else:
+            status = NOT_CONVERGED if att.lm_residual <= 10 * self.tol_abs else NO_ASSEMBLY
+        if status == NOT_CONVERGED and att.capped:
+            # a root exists, the cap stopped Newton: the step stays not_converged (NaN), and the
+            # sweep predicts on from that root with the slope from before (no restart)
+            if root is not None:
+                path.q, path.s = root, s_i
+            return status
+        path.gap = path.mode_pending = True
+        if att.lm_residual is not None and np.all(np.isfinite(att.q_lm)):
+            path.gap_shape = att.q_lm
+        path.dq, path.d2q = None, None  # after a gap, restart from the last assembled shape
+        return status
 
 
 def _velocity_one(model, X, s, s_dot, J=None):
