@@ -211,21 +211,48 @@ def build_model(scene: Scene) -> Model:
     lens = [float(np.hypot(*(X0[index[l.points[1]]] - X0[index[l.points[0]]]))) for l in scene.links]
     size = max([size] + lens) or 1.0
 
-    dist_a, dist_b, dist_len, dist_link = [], [], [], []
+    def ints(x):
+        return np.asarray(x, dtype=np.intp).reshape(-1)
+
+    def flts(x, shape=(-1,)):
+        return np.asarray(x, dtype=float).reshape(shape)
+
+    dist, loc = _link_rows(scene, index, X0, fixed)
+    sfix_p, sfix_c, sfix_n, smov = _slider_rows(scene, index, X0)
+    drv_angle, drv_a, drv_b, drv_axis = _driver_rows(scene, index)
+    arrays = dict(
+        dist_a=ints(dist["a"]), dist_b=ints(dist["b"]), dist_len=flts(dist["len"]),
+        loc_a=ints(loc["a"]), loc_b=ints(loc["b"]), loc_p=ints(loc["p"]),
+        loc_u=flts(loc["u"]), loc_v=flts(loc["v"]), loc_len=flts(loc["len"]),
+        sfix_p=ints(sfix_p), sfix_c=flts(sfix_c, (-1, 2)), sfix_n=flts(sfix_n, (-1, 2)),
+        smov_p=ints(smov["p"]), smov_d=ints(smov["d"]), smov_e=ints(smov["e"]),
+        smov_len=flts(smov["len"]),
+        drv_angle=np.array(drv_angle, dtype=bool), drv_a=ints(drv_a), drv_b=ints(drv_b),
+        drv_axis=ints(drv_axis))
+    ia = np.array([index[l.points[0]] for l in scene.links], dtype=np.intp)
+    ib = np.array([index[l.points[1]] for l in scene.links], dtype=np.intp)
+    return Model(
+        scene=scene, point_names=names, start_position=X0, fixed=fixed,
+        moving=np.flatnonzero(~fixed), size=size, **arrays, link_a=ia, link_b=ib,
+        dist_link=ints(dist["link"]), loc_link=ints(loc["link"]), rows=eq.rows_of(**arrays),
+    )
+
+
+def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray):
+    """Each link's distance row (between its first two points, unless both are fixed) and two
+    local rows per further point; returns (dist, loc) as dicts of lists."""
+    dist = {k: [] for k in ("a", "b", "len", "link")}
     loc = {k: [] for k in ("a", "b", "p", "u", "v", "len", "link")}
     for li, link in enumerate(scene.links):
         ia, ib = index[link.points[0]], index[link.points[1]]
-        idx = [index[p] for p in link.points]
-        if all(fixed[i] for i in idx):
+        if all(fixed[index[p]] for p in link.points):
             continue  # a drawn piece of ground: no unknowns, no rows
         d0 = X0[ib] - X0[ia]
         L0 = float(np.hypot(*d0))
         L = float(link.length) if link.length is not None else L0
         if not fixed[ia] or not fixed[ib]:
-            dist_a.append(ia)
-            dist_b.append(ib)
-            dist_len.append(L)
-            dist_link.append(li)
+            for key, val in zip(("a", "b", "len", "link"), (ia, ib, L, li)):
+                dist[key].append(val)
         e = d0 / L0
         ep = _R90 @ e
         for pname in link.points[2:]:
@@ -237,74 +264,59 @@ def build_model(scene: Scene) -> Model:
             else:
                 r = X0[ip] - X0[ia]
                 u, v = float(r @ e), float(r @ ep)
-            reach = float(np.hypot(u, v)) / L
-            if reach**2 * scene.solver.singular_rcond >= 1.0:
-                # the Jacobian's condition grows as reach^2: every step would count as singular
-                raise SceneError(
-                    scene.path, f'links "{link.name}"', "local" if pname in link.local else "points",
-                    f'point "{pname}" is {reach:.3g} times farther from "{link.points[0]}" than '
-                    f'the link\'s second point "{link.points[1]}": a frame that short cannot hold '
-                    f"it (the constraint Jacobian's condition grows as the square of that ratio, "
-                    f"about {reach**2:.1g} here, and every step would count as singular)",
-                    f'list a far point second so that the frame is long, e.g. points = '
-                    f'["{link.points[0]}", "{pname}", ...] (lengths and local refer to the first '
-                    f"two points)")
+            _check_reach(scene, link, pname, float(np.hypot(u, v)) / L)
             for key, val in zip(("a", "b", "p", "u", "v", "len", "link"), (ia, ib, ip, u, v, L, li)):
                 loc[key].append(val)
+    return dist, loc
 
+
+def _check_reach(scene: Scene, link, pname: str, reach: float) -> None:
+    """A further point far beyond the frame's second point makes every step singular."""
+    if reach**2 * scene.solver.singular_rcond < 1.0:
+        return
+    # the Jacobian's condition grows as reach^2: every step would count as singular
+    raise SceneError(
+        scene.path, f'links "{link.name}"', "local" if pname in link.local else "points",
+        f'point "{pname}" is {reach:.3g} times farther from "{link.points[0]}" than '
+        f'the link\'s second point "{link.points[1]}": a frame that short cannot hold '
+        f"it (the constraint Jacobian's condition grows as the square of that ratio, "
+        f"about {reach**2:.1g} here, and every step would count as singular)",
+        f'list a far point second so that the frame is long, e.g. points = '
+        f'["{link.points[0]}", "{pname}", ...] (lengths and local refer to the first '
+        f"two points)")
+
+
+def _slider_rows(scene: Scene, index: dict, X0: np.ndarray):
+    """Fixed guides (point, a point of the line, unit normal) and moving guides (point, the
+    guide's two points, their distance)."""
     sfix_p, sfix_c, sfix_n = [], [], []
     smov = {k: [] for k in ("p", "d", "e", "len")}
     for sl in scene.sliders:
         ip = index[sl.point]
         if sl.moving:
             idd, ie = index[sl.line_points[0]], index[sl.line_points[1]]
-            smov["p"].append(ip)
-            smov["d"].append(idd)
-            smov["e"].append(ie)
-            smov["len"].append(float(np.hypot(*(X0[ie] - X0[idd]))))
+            for key, val in zip(("p", "d", "e", "len"),
+                                (ip, idd, ie, float(np.hypot(*(X0[ie] - X0[idd]))))):
+                smov[key].append(val)
         else:
             dvec = np.asarray(sl.direction, dtype=float)
             dvec = dvec / np.hypot(*dvec)
             sfix_p.append(ip)
             sfix_c.append(sl.through)
             sfix_n.append(_R90 @ dvec)
+    return sfix_p, sfix_c, sfix_n, smov
 
+
+def _driver_rows(scene: Scene, index: dict):
+    """Per driver: whether it drives an angle, its (tail) point, head point (-1) and axis (-1)."""
     drv_angle, drv_a, drv_b, drv_axis = [], [], [], []
     for dr in scene.drivers:
-        if dr.kind == "angle":
-            drv_angle.append(True)
-            drv_a.append(index[dr.points[0]])
-            drv_b.append(index[dr.points[1]])
-            drv_axis.append(-1)
-        else:
-            drv_angle.append(False)
-            drv_a.append(index[dr.points[0]])
-            drv_b.append(-1)
-            drv_axis.append(int(dr.axis))
-
-    ia = np.array([index[l.points[0]] for l in scene.links], dtype=np.intp)
-    ib = np.array([index[l.points[1]] for l in scene.links], dtype=np.intp)
-
-    def ints(x):
-        return np.asarray(x, dtype=np.intp).reshape(-1)
-
-    def flts(x, shape=(-1,)):
-        return np.asarray(x, dtype=float).reshape(shape)
-
-    arrays = dict(
-        dist_a=ints(dist_a), dist_b=ints(dist_b), dist_len=flts(dist_len),
-        loc_a=ints(loc["a"]), loc_b=ints(loc["b"]), loc_p=ints(loc["p"]),
-        loc_u=flts(loc["u"]), loc_v=flts(loc["v"]), loc_len=flts(loc["len"]),
-        sfix_p=ints(sfix_p), sfix_c=flts(sfix_c, (-1, 2)), sfix_n=flts(sfix_n, (-1, 2)),
-        smov_p=ints(smov["p"]), smov_d=ints(smov["d"]), smov_e=ints(smov["e"]),
-        smov_len=flts(smov["len"]),
-        drv_angle=np.array(drv_angle, dtype=bool), drv_a=ints(drv_a), drv_b=ints(drv_b),
-        drv_axis=ints(drv_axis))
-    return Model(
-        scene=scene, point_names=names, start_position=X0, fixed=fixed,
-        moving=np.flatnonzero(~fixed), size=size, **arrays, link_a=ia, link_b=ib,
-        dist_link=ints(dist_link), loc_link=ints(loc["link"]), rows=eq.rows_of(**arrays),
-    )
+        angle = dr.kind == "angle"
+        drv_angle.append(angle)
+        drv_a.append(index[dr.points[0]])
+        drv_b.append(index[dr.points[1]] if angle else -1)
+        drv_axis.append(-1 if angle else int(dr.axis))
+    return drv_angle, drv_a, drv_b, drv_axis
 
 
 def driver_values(scene: Scene) -> np.ndarray:
