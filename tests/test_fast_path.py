@@ -134,7 +134,7 @@ def test_vectorised_general_path_on_a_long_sweep():
         np.testing.assert_allclose(out["velocity"][:, i], cf["V" + p], atol=1e-12 * 40.0)
         np.testing.assert_allclose(out["acceleration"][:, i], cf["A" + p], atol=1e-11 * 400.0)
     # and the dyads on the same sweep
-    plan = dyads.decompose(model)
+    plan = batch.decompose(model)
     dyads.set_branches(plan, X[0], s[0])
     sw = dyads.solve_chain(plan, s, sd, sdd)
     assert rel_err(sw.position, X) <= REL
@@ -181,7 +181,7 @@ kinematics = ["velocity", "acceleration"]
 
 def test_a_triad_does_not_decompose_and_auto_runs_newton():
     scene = linkpipe.parse_scene(STEPHENSON, "triad.toml")
-    plan = dyads.decompose(build_model(scene))
+    plan = batch.decompose(build_model(scene))
     assert not plan.ok and "B" in plan.reason
     r = linkpipe.solve(scene)
     assert r.solver_method_used == "newton" and "no closed-form dyad" in r.solver_note

@@ -16,7 +16,8 @@ import numpy as np
 
 from ..errors import SceneError
 from ..model import Model
-from .dyads import branch_check, decompose, refine_branches, set_branches, solve_chain
+from .decompose import decompose
+from .dyads import branch_check, refine_branches, set_branches, solve_chain
 from .start import start_state
 from .vectorised import max_abs_phi, solve_newton
 from ..status import NO_ASSEMBLY, OK
@@ -119,3 +120,7 @@ from .derivatives import (dense_derivatives, derivatives, driver_motion, fd_deri
                           link_angles_unwrapped, link_rates)
 from .newton import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
+
+__all__ = ["solve_sweep", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+           "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
+           "link_angles_unwrapped", "link_rates", "newton", "solve_positions"]
