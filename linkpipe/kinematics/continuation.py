@@ -10,7 +10,8 @@ import numpy as np
 
 from ..model import Model
 from ..status import NO_ASSEMBLY, NOT_CONVERGED
-from .linalg import _cond_inverse, _lin_solve, jacobian_condition
+from .linalg import (MODE_SETTLED_BELOW, POLISH_FROM, condition, condition_and_inverse_one,
+                     is_singular, lin_solve)
 from .newton import _classify_failure, _converging_at_cap, _lm_root, _mirror_root, _null_line_roots, _polish, aim_drivers, drivers_aligned, newton
 from .start import start_state
 from .step import _step_kernels
@@ -171,7 +172,7 @@ class _Continuation:
         if not (path.dq is None and not path.gap and model.n_q and np.any(s_i != path.s)):
             return
         Jg = model.jacobian(model.positions(path.q[None]), s_i[None])
-        if jacobian_condition(Jg)[0] * self.rcond < 1.0:
+        if not is_singular(condition(Jg)[0], self.rcond):
             return
         v, roots = _null_line_roots(model, path.q[None], s_i)
         written = model.q_of(model.start_position[None])[0]
@@ -239,19 +240,19 @@ class _Continuation:
         gap, and move the path on (with the step's slope where the step is regular)."""
         model = self.model
         qi, J, cond, inv = att.q, *self._condition(att.q, s_i)
-        if not cond * self.rcond < 1e-3:
+        if is_singular(cond, self.rcond, POLISH_FROM):
             # within 1000 of the singular threshold: at a double root Newton stops at tol on a
             # slow (linear) approach, with the Jacobian less singular than at the root;
             # iterate on to rounding level before deciding
             qi, att.residual, extra = _polish(model, qi, s_i, self.max_iter)
             att.iterations += extra
             J = model.jacobian(model.positions(qi), s_i[None])
-            cond, inv = jacobian_condition(J)[0], None
-        regular = bool(cond * self.rcond < 1.0)  # as dense_derivatives() decides
+            cond, inv = condition(J)[0], None
+        regular = not is_singular(cond, self.rcond)  # as the derivative stage decides
         if self.square and regular and path.mode_pending and path.sign:
             qi, J, inv = self._keep_mode(att, path, qi, J, inv, s_i)
         path.gap, path.gap_shape = False, None
-        if cond * self.rcond < 1e-4:
+        if not is_singular(cond, self.rcond, MODE_SETTLED_BELOW):
             # well clear of a limit (condition below 100 at the default rcond): the mode is
             # settled; a re-entry on or next to the limit leaves the check to the steps after it
             path.mode_pending = False
@@ -275,9 +276,9 @@ class _Continuation:
         else:
             J = self.model.jacobian(self.model.positions(qi), s_i[None])
         if fast is not None and self.square:
-            cond, inv = _cond_inverse(J[0])
+            cond, inv = condition_and_inverse_one(J[0])
             return J, cond, inv
-        return J, jacobian_condition(J)[0], None
+        return J, condition(J)[0], None
 
     def _keep_mode(self, att: _Attempt, path: _Path, qi, J, inv, s_i):
         """Re-entering after a gap: no path connects the two sides, so keep the assembly mode
@@ -289,7 +290,7 @@ class _Continuation:
         def same_mode(qq, si=s_i):
             Jq = model.jacobian(model.positions(qq), si[None])
             return bool(np.linalg.slogdet(Jq[0])[0] == path.sign
-                        and jacobian_condition(Jq)[0] * self.rcond < 1.0)
+                        and not is_singular(condition(Jq)[0], self.rcond))
 
         alt, extra = _mirror_root(model, qi, s_i, self.tol_abs, self.max_iter, self.jacobian,
                                   same_mode, guesses=(att.guess,))
@@ -319,7 +320,7 @@ class _Continuation:
             e = np.zeros((1, model.n_drivers))
             e[0, j] = 1.0
             g = model.gamma(X, model.velocities(dq[:, j][None]), s_i[None], e, np.zeros_like(e))
-            d2[:, j, j] = _lin_solve(J, g)[0]
+            d2[:, j, j] = lin_solve(J, g)[0]
         return d2
 
     def classify(self, att: _Attempt, path: _Path, s_i) -> int:
@@ -349,4 +350,4 @@ def _velocity_one(model, X, s, s_dot, J=None):
     if J is None:
         J = model.jacobian(X, s)
     rhs = -model.phi_t(X, s, s_dot)
-    return _lin_solve(J, rhs)[0]
+    return lin_solve(J, rhs)[0]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model, driver_scale, driver_values
-from .linalg import _pinv_cond, engine
+from .linalg import condition_and_inverse, engine, is_singular
 from .vectorised import CHUNK
 from ..status import OK, SINGULAR
 
@@ -34,7 +34,6 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     vres = np.full(S, np.nan)
     ares = np.full(S, np.nan) if need_acceleration else None
     rcond = model.scene.solver.singular_rcond
-    eye = np.eye(m)
     for lo in range(0, S, chunk):
         hi = min(S, lo + chunk)
         idx = lo + np.flatnonzero(status[lo:hi] == OK)
@@ -43,14 +42,10 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         Xc, sc_ = X[idx], s[idx]
         q = model.q_of(Xc)
         E = eng.entries(q, sc_)
-        inv = eng.solve(E, [eye[r][:, None] for r in range(m)])  # n arrays (m, k)
-        invs = np.stack(inv)  # (n, m, k)
-        with np.errstate(invalid="ignore"):
-            ni = np.abs(invs).sum(axis=0).max(axis=0)
-            cond = eng.norm1(E) * ni
-        cond = np.where(np.isfinite(cond), cond, np.inf)
+        invs = eng.inverse(E)  # (n, m, k)
+        cond = eng.condition(E, invs)
         condition[idx] = cond
-        sing = ~(cond * rcond < 1.0)
+        sing = is_singular(cond, rcond)
         status[idx[sing]] = SINGULAR
         good = ~sing
         gi = idx[good]
@@ -102,19 +97,10 @@ def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, nee
     idx = np.flatnonzero(ok)
     if len(idx):
         J = model.jacobian(X[idx], s[idx])
-        if m == nq:
-            try:
-                inv = np.linalg.inv(J)
-                n1 = np.abs(J).sum(axis=1).max(axis=1)
-                ni = np.abs(inv).sum(axis=1).max(axis=1)
-                cond = n1 * ni
-            except np.linalg.LinAlgError:
-                inv, cond = _pinv_cond(J)
-        else:
-            inv, cond = _pinv_cond(J)
+        cond, inv = condition_and_inverse(J)
         condition[idx] = cond
         Jinv[idx] = inv
-        sing = ~(cond * model.scene.solver.singular_rcond < 1.0)
+        sing = is_singular(cond, model.scene.solver.singular_rcond)
         status[idx[sing]] = SINGULAR
         Jinv[idx[sing]] = np.nan
     good = status == OK

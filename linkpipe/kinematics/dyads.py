@@ -382,10 +382,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     cols = [np.ascontiguousarray(s[:, j]) for j in range(nd)]
     dcols = [np.ascontiguousarray(s_dot[:, j]) for j in range(nd)] if order >= 1 else None
     ddcols = [np.ascontiguousarray(s_ddot[:, j]) for j in range(nd)] if order >= 2 else None
-    if dcols is not None:  # constant rates (the usual sweep) stay scalars
-        dcols = [float(c[0]) if c.size and (c == c[0]).all() else c for c in dcols]
-    if ddcols is not None:
-        ddcols = [float(c[0]) if c.size and (c == c[0]).all() else c for c in ddcols]
+    dcols, ddcols = _scalar_if_constant(dcols), _scalar_if_constant(ddcols)
     ch = _Chunk()
     ch.gap2 = [] if gaps else None
     prev = {}  # dyad point -> (x, y, gap^2) at the last step of the chunk before
@@ -410,19 +407,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             if moving:
                 ok[lo:hi] = np.isfinite(total)
             if gaps:
-                # a step pair (i-1, i) is safe when both steps' roots are farther apart than
-                # BRANCH_MARGIN times the dyad point's move between them (|dx| + |dy| >= the move)
-                for p, g2 in ch.gap2:
-                    x, y = ch.px[p], ch.py[p]
-                    mv = np.abs(x[1:] - x[:-1]) + np.abs(y[1:] - y[:-1])
-                    g = np.minimum(g2[1:], g2[:-1])
-                    np.minimum(gap[lo + 1:hi], g - (BRANCH_MARGIN * mv) ** 2, out=gap[lo + 1:hi])
-                    if p in prev:
-                        x0, y0, g0 = prev[p]
-                        m0 = abs(x[0] - x0) + abs(y[0] - y0)
-                        gap[lo] = min(gap[lo], min(g0, g2[0]) - (BRANCH_MARGIN * m0) ** 2)
-                    prev[p] = (x[-1], y[-1], g2[-1])
-                ch.gap2 = []
+                _branch_margins(ch, gap, prev, lo, hi)
             if max_abs_phi is not None:
                 pts = {p: (ch.px[p], ch.py[p]) for p in moving}
                 residual[lo:hi] = max_abs_phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
@@ -444,6 +429,31 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
         if residual is not None:
             residual[bad] = np.nan
     return ChainSweep(X, V, A, ok, residual, gap)
+
+
+def _scalar_if_constant(columns):
+    """Constant rates (the usual sweep) stay scalars: zero terms can be skipped."""
+    if columns is None:
+        return None
+    return [float(c[0]) if c.size and (c == c[0]).all() else c for c in columns]
+
+
+def _branch_margins(ch: _Chunk, gap: np.ndarray, prev: dict, lo: int, hi: int) -> None:
+    """Lower ``gap[lo:hi]`` to each dyad's margin in this chunk: a step pair (i-1, i) is safe
+    when both steps' roots are farther apart than BRANCH_MARGIN times the dyad point's move
+    between them (|dx| + |dy| >= the move). ``prev``: each dyad point's last step of the chunk
+    before (x, y, gap^2), updated here."""
+    for p, g2 in ch.gap2:
+        x, y = ch.px[p], ch.py[p]
+        mv = np.abs(x[1:] - x[:-1]) + np.abs(y[1:] - y[:-1])
+        g = np.minimum(g2[1:], g2[:-1])
+        np.minimum(gap[lo + 1:hi], g - (BRANCH_MARGIN * mv) ** 2, out=gap[lo + 1:hi])
+        if p in prev:
+            x0, y0, g0 = prev[p]
+            m0 = abs(x[0] - x0) + abs(y[0] - y0)
+            gap[lo] = min(gap[lo], min(g0, g2[0]) - (BRANCH_MARGIN * m0) ** 2)
+        prev[p] = (x[-1], y[-1], g2[-1])
+    ch.gap2 = []
 
 
 def branch_check(plan: DyadChain, sweep: ChainSweep) -> bool:

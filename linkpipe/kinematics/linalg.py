@@ -340,6 +340,19 @@ class Engine:
         absE = np.abs(E)
         return np.max(np.stack([absE[ce].sum(axis=0) for ce in self.col_entries]), axis=0)
 
+    def inverse(self, E: np.ndarray) -> np.ndarray:
+        """Return J^-1 as (n, m, S): one block solve per unit right-hand side."""
+        eye = np.eye(self.model.n_rows)
+        return np.stack(self.solve(E, [eye[r][:, None] for r in range(self.model.n_rows)]))
+
+    def condition(self, E: np.ndarray, inverse: np.ndarray | None = None) -> np.ndarray:
+        """Return the 1-norm condition ``|J|_1 |J^-1|_1`` (S,) (inf where not finite), as
+        :func:`condition` measures it densely."""
+        inv = self.inverse(E) if inverse is None else inverse
+        with np.errstate(invalid="ignore"):
+            cond = self.norm1(E) * np.abs(inv).sum(axis=0).max(axis=0)
+        return np.where(np.isfinite(cond), cond, np.inf)
+
 
 def _matching(row_cols: list, n: int):
     """Return a perfect matching row -> column of a bipartite pattern (Kuhn), or None."""
@@ -429,32 +442,45 @@ def _rows(a: np.ndarray) -> list:
     return list(np.ascontiguousarray(a.T))
 
 
-def jacobian_condition(J: np.ndarray) -> np.ndarray:
-    """Return the condition (S,) of Jacobians (S, m, n) as dense_derivatives() measures it.
+#: a step's condition c against the scene's ``singular_rcond`` r: ``c r >= SINGULAR_AT`` is
+#: singular (its derivatives and forces are undetermined); ``c r >= POLISH_FROM`` is iterated to
+#: rounding level before that is decided (a double root is approached only linearly);
+#: ``c r < MODE_SETTLED_BELOW`` is well clear of any limit (its assembly mode is settled)
+SINGULAR_AT, POLISH_FROM, MODE_SETTLED_BELOW = 1.0, 1e-3, 1e-4
+
+
+def is_singular(condition, rcond: float, margin: float = SINGULAR_AT):
+    """Whether condition(s) ``c`` reach ``margin / rcond`` (NaN counts as singular)."""
+    return ~(np.asarray(condition) * rcond < margin)
+
+
+def condition(J: np.ndarray) -> np.ndarray:
+    """Return the condition (S,) of Jacobians (S, m, n), the one measure every path uses.
 
     Square: the 1-norm condition ``|J|_1 |J^-1|_1`` (inf when exactly singular); more rows than
     columns (known redundancy): ``sigma_1 / sigma_n``, the rank deficiency beyond the redundancy.
     """
     if J.shape[1] == J.shape[2]:
         return np.linalg.cond(J, 1)
-    sv = np.linalg.svd(J, compute_uv=False)
-    n = J.shape[2]
-    return sv[:, 0] / np.where(sv[:, n - 1] > 0, sv[:, n - 1], np.finfo(float).tiny)
+    return pseudo_inverse(J)[1]
 
 
-def _lin_solve(J, b):
-    """Solve J x = b for stacks (S, m, n), (S, m) in the least-squares, minimum-norm sense."""
-    S, m, n = J.shape
-    if m == n:
+def condition_and_inverse(J: np.ndarray):
+    """Return (condition (S,), inverse (S, n, m)) of Jacobians (S, m, n): the inverse and the
+    1-norm condition where square and regular, else the pseudo-inverse and sigma_1/sigma_n."""
+    if J.shape[1] == J.shape[2]:
         try:
-            return np.linalg.solve(J, b[..., None])[..., 0]
+            inv = np.linalg.inv(J)
+            return np.abs(J).sum(axis=1).max(axis=1) * np.abs(inv).sum(axis=1).max(axis=1), inv
         except np.linalg.LinAlgError:
             pass
-    return np.einsum("sij,sj->si", np.linalg.pinv(J, rcond=1e-13), b)
+    inv, cond = pseudo_inverse(J)
+    return cond, inv
 
 
-def _cond_inverse(J: np.ndarray):
-    """Return (1-norm condition as :func:`jacobian_condition`, inverse or None) of square J (n, n)."""
+def condition_and_inverse_one(J: np.ndarray):
+    """:func:`condition_and_inverse` of one square Jacobian (n, n): (condition, inverse or
+    None where exactly singular); the continuation's per-step form."""
     try:
         inv = np.linalg.inv(J)
     except np.linalg.LinAlgError:
@@ -465,7 +491,18 @@ def _cond_inverse(J: np.ndarray):
     return c, inv
 
 
-def _pinv_cond(J):
+def lin_solve(J, b):
+    """Solve J x = b for stacks (S, m, n), (S, m) in the least-squares, minimum-norm sense."""
+    S, m, n = J.shape
+    if m == n:
+        try:
+            return np.linalg.solve(J, b[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            pass
+    return np.einsum("sij,sj->si", np.linalg.pinv(J, rcond=1e-13), b)
+
+
+def pseudo_inverse(J):
     """Return the pseudo-inverse and the condition sigma_1/sigma_n of stacks (S, m, n)."""
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     n = J.shape[2]

@@ -6,7 +6,7 @@ import numpy as np
 
 from ..model import Model
 from ..status import NO_ASSEMBLY, NOT_CONVERGED
-from .linalg import _lin_solve
+from .linalg import lin_solve
 
 
 NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
@@ -60,7 +60,7 @@ def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter:
         active, F, X = active[keep], F[keep], X[keep]
         J = (model.jacobian(X, s[active]) if jacobian == "analytic"
              else fd_jacobian(model, q[active], s[active]))
-        dq = _lin_solve(J, -F)
+        dq = lin_solve(J, -F)
         big = np.abs(dq).max(axis=1)
         scale = np.where(big > step_cap, step_cap / np.where(big > 0, big, 1.0), 1.0)
         q[active] += dq * scale[:, None]
@@ -83,7 +83,7 @@ def _polish(model: Model, q: np.ndarray, s_row: np.ndarray, max_iter: int):
     it = 0
     while it < max_iter and best_r > 0.0:
         it += 1
-        qn = best_q + _lin_solve(model.jacobian(X, s_row[None]), -F)
+        qn = best_q + lin_solve(model.jacobian(X, s_row[None]), -F)
         Xn = model.positions(qn)
         Fn = model.phi(Xn, s_row[None])
         r = float(np.abs(Fn).max())
@@ -164,7 +164,7 @@ def _deflated_newton(model: Model, x: np.ndarray, s_row: np.ndarray, q_known: np
             near = np.abs(x - q_known).max() <= 1e-6 * model.size
             return x, it - 1, not near
         J = model.jacobian(model.positions(x), s1)[0]
-        dx = _lin_solve(J[None], -F[None])[0]
+        dx = lin_solve(J[None], -F[None])[0]
         r = (x - q_known)[0] / model.size  # scale-free: the same deflation in m and in mm
         r2 = float(r @ r)
         if r2 == 0.0:

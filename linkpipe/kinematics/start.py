@@ -5,7 +5,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..model import Model, constraint_source
-from .linalg import jacobian_condition
+from .linalg import condition, is_singular
 from .newton import _null_line_roots, drivers_aligned, newton
 from .step import _step_kernels
 
@@ -53,7 +53,7 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
         if conv2[0]:
             return qq[0]
     path = model.scene.path
-    if model.n_q and not jacobian_condition(jac(sol.x)[None])[0] * model.scene.solver.singular_rcond < 1.0:
+    if model.n_q and is_singular(condition(jac(sol.x)[None])[0], model.scene.solver.singular_rcond):
         # stuck on a singular shape (links in line): Newton and least squares cannot leave a
         # mirror-symmetric guess; if either side of it assembles, the guess is just ambiguous
         v, roots = _null_line_roots(model, sol.x[None], s0)

@@ -6,7 +6,7 @@ import numpy as np
 
 from ..model import Model
 from ..model import equations as eq
-from .linalg import _lin_solve
+from .linalg import lin_solve
 from .newton import NEWTON_STALL
 
 
@@ -109,7 +109,7 @@ class _Step:
             bad = not np.isfinite(r) or stall >= NEWTON_STALL
             if it == max_iter or done or bad:
                 break
-            dq = _lin_solve(jac(q, s)[None], -F[None])[0]
+            dq = lin_solve(jac(q, s)[None], -F[None])[0]
             big = np.abs(dq).max()
             if big > step_cap:
                 dq = dq * (step_cap / big)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..model import Model
 from .continuation import solve_positions
-from .linalg import _rows, engine
+from .linalg import POLISH_FROM, _rows, engine, is_singular
 from .start import start_state
 from ..status import OK
 
@@ -61,31 +61,43 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
         start = start_state(model, s[0], tol_abs, sc.max_iter)
     qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
     qn, resn = _polish_soa(eng, qn, s[nodes], stn == OK, resn)
-    q = np.full((S, model.n_q), np.nan)
-    residual = np.full(S, np.nan)
-    iterations = np.zeros(S, dtype=np.int32)
-    status = np.zeros(S, dtype=np.int8)
-    sequential = np.zeros(S, dtype=bool)
-    q[nodes], residual[nodes], iterations[nodes], status[nodes] = qn, resn, itn, stn
-    sequential[nodes] = True
-    # slopes dq/dstep at the nodes, from the engine
+    out = dict(q=np.full((S, model.n_q), np.nan), residual=np.full(S, np.nan),
+               iterations=np.zeros(S, dtype=np.int32), status=np.zeros(S, dtype=np.int8),
+               sequential=np.zeros(S, dtype=bool))
+    out["q"][nodes], out["residual"][nodes] = qn, resn
+    out["iterations"][nodes], out["status"][nodes] = itn, stn
+    out["sequential"][nodes] = True
     ds = (s[-1] - s[0]) / (S - 1)  # driver increment per step (nd,)
-    okn = stn == OK
+    slope, regular = _node_slopes(model, eng, qn, s[nodes], ds, stn == OK)
+    bad_interval = _refine_between_nodes(model, eng, out, s, nodes, qn, slope, regular, chunk)
+    _rerun_sequentially(model, out, s, nodes, qn, bad_interval, start)
+    return out
+
+
+def _node_slopes(model: Model, eng, qn, s_nodes, ds, ok):
+    """Return the slopes dq/dstep (n_nodes, n_q) at the coarse nodes, from the engine, and
+    which nodes are regular (ok, finite slope, condition clear of the singular threshold)."""
     slope = np.full_like(qn, np.nan)
-    if okn.any():
-        Xn = model.positions(qn[okn])
-        E = eng.entries(qn[okn], s[nodes][okn])
-        rhs = -model.phi_t(Xn, s[nodes][okn], np.broadcast_to(ds, (okn.sum(), len(ds))))
-        slope[okn] = np.stack(eng.solve(E, _rows(rhs)), axis=1)
-        with np.errstate(invalid="ignore"):
-            cond = eng.norm1(E) * np.abs(np.stack(eng.solve(E, [np.eye(model.n_rows)[r][:, None]
-                                                               for r in range(model.n_rows)]))
-                                         ).sum(axis=0).max(axis=0)
-        near_singular = ~(cond * model.scene.solver.singular_rcond < 1e-3)
-        okn[np.flatnonzero(okn)[near_singular]] = False
-    okn &= np.isfinite(slope).all(axis=1)
-    # fine steps of intervals between two regular nodes
-    interval_ok = okn[:-1] & okn[1:]
+    ok = ok.copy()
+    if ok.any():
+        Xn = model.positions(qn[ok])
+        E = eng.entries(qn[ok], s_nodes[ok])
+        rhs = -model.phi_t(Xn, s_nodes[ok], np.broadcast_to(ds, (ok.sum(), len(ds))))
+        slope[ok] = np.stack(eng.solve(E, _rows(rhs)), axis=1)
+        cond = eng.condition(E)
+        near_singular = is_singular(cond, model.scene.solver.singular_rcond, POLISH_FROM)
+        ok[np.flatnonzero(ok)[near_singular]] = False
+    return slope, ok & np.isfinite(slope).all(axis=1)
+
+
+def _refine_between_nodes(model: Model, eng, out: dict, s, nodes, qn, slope, regular, chunk):
+    """Every fine step of an interval between two regular nodes, at once: Newton from the
+    cubic Hermite prediction; a step that does not converge, or lands farther from its
+    prediction than a small part of its interval's motion, marks its interval bad (returned,
+    (n_nodes - 1,) bool)."""
+    sc, S = model.scene.solver, s.shape[0]
+    tol_abs = sc.tol * model.size
+    interval_ok = regular[:-1] & regular[1:]
     bad_interval = ~interval_ok
     lengths = np.diff(nodes)
     seg = np.repeat(np.arange(len(nodes) - 1), lengths)  # interval of steps 0..S-2
@@ -107,35 +119,39 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
         qT, res, its, conv, _ = _newton_soa(eng, predT.copy(), sT, tol_abs,
                                             min(NEWTON_ITERATIONS, sc.max_iter))
         moved = _colmax(np.abs(qT - predT)) if qT.shape[0] else np.zeros(len(ii))
-        span = span_int[g]
-        accept = conv & (moved <= np.maximum(OFF_BRANCH * span, OFF_BRANCH_ABS * model.size))
+        accept = conv & (moved <= np.maximum(OFF_BRANCH * span_int[g], OFF_BRANCH_ABS * model.size))
         accept &= _aligned(eng, qT, sT)
         ia = ii[accept]
         for c in range(qT.shape[0]):  # one coordinate at a time: cheaper than a 2-D fancy write
-            q[ia, c] = qT[c, accept]
-        residual[ii] = res
-        iterations[ii] = its
+            out["q"][ia, c] = qT[c, accept]
+        out["residual"][ii] = res
+        out["iterations"][ii] = its
         bad_interval[np.unique(g[~accept])] = True
-    # runs of intervals the vectorised refinement could not do: the sequential continuation,
-    # from the run's first node (or the last assembled step before it)
-    last = len(nodes) - 1
+    return bad_interval
+
+
+def _rerun_sequentially(model: Model, out: dict, s, nodes, qn, bad_interval, start):
+    """Runs of intervals the vectorised refinement could not do go to the sequential
+    continuation, from the run's first node (or the last assembled step before it); where it
+    arrives elsewhere than the coarse run at a node, it continues to the end."""
+    S, last = s.shape[0], len(nodes) - 1
     bad = np.flatnonzero(bad_interval)
     runs = np.split(bad, np.flatnonzero(np.diff(bad) > 1) + 1) if len(bad) else []
+    keys = ("q", "residual", "iterations", "status")
     for run in runs:
         j0, j1 = run[0], run[-1]
         a, b = nodes[j0], nodes[j1 + 1]
-        qs, rs, its, sts = _sequential_from_before(model, s, q, a, b, start)
-        q[a + 1:b + 1], residual[a + 1:b + 1] = qs[1:], rs[1:]
-        iterations[a + 1:b + 1], status[a + 1:b + 1] = its[1:], sts[1:]
-        sequential[a + 1:b + 1] = True
-        if j1 + 1 < last and not _same(qs[-1], qn[j1 + 1], model):
+        solved = _sequential_from_before(model, s, out["q"], a, b, start)
+        for key, arr in zip(keys, solved):
+            out[key][a + 1:b + 1] = arr[1:]
+        out["sequential"][a + 1:b + 1] = True
+        if j1 + 1 < last and not _same(solved[0][-1], qn[j1 + 1], model):
             # the coarse continuation went elsewhere at this node: continue sequentially
-            qs, rs, its, sts = _sequential_from_before(model, s, q, b, S - 1, start)
-            q[b + 1:], residual[b + 1:], iterations[b + 1:], status[b + 1:] = qs[1:], rs[1:], its[1:], sts[1:]
-            sequential[b + 1:] = True
+            solved = _sequential_from_before(model, s, out["q"], b, S - 1, start)
+            for key, arr in zip(keys, solved):
+                out[key][b + 1:] = arr[1:]
+            out["sequential"][b + 1:] = True
             break
-    out.update(q=q, residual=residual, iterations=iterations, status=status, sequential=sequential)
-    return out
 
 
 def _hermite_T(q0, d0, q1, d1, t):
