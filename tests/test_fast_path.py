@@ -264,8 +264,10 @@ if str(_HARD) not in sys.path:
 def test_dyads_satisfy_the_models_equations_and_equal_newton(family, a, b, c, start, branch, scale):
     """The closed-form dyads solve the model's own equations (model/equations.py): Φ = 0,
     Φq v = −Φt, Φq a = γ to 1e-12 of the size (and of the velocities' and accelerations'
-    scales), and equal the general Newton path to 1e-12 relative, on families of four-bars
-    (Grashof crank-rockers: a + 4 < b + c), offset slider-cranks and Watt six-bars."""
+    scales), and equal the general Newton path, on families of four-bars (Grashof
+    crank-rockers: a + 4 < b + c), offset slider-cranks and Watt six-bars. Two solutions of one
+    linear system agree to rounding times its condition: the derivatives are compared step by
+    step to (1e-12 + 1e-15 * condition) of their scale (near a toggle the condition is 1e5+)."""
     import hard_scenes as hs
 
     if family == "fourbar":
@@ -295,5 +297,6 @@ def test_dyads_satisfy_the_models_equations_and_equal_newton(family, a, b, c, st
     slow = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton")))
     np.testing.assert_array_equal(slow.status, fast.status)
     assert np.abs(slow.position - X).max() <= 1e-12 * size
-    assert np.abs(slow.velocity - V).max() <= 1e-12 * v_scale
-    assert np.abs(slow.acceleration - A).max() <= 1e-11 * a_scale
+    allowed = 1e-12 + 1e-15 * fast.condition  # (S,)
+    assert (np.abs(slow.velocity - V).max(axis=(1, 2)) <= allowed * v_scale).all()
+    assert (np.abs(slow.acceleration - A).max(axis=(1, 2)) <= 10 * allowed * a_scale).all()

@@ -115,7 +115,6 @@ def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarr
             return sweep
     return solve_with_newton(model, s, note, start)
 
-
 from .derivatives import (dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
                           link_angles_unwrapped, link_rates)
 from .newton import newton  # noqa: E402

@@ -1,0 +1,146 @@
+"""Reading the geometry tables: points, links (lengths, local coordinates), sliders."""
+from __future__ import annotations
+
+import math
+
+from .keys import _Table, _show, _suggest, _type_name
+from .tables import Link, Point, Slider
+
+
+class GeometryTables:
+    """The ``[points]``, ``[[links]]`` and ``[[sliders]]`` readers of :class:`~.parse._Parser`."""
+
+    def point_table(self) -> None:
+        raw = self.top("points")
+        if not raw:
+            raise self.error("points", None, "no points: the scene needs a [points] table",
+                             "add [points] with e.g. A = { x = 0.0, y = 0.0, fixed = true }")
+        for name, value in raw.items():
+            if not name.strip():
+                raise self.error("points", f'"{name}"', "a point name is empty",
+                                 "name it, e.g. A = { x = 0.0, y = 0.0 }")
+            if not isinstance(value, dict):
+                raise self.error("points", name, f"expected a table {{ x = ..., y = ... }}, "
+                                 f"got {_type_name(value)} ({_show(value)})",
+                                 f"write e.g. {name} = {{ x = 0.0, y = 0.0 }}")
+            table = _Table(self.path, f"points.{name}", value, "point")
+            self.points[name] = Point(name, table.number("x"), table.number("y"),
+                                      table.boolean("fixed", False))
+
+
+    def link_tables(self) -> None:
+        for table in self.entries("links"):
+            names = table.strings("points", what="point")
+            if len(names) < 2:
+                raise table.error("points", f"a link needs at least two points, got "
+                                  f"{len(names)}", 'write e.g. points = ["A", "B"]')
+            for name in names:
+                self.point(table, "points", name)
+            for i, a in enumerate(names):
+                for b in names[i + 1:]:
+                    pa, pb = self.points[a], self.points[b]
+                    if (pa.x, pa.y) == (pb.x, pb.y):
+                        raise table.error("points", f'points "{a}" and "{b}" are at the same '
+                                          f"place ({pa.x:g}, {pa.y:g}) on one link",
+                                          "move one of them in [points] (x, y are the start "
+                                          "configuration)")
+            link = Link(table.data["name"], names, self.link_length(table, names),
+                        self.link_local(table, names))
+            self.links[link.name] = link
+        if not self.links:
+            raise self.error("links", None, "no links: the scene needs at least one [[links]]",
+                             'add [[links]] with name = "..." and points = ["A", "B"]')
+
+
+    def link_length(self, table: _Table, names) -> float | None:
+        """``lengths = { "A-B" = d }``: only the first two points' distance may be given."""
+        if not table.has("lengths"):
+            return None
+        a, b = names[0], names[1]
+        if not isinstance(table.data["lengths"], dict):
+            raise table.wrong_type("lengths", "a table")
+        sub = _Table(self.path, f"{table.label}.lengths", table.data["lengths"], "links",
+                     examples={key: "3.5" for key in table.data["lengths"]})
+        length = None
+        for key in sub.data:
+            if key not in (f"{a}-{b}", f"{b}-{a}"):
+                raise sub.error(key, f'only the distance of the first two points, "{a}-{b}", '
+                                "may be given",
+                                "further points are held by `local`: write "
+                                f'local = {{ P = [u, v] }} for a point P after "{a}", "{b}"')
+            length = sub.number(key)
+            if length <= 0:
+                raise sub.error(key, f"must be positive, got {length:g}",
+                                f'write the distance of "{a}" and "{b}"')
+            pa, pb = self.points[a], self.points[b]
+            if pa.fixed and pb.fixed:  # nothing moves to meet this length: it must hold as drawn
+                drawn = math.hypot(pb.x - pa.x, pb.y - pa.y)
+                if abs(drawn - length) > 1e-9 * max(drawn, length):
+                    raise sub.error(key, f'"{a}" and "{b}" are both fixed, {drawn:g} apart, but '
+                                    f"the length says {length:g}",
+                                    "move the fixed points, or correct (or drop) the length")
+        return length
+
+
+    def link_local(self, table: _Table, names) -> dict[str, tuple[float, float]]:
+        """``local = { P = [u, v] }`` for points of the link after the first two."""
+        if not table.has("local"):
+            return {}
+        if not isinstance(table.data["local"], dict):
+            raise table.wrong_type("local", "a table")
+        sub = _Table(self.path, f"{table.label}.local", table.data["local"], "links",
+                     examples={key: "[1.5, 0.8]" for key in table.data["local"]})
+        local = {}
+        for name in sub.data:
+            if name in names[:2]:
+                raise sub.error(name, f'"{name}" is one of the first two points, which span '
+                                "the link's frame", f'give local coordinates only for points '
+                                f'after them ("{names[0]}" is [0, 0], "{names[1]}" is on the '
+                                "u axis; set their distance with lengths)")
+            if name not in names:
+                if name not in self.points:
+                    raise sub.error(name, f'unknown point "{name}"',
+                                    _suggest(name, names[2:] or self.points))
+                raise sub.error(name, f'point "{name}" is not a point of {table.label}',
+                                f'add "{name}" to its points')
+            local[name] = sub.pair(name)
+        return local
+
+
+    def slider_tables(self) -> tuple[Slider, ...]:
+        sliders = []
+        for table in self.entries("sliders"):
+            point = self.point(table, "point", table.string("point"))
+            along = table.value("along")
+            if isinstance(along, dict):
+                sub = table.sub("along")
+                sliders.append(Slider(table.data["name"], point, through=sub.pair("through"),
+                                      direction=sub.pair("direction", nonzero=True)))
+                continue
+            if (not isinstance(along, list) or len(along) != 2
+                    or not all(isinstance(v, str) for v in along)):
+                raise table.error("along", "expected { through = [x, y], direction = [dx, dy] } "
+                                  f"or two point names, got {_type_name(along)} ({_show(along)})",
+                                  f'write e.g. {table.example("along")} or along = ["D", "E"]')
+            a, b = along
+            for name in along:
+                self.point(table, "along", name)
+            if a == b:
+                raise table.error("along", f'the line needs two different points, got "{a}" '
+                                  "twice", "name two points of one moving link")
+            if point in along:
+                raise table.error("along", f'the slider point "{point}" cannot be one of the '
+                                  "points its line goes through",
+                                  "name two other points of the link that carries the guide")
+            if not any(a in link.points and b in link.points for link in self.links.values()):
+                def on(p):
+                    found = [f'"{n}"' for n, link in self.links.items() if p in link.points]
+                    return "links " + ", ".join(found) if found else "no link"
+                on_a, on_b = on(a), on(b)
+                raise table.error("along", f'"{a}" and "{b}" are not on one common link '
+                                  f'("{a}" is on {on_a}, "{b}" on {on_b})',
+                                  "name two points of the same link, or write "
+                                  "{ through = [x, y], direction = [dx, dy] } for a fixed guide")
+            sliders.append(Slider(table.data["name"], point, line_points=(a, b)))
+        return tuple(sliders)
+

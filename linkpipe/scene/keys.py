@@ -1,0 +1,264 @@
+"""The keys every table may hold and how one table of the TOML is read and checked
+(types, units, did-you-mean hints for unknown keys)."""
+from __future__ import annotations
+
+import math
+
+from ..errors import SceneError, did_you_mean
+
+
+# --------------------------------------------------------------------------------------------
+# The loader.
+#
+# Messages name tables as written: ``scene``, ``points.A``, ``links "coupler"``,
+# ``links "coupler".lengths``, ``drivers "crank".input``, ``masses[1]``. An entry of an array of
+# tables is named by its ``name`` once that name has been read; before that (a missing or bad
+# ``name``), and for ``[[masses]]``, which have no name, by its 1-based index: ``links[2]``.
+# --------------------------------------------------------------------------------------------
+
+#: Top-level tables: name -> "table" (``[name]``) or "array" (``[[name]]``).
+TABLES = {
+    "scene": "table",
+    "points": "table",
+    "links": "array",
+    "sliders": "array",
+    "drivers": "array",
+    "solver": "table",
+    "analysis": "table",
+    "gravity": "table",
+    "springs": "array",
+    "masses": "array",
+    "loads": "array",
+    "outputs": "table",
+}
+
+#: The allowed keys of every kind of table, each with an example value for hints. These dicts
+#: are the whole vocabulary: any other key is an error with a "did you mean" hint.
+KEYS: dict[str, dict[str, str]] = {
+    "scene": {"name": '"fourbar"', "description": '"Crank-rocker four-bar"',
+              "units": '{ length = "m", mass = "kg", time = "s", force = "N" }'},
+    "point": {"x": "0.0", "y": "0.0", "fixed": "true"},
+    "links": {"name": '"coupler"', "points": '["A", "B"]', "lengths": '{ "A-B" = 3.5 }',
+              "local": "{ P = [1.5, 0.8] }"},
+    "sliders": {"name": '"guide"', "point": '"C"',
+                "along": "{ through = [0.0, 0.0], direction = [0.0, 1.0] }"},
+    "sliders.along": {"through": "[0.0, 0.0]", "direction": "[0.0, 1.0]"},
+    "drivers": {"name": '"crank"', "angle": '["O2", "A"]', "coordinate": '"P.y"',
+                "from": "0.0", "to": "360.0", "steps": "361", "step": "1.0", "rate": "0.0",
+                "acceleration": "0.0", "input": '{ point = "H", direction = [0.0, 1.0] }'},
+    "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]"},
+    "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
+               "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
+               "singular_rcond": "1e-6"},
+    "analysis": {"effects": '["springs", "gravity"]'},
+    "gravity": {"g": "[0.0, -9.81]"},
+    "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",
+                "free_length": "0.5", "preload": "10.0", "damping": "0.0"},
+    "masses": {"link": '"coupler"', "mass": "1.0", "center": '"G" (or [u, v] in the link frame)',
+               "inertia": "0.0"},
+    "loads": {"name": '"cut"', "point": '"C"', "force": "[0.0, 500.0]", "link": '"rocker"',
+              "torque": "-2.0"},
+    "outputs": {"kinematics": '["velocity", "acceleration"]', "trace": '["P"]',
+                "vectors": '["P"]'},
+}
+
+#: What each effect needs in the file: effect -> the tables that must be present.
+EFFECT_NEEDS = {
+    "springs": ("springs",),
+    "gravity": ("gravity", "masses"),
+    "inertia": ("masses",),
+    "loads": ("loads",),
+    "damping": ("springs",),
+}
+
+_REQUIRED = object()  # default of a key that must be given
+
+
+def _type_name(value) -> str:
+    """Name a TOML value's type as a user reads it: "a string", "a boolean", ..."""
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a float"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return "a date/time"
+
+
+def _show(value) -> str:
+    """Show a value briefly, TOML-like, for a message."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return f'"{value}"'
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+#: the keys of ``[scene].units`` (their values are free text, recorded in the outputs)
+UNIT_KEYS = ("length", "mass", "time", "force")
+
+
+def _suggest(word: str, choices) -> str:
+    """A "did you mean" hint that also catches a wrong case ("p" for "P")."""
+    same = [c for c in choices if str(c).lower() == str(word).lower()]
+    return f'did you mean "{same[0]}"?' if same else did_you_mean(word, choices)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _table_ref(name: str) -> str:
+    return f"[[{name}]]" if TABLES[name] == "array" else f"[{name}]"
+
+
+class _Table:
+    """One TOML table being read: its label for messages and typed, checked getters.
+
+    ``kind`` selects the allowed keys in :data:`KEYS` (unknown keys raise at once); a table whose
+    keys are names (``local``) passes ``examples`` instead and checks its keys itself.
+    """
+
+    def __init__(self, path: str, label: str, data: dict, kind: str, examples=None,
+                 check: bool = True):
+        self.path, self.label, self.data, self.kind = path, label, data, kind
+        self.examples = KEYS[kind] if examples is None else examples
+        if check and examples is None:
+            self.check_keys()
+
+    def check_keys(self) -> None:
+        """Raise on the first key that is not in the vocabulary, with a "did you mean"."""
+        for key in self.data:
+            if key not in self.examples:
+                raise self.error(key, "unknown key",
+                                 _suggest(key, self.examples))
+
+    def error(self, key: str | None, message: str, hint: str = "") -> SceneError:
+        return SceneError(self.path, self.label, key, message, hint)
+
+    def example(self, key: str) -> str:
+        return f"{key} = {self.examples[key]}"
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def value(self, key: str):
+        """The raw value of a required key of several possible types."""
+        self._present(key, _REQUIRED)
+        return self.data[key]
+
+    def _present(self, key: str, default) -> bool:
+        """Whether ``key`` is given; raise when it is missing and required."""
+        if key in self.data:
+            return True
+        if default is _REQUIRED:
+            raise self.error(key, "missing", f"add {self.example(key)}")
+        return False
+
+    def wrong_type(self, key: str, expected: str) -> SceneError:
+        value = self.data[key]
+        return self.error(key, f"expected {expected}, got {_type_name(value)} ({_show(value)})",
+                          f"write e.g. {self.example(key)}")
+
+    def number(self, key: str, default=_REQUIRED) -> float | None:
+        """A finite number (an integer is accepted) as a float."""
+        if not self._present(key, default):
+            return default
+        value = self.data[key]
+        if not _is_number(value):
+            raise self.wrong_type(key, "a number")
+        if not math.isfinite(value):
+            raise self.error(key, f"must be a finite number, got {_show(value)}",
+                             f"write e.g. {self.example(key)}")
+        return float(value)
+
+    def integer(self, key: str, default=_REQUIRED) -> int | None:
+        if not self._present(key, default):
+            return default
+        value = self.data[key]
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.wrong_type(key, "an integer")
+        return value
+
+    def boolean(self, key: str, default) -> bool:
+        if not self._present(key, default):
+            return default
+        if not isinstance(self.data[key], bool):
+            raise self.wrong_type(key, "true or false")
+        return self.data[key]
+
+    def string(self, key: str, default=_REQUIRED) -> str | None:
+        if not self._present(key, default):
+            return default
+        if not isinstance(self.data[key], str):
+            raise self.wrong_type(key, "a string")
+        return self.data[key]
+
+    def name(self, key: str = "name") -> str:
+        """A required, non-empty name."""
+        value = self.string(key)
+        if not value.strip():
+            raise self.error(key, "is empty", f"write e.g. {self.example(key)}")
+        return value
+
+    def pair(self, key: str, default=_REQUIRED, nonzero: bool = False):
+        """Two finite numbers ``[a, b]`` as a tuple of floats; ``nonzero``: not ``[0, 0]``."""
+        if not self._present(key, default):
+            return default
+        value = self.data[key]
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(_is_number(v) for v in value)):
+            raise self.wrong_type(key, "two numbers [a, b]")
+        if not all(math.isfinite(v) for v in value):
+            raise self.error(key, f"must hold finite numbers, got {_show(value)}",
+                             f"write e.g. {self.example(key)}")
+        result = (float(value[0]), float(value[1]))
+        if nonzero and result == (0.0, 0.0):
+            raise self.error(key, "is zero: a direction needs a non-zero vector",
+                             f"write e.g. {self.example(key)}")
+        return result
+
+    def strings(self, key: str, default=_REQUIRED, what: str = "name") -> tuple[str, ...]:
+        """An array of strings (``what`` names one of them), each listed once."""
+        if not self._present(key, default):
+            return tuple(default)
+        value = self.data[key]
+        if not isinstance(value, list):
+            raise self.wrong_type(key, f"an array of {what}s")
+        seen = set()
+        for i, item in enumerate(value, 1):
+            if not isinstance(item, str):
+                raise self.error(key, f"element {i} is {_type_name(item)} ({_show(item)}), "
+                                 f"expected a {what} (a string)",
+                                 f"write e.g. {self.example(key)}")
+            if item in seen:
+                raise self.error(key, f'{what} "{item}" appears twice', "list each one once")
+            seen.add(item)
+        return tuple(value)
+
+    def sub(self, key: str) -> _Table:
+        """The inline table at ``key``, checked against the keys of ``<kind>.<key>``."""
+        if not isinstance(self.data[key], dict):
+            raise self.wrong_type(key, "a table")
+        return _Table(self.path, f"{self.label}.{key}", self.data[key], f"{self.kind}.{key}")
+
+    def one_of(self, first: str, second: str) -> str:
+        """Which of two exclusive keys is given; raise when neither or both are."""
+        if self.has(first) and self.has(second):
+            raise self.error(second, f"give {first} or {second}, not both",
+                             f"keep one of {self.example(first)} or {self.example(second)}")
+        if not (self.has(first) or self.has(second)):
+            raise self.error(first, f"missing: give {first} or {second}",
+                             f"add {self.example(first)} or {self.example(second)}")
+        return first if self.has(first) else second
+
+

@@ -1,0 +1,244 @@
+"""Reading the motion and force tables: drivers, solver, gravity, springs, masses, loads,
+analysis, outputs."""
+from __future__ import annotations
+
+import math
+
+from .keys import EFFECT_NEEDS, _Table, _show, _suggest, _table_ref
+from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver, Spring
+
+
+class MotionTables:
+    """The ``[[drivers]]`` and ``[solver]`` readers of :class:`~.parse._Parser`."""
+
+    def driver_tables(self) -> tuple[Driver, ...]:
+        tables = self.entries("drivers")
+        if not tables:
+            raise self.error("drivers", None, "no drivers: the scene needs at least one "
+                             "[[drivers]]", 'add [[drivers]] with name, angle = ["O2", "A"] '
+                             '(or coordinate = "P.y"), from, to and steps')
+        drivers = [self.driver(table) for table in tables]
+        first = drivers[0]
+        for table, driver in zip(tables[1:], drivers[1:]):
+            if driver.steps != first.steps:
+                raise table.error("step" if table.has("step") else "steps",
+                                  f'gives {driver.steps} steps but drivers "{first.name}" '
+                                  f"gives {first.steps}",
+                                  "all drivers advance together: make their step counts equal")
+        return tuple(drivers)
+
+
+    def driver(self, table: _Table) -> Driver:
+        if table.one_of("angle", "coordinate") == "angle":
+            kind, axis = "angle", None
+            points = table.strings("angle", what="point")
+            if len(points) != 2:
+                raise table.error("angle", f"expected two point names, got {len(points)}",
+                                  f"write e.g. {table.example('angle')}")
+            for name in points:
+                self.point(table, "angle", name)
+            if all(self.points[p].fixed for p in points):
+                raise table.error("angle", f'"{points[0]}" and "{points[1]}" are both fixed: '
+                                  "their direction cannot be driven",
+                                  "drive the direction from a point to a moving point")
+        else:
+            kind = "coordinate"
+            text = table.string("coordinate")
+            name, dot, axis_name = text.rpartition(".")
+            if not dot or axis_name not in ("x", "y"):
+                raise table.error("coordinate", f"{_show(text)} is not a point coordinate",
+                                  'write "<point>.x" or "<point>.y", e.g. coordinate = "P.y"')
+            self.point(table, "coordinate", name)
+            if self.points[name].fixed:
+                raise table.error("coordinate", f'point "{name}" is fixed: its coordinate '
+                                  "cannot be driven", "drive a moving point")
+            points, axis = (name,), "xy".index(axis_name)
+        start, stop = table.number("from"), table.number("to")
+        steps, step = self.driver_steps(table, start, stop)
+        driver_input = None
+        if table.has("input"):
+            sub = table.sub("input")
+            driver_input = Input(self.point(sub, "point", sub.string("point")),
+                                 sub.pair("direction", nonzero=True))
+            if self.points[driver_input.point].fixed:
+                raise sub.error("point", f'point "{driver_input.point}" is fixed: it never moves, '
+                                "so an actuator there does no work (every step would be "
+                                "no_leverage)", "name the moving point the actuator pushes")
+        return Driver(table.data["name"], kind, tuple(points), axis, start, stop, steps, step,
+                      rate=table.number("rate", 0.0),
+                      acceleration=table.number("acceleration", 0.0), input=driver_input)
+
+
+    @staticmethod
+    def driver_steps(table: _Table, start: float, stop: float) -> tuple[int, float | None]:
+        """Resolve ``steps`` or ``step`` into the step count (and the step, when given)."""
+        span = f"from = {start:g}, to = {stop:g}"
+        if table.one_of("steps", "step") == "steps":
+            steps = table.integer("steps")
+            if steps < 1:
+                raise table.error("steps", f"steps = {steps} gives no steps",
+                                  "use steps >= 1 (steps = 1 is a single position)")
+            if steps == 1 and start != stop:
+                raise table.error("steps", f"steps = 1 with {span} gives no steps: a single "
+                                  "position never reaches to",
+                                  "use steps >= 2 to sweep, or to = from for a single position")
+            if steps > 1 and start == stop:
+                raise table.error("steps", f"{span} with steps = {steps} gives no motion",
+                                  "use steps = 1 for a single position, or change from/to")
+            return steps, None
+        step = table.number("step")
+        if start == stop:
+            raise table.error("step", f"{span} gives no motion",
+                              "use steps = 1 for a single position, or change from/to")
+        if step == 0 or (step > 0) != (stop > start):
+            better = abs(step) if step else abs(stop - start) / 10
+            raise table.error("step", f"step = {step:g} with {span} gives no steps",
+                              "use a non-zero step with the sign of to - from, e.g. step = "
+                              f"{better if stop > start else -better:g}")
+        # from, from + s, ... up to and including `to` when it lands within 1e-9*|s| of it
+        steps = math.floor((stop - start) / step + 1e-9) + 1
+        if steps == 1:
+            raise table.error("step", f"step = {step:g} with {span} gives no steps: it "
+                              "oversteps to, leaving a single position",
+                              f"use a step no larger than |to - from| = {abs(stop - start):g}")
+        return steps, step
+
+    def solver_table(self) -> Solver:
+        table = self.table("solver")
+        tol = table.number("tol", Solver.tol)
+        if tol <= 0:
+            raise table.error("tol", f"must be positive, got {tol:g}", "write e.g. tol = 1e-12")
+        max_iter = table.integer("max_iter", Solver.max_iter)
+        if max_iter < 1:
+            raise table.error("max_iter", f"must be at least 1, got {max_iter}",
+                              "write e.g. max_iter = 25")
+        choices = {}
+        for key, allowed in SOLVER_CHOICES.items():
+            value = table.string(key, allowed[0])
+            if value not in allowed:
+                raise table.error(key, f"unknown choice {_show(value)}",
+                                  _suggest(value, allowed))
+            choices[key] = value
+        rcond = table.number("singular_rcond", Solver.singular_rcond)
+        if not 0 < rcond < 1:
+            raise table.error("singular_rcond", f"must be between 0 and 1, got {rcond:g}",
+                              "write e.g. singular_rcond = 1e-6")
+        return Solver(tol, max_iter, singular_rcond=rcond, **choices)
+
+
+
+class EffectTables:
+    """The ``[gravity]``, ``[[springs]]``, ``[[masses]]``, ``[[loads]]``, ``[analysis]`` and
+    ``[outputs]`` readers of :class:`~.parse._Parser`."""
+
+    def gravity_table(self) -> tuple[float, float] | None:
+        return self.table("gravity").pair("g") if self.top("gravity") is not None else None
+
+
+    def spring_tables(self) -> tuple[Spring, ...]:
+        springs = []
+        for table in self.entries("springs"):
+            between = table.strings("between", what="point")
+            if len(between) != 2:
+                raise table.error("between", f"expected two different points, got "
+                                  f"{len(between)}", f"write e.g. {table.example('between')}")
+            for name in between:
+                self.point(table, "between", name)
+            k = table.number("k")
+            if k < 0:
+                raise table.error("k", f"negative stiffness k = {k:g}",
+                                  "use k >= 0 (the force is tension when stretched)")
+            table.one_of("free_length", "preload")
+            free_length = table.number("free_length", None)
+            if free_length is not None and free_length < 0:
+                raise table.error("free_length", f"must be >= 0, got {free_length:g}",
+                                  "write the spring's unstretched length")
+            damping = table.number("damping", 0.0)
+            if damping < 0:
+                raise table.error("damping", f"must be >= 0, got {damping:g}",
+                                  "write e.g. damping = 0.0")
+            springs.append(Spring(table.data["name"], between, k, free_length,
+                                  table.number("preload", None), damping))
+        return tuple(springs)
+
+
+    def mass_tables(self) -> tuple[Mass, ...]:
+        masses = []
+        for table in self.entries("masses"):
+            link = self.link(table, "link", table.string("link"))
+            mass = table.number("mass")
+            if mass <= 0:
+                raise table.error("mass", f"must be positive, got {mass:g}",
+                                  f"write e.g. {table.example('mass')}")
+            if isinstance(table.value("center"), str):
+                center = self.point(table, "center", table.data["center"])
+                if center not in link.points:
+                    raise table.error("center", f'point "{center}" is not a point of links '
+                                      f'"{link.name}"', "use one of its points ("
+                                      + ", ".join(f'"{p}"' for p in link.points)
+                                      + ") or [u, v] in its frame")
+            else:
+                center = table.pair("center")
+            inertia = table.number("inertia", 0.0)
+            if inertia < 0:
+                raise table.error("inertia", f"must be >= 0, got {inertia:g}",
+                                  "write the moment of inertia about the center of mass")
+            masses.append(Mass(link.name, mass, center, inertia))
+        return tuple(masses)
+
+
+    def load_tables(self) -> tuple[Load, ...]:
+        loads = []
+        for table in self.entries("loads"):
+            at_point = table.has("point") or table.has("force")
+            on_link = table.has("link") or table.has("torque")
+            if at_point and on_link:
+                raise table.error("torque" if table.has("torque") else "link",
+                                  "a load is a force at a point or a torque on a link, not both",
+                                  "split it into two [[loads]]")
+            if at_point or not on_link:
+                if not at_point:
+                    raise table.error("point", "missing: a load needs point + force, or "
+                                      "link + torque",
+                                      f"add {table.example('point')} and "
+                                      f"{table.example('force')}, or {table.example('link')} "
+                                      f"and {table.example('torque')}")
+                loads.append(Load(table.data["name"],
+                                  point=self.point(table, "point", table.string("point")),
+                                  force=table.pair("force")))
+            else:
+                loads.append(Load(table.data["name"],
+                                  link=self.link(table, "link", table.string("link")).name,
+                                  torque=table.number("torque")))
+        return tuple(loads)
+
+
+    def analysis_table(self) -> tuple[str, ...]:
+        table = self.table("analysis")
+        effects = table.strings("effects", (), what="effect")
+        for effect in effects:
+            if effect not in EFFECTS:
+                raise table.error("effects", f'unknown effect "{effect}"',
+                                  _suggest(effect, EFFECTS))
+            for needed in EFFECT_NEEDS[effect]:
+                if not self.top(needed):
+                    ref = _table_ref(needed)
+                    raise table.error("effects", f'effect "{effect}" is on but the scene has '
+                                      f"no {ref}", f'add {ref} or remove "{effect}" from effects')
+        return effects
+
+
+    def output_table(self) -> Outputs:
+        table = self.table("outputs")
+        kinematics = table.strings("kinematics", (), what="kinematic order")
+        for order in kinematics:
+            if order not in KINEMATIC_ORDERS:
+                raise table.error("kinematics", f'unknown kinematic order "{order}"',
+                                  _suggest(order, KINEMATIC_ORDERS))
+        lists = {key: table.strings(key, (), what="point") for key in ("trace", "vectors")}
+        for key, names in lists.items():
+            for name in names:
+                self.point(table, key, name)
+        return Outputs(kinematics, lists["trace"], lists["vectors"])
+
+

@@ -1,0 +1,192 @@
+"""Read a scene TOML file into frozen, typed objects (no maths here).
+
+The contract is ``docs/scene-format.md``. Every check that needs only the text lives in this
+package; checks that need the constraint Jacobian (degrees of freedom, assembly of the start
+configuration) live in :mod:`linkpipe.model` and raise the same :class:`SceneError`.
+"""
+from __future__ import annotations
+
+import stat
+import tomllib
+from pathlib import Path
+
+from ..errors import SceneError
+from .keys import KEYS, TABLES, UNIT_KEYS, _Table, _show, _suggest, _type_name
+from .tables import Link, Point, Scene
+from .geometry import GeometryTables
+from .motion import EffectTables, MotionTables
+
+
+class _Parser(GeometryTables, MotionTables, EffectTables):
+    """Read one scene; the table readers run in dependency order (names before their users)."""
+
+    def __init__(self, data: dict, text: str, path: str):
+        self.data, self.text, self.path = data, text, path
+        self.points: dict[str, Point] = {}
+        self.links: dict[str, Link] = {}
+
+
+    def error(self, table: str, key: str | None, message: str, hint: str = "") -> SceneError:
+        return SceneError(self.path, table, key, message, hint)
+
+    # -- the shape of the file ----------------------------------------------------------------
+
+
+    def top(self, name: str):
+        """The raw value of a top-level table: a dict, a list of dicts, or None when absent."""
+        value = self.data.get(name)
+        if value is None:
+            return None
+        if TABLES[name] == "table":
+            if not isinstance(value, dict):
+                raise self.error(name, None, f"expected a table [{name}], got "
+                                 f"{_type_name(value)}", f"write [{name}] on a line of its own")
+        elif not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.error(name, None, f"expected an array of tables [[{name}]], got "
+                             f"{_type_name(value)}",
+                             f"write [[{name}]] (double brackets) before each entry")
+        return value
+
+
+    def table(self, name: str) -> _Table:
+        """A top-level single table (empty when absent)."""
+        return _Table(self.path, name, self.top(name) or {}, name)
+
+
+    def entries(self, name: str) -> list[_Table]:
+        """The entries of an array of tables, labelled by their names, which must be unique."""
+        tables, first_at = [], {}
+        named = "name" in KEYS[name]
+        for i, raw in enumerate(self.top(name) or [], 1):
+            table = _Table(self.path, f"{name}[{i}]", raw, name, check=False)
+            if named and "name" in raw:
+                entry_name = table.name()
+                if entry_name in first_at:
+                    raise table.error("name", f'"{entry_name}" is used twice '
+                                      f"({first_at[entry_name]} and {name}[{i}])",
+                                      f"give each of the [[{name}]] its own name")
+                first_at[entry_name] = f"{name}[{i}]"
+                table.label = f'{name} "{entry_name}"'
+            table.check_keys()
+            if named and "name" not in raw:
+                table.name()  # "missing", once a misspelt name key has had its hint
+            tables.append(table)
+        return tables
+
+    # -- name look-ups ------------------------------------------------------------------------
+
+
+    def point(self, table: _Table, key: str, name: str) -> str:
+        if name not in self.points:
+            raise table.error(key, f'unknown point "{name}"',
+                              _suggest(name, self.points) or "declare it in [points]")
+        return name
+
+
+    def link(self, table: _Table, key: str, name: str) -> Link:
+        if name not in self.links:
+            raise table.error(key, f'unknown link "{name}"',
+                              _suggest(name, self.links) or "declare it with [[links]]")
+        return self.links[name]
+
+    # -- the tables ---------------------------------------------------------------------------
+
+
+    def parse(self) -> Scene:
+        for name in self.data:
+            if name not in TABLES:
+                raise self.error(name, None, "unknown table", _suggest(name, TABLES))
+        scene = self.scene_table()
+        self.point_table()
+        self.link_tables()
+        sliders = self.slider_tables()
+        drivers = self.driver_tables()
+        solver = self.solver_table()
+        gravity = self.gravity_table()
+        springs = self.spring_tables()
+        masses = self.mass_tables()
+        loads = self.load_tables()
+        effects = self.analysis_table()
+        outputs = self.output_table()
+        return Scene(path=self.path, text=self.text, **scene,
+                     points=tuple(self.points.values()), links=tuple(self.links.values()),
+                     sliders=sliders, drivers=drivers, solver=solver, effects=effects,
+                     gravity=gravity, springs=springs, masses=masses, loads=loads,
+                     outputs=outputs)
+
+
+    def scene_table(self) -> dict:
+        table = self.table("scene")
+        stem = "scene" if self.path == "<string>" else Path(self.path).stem
+        name = table.string("name", stem)
+        if not name.strip() or any(c in name for c in "/\\") or name in (".", ".."):
+            raise table.error("name", f"{_show(name)} cannot be a file name (outputs are "
+                              "<name>.h5 and <name>.rrd)", f"write e.g. {table.example('name')}")
+        units = {}
+        if table.has("units"):
+            if not isinstance(table.data["units"], dict):
+                raise table.wrong_type("units", "a table of strings")
+            for key, value in table.data["units"].items():
+                if key not in UNIT_KEYS:  # they name the outputs' units: a typo must not pass
+                    raise self.error("scene.units", key, f"unknown unit key {_show(key)}: "
+                                     + _suggest(key, UNIT_KEYS),
+                                     "the keys are " + ", ".join(UNIT_KEYS))
+                if not isinstance(value, str):
+                    raise self.error("scene.units", key, f"expected a string, got "
+                                     f"{_type_name(value)} ({_show(value)})",
+                                     f'units are free text: write e.g. {key} = "m"')
+                units[key] = value
+        return {"name": name, "description": table.string("description", ""), "units": units}
+
+
+def parse_scene(text: str, path: str = "<string>") -> Scene:
+    """Parse and check a scene's TOML text; raise :class:`SceneError` on the first problem."""
+    path = str(path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "", None, f"not valid TOML: {exc}",
+                         "fix the syntax there (strings need quotes, tables are [name], "
+                         "arrays of tables [[name]], each key once)") from None
+    return _Parser(data, text, path).parse()
+
+
+#: a scene file larger than this is not a scene (a log, an image, a device): refused unread
+MAX_SCENE_BYTES = 16 * 2**20
+
+
+def _read_regular_file(path: Path) -> bytes:
+    """Return the bytes of a regular file; a FIFO, a device or a socket is refused without
+    being opened (reading one would block or never end), and so is a file over 16 MiB."""
+    info = path.stat()  # FileNotFoundError / PermissionError propagate
+    if stat.S_ISDIR(info.st_mode):
+        raise IsADirectoryError(path)
+    if not stat.S_ISREG(info.st_mode):
+        raise SceneError(str(path), "", None, "is not a regular file (a pipe, device or socket)",
+                         "give the path of a .toml file")
+    if info.st_size > MAX_SCENE_BYTES:
+        raise SceneError(str(path), "", None, f"is {info.st_size / 2**20:.0f} MiB, not a scene",
+                         "give the path of a .toml scene file")
+    return path.read_bytes()
+
+
+def load_scene(path) -> Scene:
+    """Read and check the scene file at ``path``; raise :class:`SceneError` on any problem."""
+    path = str(path)
+    try:
+        raw = _read_regular_file(Path(path))
+    except FileNotFoundError:
+        raise SceneError(path, "", None, "no such scene file",
+                         "check the path (scenes live in configs/*.toml)") from None
+    except IsADirectoryError:
+        raise SceneError(path, "", None, "is a directory, not a scene file",
+                         "give the path of a .toml file") from None
+    except OSError as exc:
+        raise SceneError(path, "", None, f"cannot read the file ({exc.strerror})",
+                         "check the path and its permissions") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, "", None, f"not UTF-8 text (byte {exc.start})",
+                         "save the scene as UTF-8") from None
+    return parse_scene(text, path)

@@ -1,0 +1,194 @@
+"""The scene as frozen, typed objects: what a TOML scene file means once it is read.
+
+The contract is ``docs/scene-format.md``. Every check that needs only the text lives here;
+checks that need the constraint Jacobian (degrees of freedom, assembly of the start
+configuration) live in :mod:`linkpipe.model` and raise the same :class:`SceneError`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+EFFECTS = ("springs", "gravity", "inertia", "damping", "loads")
+KINEMATIC_ORDERS = ("velocity", "acceleration")
+
+
+@dataclass(frozen=True)
+class Point:
+    name: str
+    x: float
+    y: float
+    fixed: bool = False
+
+
+@dataclass(frozen=True)
+class Link:
+    """A rigid body. ``points[0]``, ``points[1]`` span its frame.
+
+    ``length``: the exact distance of the first two points from ``lengths``, or None (take it
+    from the start configuration). ``local``: explicit local coordinates ``{name: (u, v)}`` of
+    further points (others are taken from the start configuration).
+    """
+
+    name: str
+    points: tuple[str, ...]
+    length: float | None = None
+    local: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Slider:
+    """A point on a line: fixed (``through`` + ``direction``) or through two points of a link."""
+
+    name: str
+    point: str
+    through: tuple[float, float] | None = None
+    direction: tuple[float, float] | None = None
+    line_points: tuple[str, str] | None = None  # along = ["D", "E"]
+
+    @property
+    def moving(self) -> bool:
+        return self.line_points is not None
+
+
+@dataclass(frozen=True)
+class Input:
+    point: str
+    direction: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Driver:
+    """One driven coordinate.
+
+    ``kind`` is ``"angle"`` (``points`` = (a, b): direction of a->b, degrees from +x, CCW) or
+    ``"coordinate"`` (``points`` = (p,), ``axis`` 0 for x, 1 for y). ``steps`` is the resolved
+    number of steps; ``step`` is the step size when the scene gave ``step`` (values are then
+    ``from + i*step``), else None (values ``from + i*(to-from)/(steps-1)``).
+    ``rate`` and ``acceleration`` in driver units per s and s^2 (degrees for angles).
+    """
+
+    name: str
+    kind: str
+    points: tuple[str, ...]
+    axis: int | None
+    from_value: float
+    to_value: float
+    steps: int
+    step: float | None = None
+    rate: float = 0.0
+    acceleration: float = 0.0
+    input: Input | None = None
+
+
+#: Choices of the [solver] knobs that trade accuracy for speed (first = default).
+SOLVER_CHOICES = {
+    "jacobian": ("analytic", "finite_difference"),
+    "derivatives": ("linear", "finite_difference"),
+    "predictor": ("first", "second", "none"),
+    "method": ("auto", "newton", "dyads"),
+}
+
+
+@dataclass(frozen=True)
+class Solver:
+    """Settings of stage 1. ``tol`` is relative to the mechanism's size.
+
+    ``jacobian``: analytic or finite-difference Newton Jacobian. ``derivatives``: velocities and
+    accelerations by linear solves or by finite differences of positions along the sweep.
+    ``predictor``: start guess of each step (none / first order / second order).
+    ``method``: ``auto`` (closed-form dyads where the scene decomposes, else Newton),
+    ``newton`` (always the general path) or ``dyads`` (require the fast path).
+    ``singular_rcond``: 1/condition below which a step's Jacobian counts as singular. At a
+    change point or assembly limit even a fully converged solution has a smallest singular value
+    of about sqrt(machine eps) ~ 1e-8 (the root is double), so values much below 1e-6 stop
+    flagging exact singular configurations.
+    """
+
+    tol: float = 1e-12
+    max_iter: int = 25
+    jacobian: str = "analytic"
+    derivatives: str = "linear"
+    predictor: str = "first"
+    method: str = "auto"
+    singular_rcond: float = 1e-6
+
+
+@dataclass(frozen=True)
+class Spring:
+    name: str
+    between: tuple[str, str]
+    k: float
+    free_length: float | None = None
+    preload: float | None = None
+    damping: float = 0.0
+
+
+@dataclass(frozen=True)
+class Mass:
+    link: str
+    mass: float
+    center: str | tuple[float, float]
+    inertia: float = 0.0
+
+
+@dataclass(frozen=True)
+class Load:
+    """A constant force at a point (global frame) or a couple on a link (CCW positive)."""
+
+    name: str
+    point: str | None = None
+    force: tuple[float, float] | None = None
+    link: str | None = None
+    torque: float | None = None
+
+
+@dataclass(frozen=True)
+class Outputs:
+    kinematics: tuple[str, ...] = ()
+    trace: tuple[str, ...] = ()
+    vectors: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A whole checked scene. ``text`` is the TOML source, ``path`` where it came from."""
+
+    path: str
+    text: str
+    name: str
+    description: str
+    units: dict[str, str]
+    points: tuple[Point, ...]
+    links: tuple[Link, ...]
+    sliders: tuple[Slider, ...]
+    drivers: tuple[Driver, ...]
+    solver: Solver
+    effects: tuple[str, ...] = ()
+    gravity: tuple[float, float] | None = None
+    springs: tuple[Spring, ...] = ()
+    masses: tuple[Mass, ...] = ()
+    loads: tuple[Load, ...] = ()
+    outputs: Outputs = Outputs()
+
+    @property
+    def point_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.points)
+
+    @property
+    def n_steps(self) -> int:
+        return self.drivers[0].steps if self.drivers else 1
+
+    @property
+    def present_but_off(self) -> tuple[str, ...]:
+        """Effect tables present in the file but not named in ``effects`` (validated, unused)."""
+        present = {
+            "springs": bool(self.springs),
+            "gravity": self.gravity is not None,
+            "inertia": bool(self.masses),
+            "loads": bool(self.loads),
+            "damping": any(s.damping for s in self.springs),
+        }
+        return tuple(e for e in EFFECTS if present[e] and e not in self.effects)
+
+
