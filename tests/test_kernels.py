@@ -2,7 +2,7 @@
 
 ``linkpipe/model/equations.py`` writes every constraint row once. ``Model`` evaluates the rows
 on stacked sweeps, the sequential continuation's one-step kernels (``kinematics._Step``) on
-Python floats, and the sparse engine (``batch.linalg.Engine``) on per-coordinate arrays. Here, for
+Python floats, and the sparse engine (``batch.sparse.Engine``) on per-coordinate arrays. Here, for
 every shipped scene and for hypothesis-drawn four-bars, slider-cranks and six-bars:
 
 * Φ, Φq, Φs of the float kernels equal the model's to the last bit (the continuation's branch
@@ -50,7 +50,7 @@ def _layouts_agree(model):
         np.testing.assert_array_equal(step.phi(q[i], s[i]), model.phi(X[i:i + 1], s[i:i + 1])[0])
         np.testing.assert_array_equal(step.jac(q[i], s[i]), model.jacobian(X[i:i + 1], s[i:i + 1])[0])
         np.testing.assert_array_equal(step.phi_s(q[i], s[i]), model.phi_s(X[i:i + 1], s[i:i + 1])[0])
-    eng = batch.linalg.engine(model)
+    eng = batch.sparse.engine(model)
     if eng is None:  # non-square (redundant) scenes take the dense path, by declaration
         assert model.n_rows != model.n_q
         return

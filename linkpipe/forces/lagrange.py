@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics.linalg import engine
+from ..kinematics.sparse import engine
 from ..model import Model
 
 CHUNK = 8192  # steps per block of solves

@@ -18,6 +18,7 @@ from ..errors import SceneError
 from ..model import Model
 from .decompose import decompose
 from .dyads import branch_check, refine_branches, set_branches, solve_chain
+from .sparse import no_engine_reason
 from .start import start_state
 from .vectorised import max_abs_phi, solve_newton
 from ..status import NO_ASSEMBLY, OK
@@ -85,6 +86,10 @@ def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
 def solve_with_newton(model: Model, s, note: str = "", start=None) -> Sweep:
     """The general path (coarse continuation + batched Newton; step by step for short
     sweeps): positions only, the derivative stage gives velocities and accelerations."""
+    reason = no_engine_reason(model)
+    if reason:  # a declared path: the summary and the HDF5 solver_note say it
+        note = "; ".join(x for x in (note, f"no sparse engine ({reason}): sequential "
+                                           "continuation on every step, dense derivatives") if x)
     out = solve_newton(model, s, start=start)
     q = out["q"]
     X = model.positions(np.where(np.isfinite(q), q, 0.0))

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model, driver_scale, driver_values
-from .linalg import condition_and_inverse, engine, is_singular
+from .linalg import condition_and_inverse, is_singular
+from .sparse import engine
 from .vectorised import CHUNK
 from ..status import OK, SINGULAR
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import Model
+from ..model import Model, derived
 from ..model import equations as eq
 from .linalg import lin_solve
 from .newton import NEWTON_STALL
@@ -122,8 +122,4 @@ class _Step:
 
 def _step_kernels(model: Model) -> _Step:
     """Return the model's one-step kernels (built once per model, kept beside it)."""
-    cache = model.__dict__.get("_linkpipe_step")
-    if cache is None:
-        cache = _Step(model)
-        object.__setattr__(model, "_linkpipe_step", cache)
-    return cache
+    return derived(model, "step_kernels", _Step)

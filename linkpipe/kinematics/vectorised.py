@@ -9,7 +9,8 @@ import numpy as np
 
 from ..model import Model
 from .continuation import solve_positions
-from .linalg import POLISH_FROM, _rows, engine, is_singular
+from .linalg import POLISH_FROM, is_singular
+from .sparse import _rows, engine
 from .start import start_state
 from ..status import OK
 

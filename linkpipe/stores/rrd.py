@@ -155,7 +155,6 @@ def log_result(stream: rr.RecordingStream, result) -> None:
 
 def _log_points(stream, send, result) -> None:
     X = result.position
-    names = np.array(result.point_names, dtype=str)
     ok = _finite_rows(X)                                  # (S, P)
     stream.log("mechanism/points", rr.Points2D.from_fields(
         radii=rr.components.Radius.ui_points(4.0), colors=_POINT, show_labels=True,

@@ -1,0 +1,450 @@
+"""Linear algebra of the constraint Jacobian: the sparse block-triangular :class:`Engine`
+(whole sweeps), the dense one-step solve and the condition estimates.
+
+:class:`Engine` (one per model, built once): the constraint Jacobian in natural coordinates is
+affine in ``q`` and in ``cos``/``sin`` of the angle drivers (``Phi`` is at most quadratic), so its
+non-zero entries at every step are one matrix product ``C^T f`` of a small feature vector
+``f = [1, q, cos s, sin s]``. ``C`` is read off :meth:`Model.jacobian` itself, so the model stays
+the one definition of the rows (tests/test_kernels.py checks the reconstruction). The sparsity
+pattern is put in block-triangular order once (a maximum matching and the strongly connected
+components: Dulmage-Mendelsohn), so ``Phi_q x = b`` at every step is a forward substitution
+through 1x1 and 2x2 blocks (Cramer's rule) over contiguous per-coordinate arrays.
+A model whose Jacobian is not square (redundant constraints) has no engine: the dense path
+serves it, by declaration (``engine`` returns None).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Model, derived
+from ..model import equations as eq
+
+
+class EngineUnavailable(Exception):
+    """The model's Jacobian is not square and structurally regular (use the dense path)."""
+
+
+class Engine:
+    """The model's Jacobian as sparse affine entries in block-triangular order (see module doc)."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        m, n = model.n_rows, model.n_q
+        if m != n or n == 0:
+            raise EngineUnavailable("the Jacobian is not square (redundant constraints, or fewer rows than unknowns)")
+        self.angle = np.flatnonzero(model.drv_angle)
+        na = len(self.angle)
+        self.n_features = 1 + n + 2 * na
+        C = self._coefficients()  # (n_features, m, n)
+        nz = np.abs(C).max(axis=0) > 0
+        self.rows, self.cols = np.nonzero(nz)  # entries, row-major
+        self.C = np.ascontiguousarray(C[:, self.rows, self.cols])  # (n_features, nnz)
+        self.CT = np.ascontiguousarray(self.C.T)
+        self._terms = [(float(col[0]), [(int(f), float(col[f])) for f in np.flatnonzero(col) if f > 0])
+                       for col in self.C.T]  # per entry: constant, [(feature, coefficient)]
+        self._check()
+        self._rows_setup()
+        self._blocks()
+
+    # ------------------------------------------------------------------ the affine map
+    def _jac(self, q, s):
+        model = self.model
+        return model.jacobian(model.positions(q[None]), s[None])[0]
+
+    def _coefficients(self):
+        model = self.model
+        n, nd = model.n_q, model.n_drivers
+        q0, s0 = np.zeros(n), np.zeros(nd)
+        J0 = self._jac(q0, s0)
+        C = np.zeros((self.n_features,) + J0.shape)
+        base = J0.copy()
+        for k, j in enumerate(self.angle):
+            sp = s0.copy()
+            sp[j] = np.pi
+            Jpi = self._jac(q0, sp)
+            sp[j] = np.pi / 2
+            Jh = self._jac(q0, sp)
+            bc = 0.5 * (J0 - Jpi)
+            C[1 + n + k] = bc
+            C[1 + n + len(self.angle) + k] = Jh - J0 + bc
+            base = base - bc
+        C[0] = base
+        for k in range(n):
+            e = np.zeros(n)
+            e[k] = 1.0
+            C[1 + k] = self._jac(e, s0) - J0
+        # clean rounding noise: entries are exact small rationals of the lengths
+        C[np.abs(C) < 1e-14 * max(1.0, np.abs(C).max())] = 0.0
+        return C
+
+    def features(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return the features (n_features, S) of positions q (S, n_q) and driver values s (S, nd)."""
+        S = q.shape[0]
+        F = np.empty((self.n_features, S))
+        F[0] = 1.0
+        F[1:1 + q.shape[1]] = q.T
+        na = len(self.angle)
+        if na:
+            th = s[:, self.angle].T
+            F[1 + q.shape[1]:1 + q.shape[1] + na] = np.cos(th)
+            F[1 + q.shape[1] + na:] = np.sin(th)
+        return F
+
+    def entries(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return the Jacobian's non-zero entries (nnz, S) at positions q (S, n_q), values s (S, nd)."""
+        return self.entries_T(np.ascontiguousarray(q.T), np.ascontiguousarray(s.T))
+
+    def dense(self, E: np.ndarray) -> np.ndarray:
+        """Return the dense Jacobians (S, m, n) from entries (nnz, S) (for checks)."""
+        S = E.shape[1]
+        J = np.zeros((S, self.model.n_rows, self.model.n_q))
+        J[:, self.rows, self.cols] = E.T
+        return J
+
+    def _check(self):
+        rng = np.random.default_rng(7)
+        model = self.model
+        for _ in range(3):
+            q = rng.normal(size=(1, model.n_q)) * model.size
+            s = rng.uniform(-4, 4, size=(1, model.n_drivers))
+            J = model.jacobian(model.positions(q), s)
+            Je = self.dense(self.entries(q, s))
+            if not np.allclose(J, Je, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(J).max())):
+                raise EngineUnavailable("the Jacobian is not affine in the features")
+
+    # ------------------------------------------------------------------ SoA evaluations
+    # The model's Phi, Phi_s and gamma with coordinates first and steps last (contiguous per
+    # coordinate), for chunks of steps; checked against the model's own at construction.
+    def points(self, qT: np.ndarray) -> np.ndarray:
+        """Return all points (P, 2, S) from moving coordinates qT (n_q, S)."""
+        md = self.model
+        S = qT.shape[1]
+        X2 = np.empty((md.n_points, 2, S))
+        X2[md.fixed] = md.start_position[md.fixed][:, :, None]
+        X2[md.moving] = qT.reshape(-1, 2, S)
+        return X2
+
+    def phi(self, X2: np.ndarray, sT: np.ndarray, trig: dict | None = None) -> np.ndarray:
+        """Return Phi (m, S) at points X2 (P, 2, S) and driver values sT (nd, S).
+
+        ``X2`` may also be a dict {moving point index: (x (S,), y (S,))}. ``trig``: optional
+        {driver: (cos s, sin s)} already computed by the caller.
+        """
+        S = self._n_steps(X2, sT)
+        out = np.empty((self.model.n_rows, S))
+        for r, row in enumerate(self._phi_rows(X2, sT, trig)):
+            out[r] = row
+        return out
+
+    def max_abs_phi(self, X2, sT: np.ndarray, trig: dict | None = None) -> np.ndarray:
+        """Return max |Phi| over the rows (S,), arguments as :meth:`phi`, without forming Phi.
+
+        NaN anywhere in a step gives NaN (``np.maximum`` propagates it).
+        """
+        res = np.zeros(self._n_steps(X2, sT))
+        for row in self._phi_rows(X2, sT, trig):
+            if isinstance(row, np.ndarray):
+                np.maximum(res, np.abs(row, out=row), out=res)  # every row is a fresh array
+            else:  # a row between fixed points only: a constant
+                np.maximum(res, abs(row), out=res)
+        return res
+
+    @staticmethod
+    def _n_steps(X2, sT) -> int:
+        if isinstance(X2, dict):
+            return len(next(iter(X2.values()))[0]) if X2 else sT.shape[1]
+        return X2.shape[2]
+
+    def _phi_rows(self, X2, sT: np.ndarray, trig: dict | None):
+        """Yield Phi's rows in order (:func:`linkpipe.model.equations.phi_rows`), each an (S,)
+        array (or a float when it is constant), on contiguous coordinate arrays; fixed points
+        enter as scalars."""
+        fx = self._fixed_xy
+        if isinstance(X2, dict):  # {moving point: (x (S,), y (S,))}: no copy into (P, 2, S)
+            def xy(p):
+                return fx[p] if p in fx else X2[p]
+        else:
+            def xy(p):
+                return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
+        cos_s, sin_s = self._trig(sT, trig)
+        return eq.phi_rows(self.model.rows, xy, sT, cos_s, sin_s)
+
+    def _trig(self, sT, trig=None):
+        """Return the drivers' cos and sin (lists by driver; None for coordinate drivers)."""
+        cos_s, sin_s = [None] * len(sT), [None] * len(sT)
+        for j in self.angle:
+            cos_s[j], sin_s[j] = trig[j] if trig and j in trig else (np.cos(sT[j]), np.sin(sT[j]))
+        return cos_s, sin_s
+
+    def _rows_setup(self):
+        X0 = self.model.start_position
+        self._fixed_xy = {int(p): (float(X0[p, 0]), float(X0[p, 1]))
+                          for p in np.flatnonzero(self.model.fixed)}
+
+    def phi_s(self, X2: np.ndarray, sT: np.ndarray) -> np.ndarray:
+        """Return dPhi_driver/ds (nd, S)."""
+        md = self.model
+        out = np.empty((md.n_drivers, X2.shape[2]))
+        cos_s, sin_s = self._trig(sT)
+        for j, row in enumerate(eq.phi_s_rows(md.rows, lambda p: (X2[p, 0], X2[p, 1]), cos_s, sin_s)):
+            out[j] = row
+        return out
+
+    def entries_T(self, qT: np.ndarray, sT: np.ndarray) -> np.ndarray:
+        """Return the Jacobian's entries (nnz, S) from qT (n_q, S) and sT (nd, S).
+
+        Entry by entry over its few non-zero coefficients (most entries are constants or one
+        coordinate over a length): a fraction of a dense product's work.
+        """
+        n, S = qT.shape
+        na = len(self.angle)
+        feats = [None] + list(qT)
+        if na:
+            th = sT[self.angle]
+            feats += list(np.cos(th)) + list(np.sin(th))
+        E = np.empty((len(self.rows), S))
+        tmp = np.empty(S)
+        for e, (c0, terms) in enumerate(self._terms):
+            row = E[e]
+            if not terms:
+                row.fill(c0)
+                continue
+            f, c = terms[0]
+            np.multiply(feats[f], c, out=row)
+            if c0:
+                row += c0
+            for f, c in terms[1:]:
+                np.multiply(feats[f], c, out=tmp)
+                row += tmp
+        return E
+
+    # ------------------------------------------------------------------ block-triangular order
+    def _blocks(self):
+        m = self.model.n_rows
+        row_cols = [[] for _ in range(m)]
+        for r, c in zip(self.rows, self.cols):
+            row_cols[int(r)].append(int(c))
+        match = _matching(row_cols, m)  # row -> column
+        if match is None:
+            raise EngineUnavailable("the Jacobian is structurally singular")
+        row_of = [0] * m
+        for r, c in enumerate(match):
+            row_of[c] = r  # column -> its row
+        # column c(r) depends on the other columns of row r
+        src, dst = [], []
+        for r, c in zip(self.rows, self.cols):
+            if c != match[r]:
+                src.append(int(c))
+                dst.append(int(match[r]))
+        succ = [[] for _ in range(m)]
+        for a, b in zip(src, dst):
+            succ[a].append(b)
+        comps = _components(succ)  # strongly connected, dependencies first
+        order = list(range(len(comps)))
+        self.blocks = []
+        entry_of = {(int(r), int(c)): e for e, (r, c) in enumerate(zip(self.rows, self.cols))}
+        self.entry_of = entry_of
+        for k in order:
+            cols = sorted(int(c) for c in comps[k])
+            rows = [int(row_of[c]) for c in cols]
+            inner = [[entry_of.get((r, c), -1) for c in cols] for r in rows]
+            outer = [[(e, int(self.cols[e])) for e in np.flatnonzero(self.rows == r)
+                      if int(self.cols[e]) not in cols] for r in rows]
+            self.blocks.append((rows, cols, inner, outer))
+        self.col_entries = [np.flatnonzero(self.cols == c) for c in range(m)]
+
+    # ------------------------------------------------------------------ solves
+    def solve(self, E: np.ndarray, b) -> list:
+        """Solve ``J x = b`` at every step: E (nnz, S) entries, b a list of m arrays (..., S).
+
+        Returns x as a list of n_q arrays (..., S). Exactly singular blocks give inf or NaN.
+        """
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self._solve(E, b)
+
+    def _solve(self, E, b):
+        x = [None] * self.model.n_q
+        for rows, cols, inner, outer in self.blocks:
+            rhs = []
+            for r, out in zip(rows, outer):
+                acc = b[r]
+                for e, c in out:
+                    acc = acc - E[e] * x[c]
+                rhs.append(acc)
+            k = len(cols)
+            if k == 1:
+                x[cols[0]] = rhs[0] / E[inner[0][0]]
+            elif k == 2:
+                a, b_, c, d = _block2(E, inner)
+                idet = 1.0 / (a * d - b_ * c)
+                x[cols[0]] = (rhs[0] * d - rhs[1] * b_) * idet
+                x[cols[1]] = (a * rhs[1] - c * rhs[0]) * idet
+            else:
+                S = E.shape[1]
+                M = _dense_block(E, inner)
+                shp = np.broadcast_shapes(*(np.shape(r) for r in rhs), (S,))
+                R = np.stack([np.broadcast_to(r, shp).reshape(-1, S) for r in rhs])  # (k, r, S)
+                try:
+                    sol = np.linalg.solve(M, R.transpose(2, 0, 1))  # (S, k, r)
+                except np.linalg.LinAlgError:
+                    sol = np.full((S, k, R.shape[1]), np.nan)
+                for i, c in enumerate(cols):
+                    x[c] = sol[:, i, :].T.reshape(shp)
+        return x
+
+    def solve_transpose(self, E: np.ndarray, b) -> list:
+        """Solve ``J^T y = b`` at every step: b a list of n_q arrays (S,); returns m arrays.
+
+        Back substitution through the blocks in reverse order (J^T is block upper triangular).
+        """
+        with np.errstate(divide="ignore", invalid="ignore"):
+            y = [None] * self.model.n_rows
+            for rows, cols, inner, _ in reversed(self.blocks):
+                rhs = []
+                for c in cols:
+                    acc = b[c]
+                    for e in self.col_entries[c]:
+                        r = int(self.rows[e])
+                        if r not in rows:
+                            acc = acc - E[e] * y[r]
+                    rhs.append(acc)
+                k = len(cols)
+                if k == 1:
+                    y[rows[0]] = rhs[0] / E[inner[0][0]]
+                elif k == 2:  # the block transposed: [[a, c], [b, d]]
+                    a, b_, c, d = _block2(E, inner)
+                    idet = 1.0 / (a * d - b_ * c)
+                    y[rows[0]] = (rhs[0] * d - rhs[1] * c) * idet
+                    y[rows[1]] = (a * rhs[1] - b_ * rhs[0]) * idet
+                else:
+                    S = E.shape[1]
+                    M = _dense_block(E, inner).transpose(0, 2, 1)
+                    R = np.stack([np.broadcast_to(r, (S,)) for r in rhs], axis=1)
+                    try:
+                        sol = np.linalg.solve(M, R[..., None])[..., 0]
+                    except np.linalg.LinAlgError:
+                        sol = np.full((S, k), np.nan)
+                    for i, r in enumerate(rows):
+                        y[r] = sol[:, i]
+            return y
+
+    def matvec(self, E: np.ndarray, x: list) -> list:
+        """Return ``J x`` as a list of m arrays: E (nnz, S), x a list of n_q arrays (S,)."""
+        out = [0.0] * self.model.n_rows
+        for e, (r, c) in enumerate(zip(self.rows, self.cols)):
+            out[r] = out[r] + E[e] * x[c]
+        return out
+
+    def norm1(self, E: np.ndarray) -> np.ndarray:
+        """Return the 1-norm (largest column sum of |J|) at every step (S,)."""
+        absE = np.abs(E)
+        return np.max(np.stack([absE[ce].sum(axis=0) for ce in self.col_entries]), axis=0)
+
+    def inverse(self, E: np.ndarray) -> np.ndarray:
+        """Return J^-1 as (n, m, S): one block solve per unit right-hand side."""
+        eye = np.eye(self.model.n_rows)
+        return np.stack(self.solve(E, [eye[r][:, None] for r in range(self.model.n_rows)]))
+
+    def condition(self, E: np.ndarray, inverse: np.ndarray | None = None) -> np.ndarray:
+        """Return the 1-norm condition ``|J|_1 |J^-1|_1`` (S,) (inf where not finite), as
+        :func:`condition` measures it densely."""
+        inv = self.inverse(E) if inverse is None else inverse
+        with np.errstate(invalid="ignore"):
+            cond = self.norm1(E) * np.abs(inv).sum(axis=0).max(axis=0)
+        return np.where(np.isfinite(cond), cond, np.inf)
+
+
+def _matching(row_cols: list, n: int):
+    """Return a perfect matching row -> column of a bipartite pattern (Kuhn), or None."""
+    col_row = [-1] * n
+
+    def augment(r, seen):
+        for c in row_cols[r]:
+            if not seen[c]:
+                seen[c] = True
+                if col_row[c] < 0 or augment(col_row[c], seen):
+                    col_row[c] = r
+                    return True
+        return False
+
+    for r in range(len(row_cols)):
+        if not augment(r, [False] * n):
+            return None
+    match = [0] * len(row_cols)
+    for c, r in enumerate(col_row):
+        match[r] = c
+    return match
+
+
+def _components(succ: list) -> list:
+    """Return the strongly connected components of a graph (Tarjan), each after its predecessors."""
+    n = len(succ)
+    index, low, on, stack, out = [None] * n, [0] * n, [False] * n, [], []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on[v] = True
+        for w in succ[v]:
+            if index[w] is None:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif on[w]:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on[w] = False
+                comp.append(w)
+                if w == v:
+                    break
+            out.append(comp)
+
+    for v in range(n):
+        if index[v] is None:
+            visit(v)
+    return out[::-1]  # Tarjan emits sinks first: reversed, every component follows its sources
+
+
+def _block2(E: np.ndarray, inner) -> tuple:
+    """Return the entries (a, b, c, d) of a 2x2 diagonal block [[a, b], [c, d]] (0.0 where empty)."""
+    return tuple(E[e] if e >= 0 else 0.0 for e in (inner[0][0], inner[0][1], inner[1][0], inner[1][1]))
+
+
+def _dense_block(E: np.ndarray, inner) -> np.ndarray:
+    """Return a k x k diagonal block as dense matrices (S, k, k) from the entries E (nnz, S)."""
+    k = len(inner)
+    M = np.zeros((E.shape[1], k, k))
+    for i in range(k):
+        for j in range(k):
+            if inner[i][j] >= 0:
+                M[:, i, j] = E[inner[i][j]]
+    return M
+
+
+def engine(model: Model) -> Engine | None:
+    """Return the model's engine (built once per model), or None when it has none."""
+    return derived(model, "engine", _build_engine)[0]
+
+
+def no_engine_reason(model: Model) -> str:
+    """Why the model has no sparse engine ("" when it has one): a declared path, not a
+    silent fallback; the run's ``solver_note`` says it."""
+    return derived(model, "engine", _build_engine)[1]
+
+
+def _build_engine(model: Model) -> tuple[Engine | None, str]:
+    try:
+        return Engine(model), ""
+    except EngineUnavailable as exc:
+        return None, str(exc)
+
+
+def _rows(a: np.ndarray) -> list:
+    """(S, k) -> list of k contiguous arrays."""
+    return list(np.ascontiguousarray(a.T))
+
+
