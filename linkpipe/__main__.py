@@ -233,6 +233,8 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
     path = [f"path {used}"] if used else []
     if changed or path:  # the path taken, and the [solver] knobs not at linkpipe's defaults
         lines.append("  solver: " + ", ".join(path + [f"{k} {v}" for k, v in changed.items()]))
+    if used == "newton" and result.solver_note:  # why not the fast path, why not sparse
+        lines.append(f"  solver note: {result.solver_note}")
     if result.mobility.redundant:
         line = (f"  redundant constraints: {result.mobility.redundant} (solved by least squares; "
                 f"'singular' only beyond them)")
