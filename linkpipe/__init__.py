@@ -1,5 +1,5 @@
 """linkpipe: planar linkage analysis — kinematic sweeps, forces, HDF5 and Rerun outputs."""
-__version__ = "0.1.0"
+from .version import __version__
 
 from .errors import LinkpipeError, SceneError  # noqa: E402
 from .scene import Scene, load_scene, parse_scene  # noqa: E402

@@ -217,7 +217,7 @@ class Result:
 
     def attributes(self) -> dict[str, Any]:
         """Root attributes of the HDF5 file."""
-        from . import __version__
+        from .version import __version__
         import datetime
 
         sc = self.scene

@@ -306,14 +306,16 @@ def test_a_rung_that_crashes_is_a_row_with_its_error_and_the_command_fails(tmp_p
     rungs are measured, and `accuracy` exits 1."""
     import h5py
 
-    real_solve = accuracy.solve
+    from linkpipe.accuracy import timing
+
+    real_solve = timing.solve
 
     def solve(scene):
         if scene.solver.tol == 1e-4:
             raise ZeroDivisionError("injected")
         return real_solve(scene)
 
-    monkeypatch.setattr(accuracy, "solve", solve)
+    monkeypatch.setattr(timing, "solve", solve)
     path = CONFIGS / "shear_press.toml"
     assert main(["accuracy", str(path), "--quick", "--repeats", "1", "--out", str(tmp_path)]) == 1
     captured = capsys.readouterr()

@@ -1,0 +1,2 @@
+"""The package version (a leaf: the outputs record it)."""
+__version__ = "0.1.0"
