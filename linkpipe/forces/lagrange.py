@@ -7,8 +7,8 @@ import numpy as np
 
 from ..kinematics.sparse import engine
 from ..model import Model
+from ..kinematics.linalg import CHUNK
 
-CHUNK = 8192  # steps per block of solves
 
 
 def multipliers(model: Model, Xz, s, generalized_q, ok):

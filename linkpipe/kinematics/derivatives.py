@@ -8,7 +8,7 @@ import numpy as np
 from ..model import Model, driver_scale, driver_values
 from .linalg import condition_and_inverse, is_singular
 from .sparse import engine
-from .vectorised import CHUNK
+from .linalg import CHUNK
 from ..status import OK, SINGULAR
 
 

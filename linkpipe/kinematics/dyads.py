@@ -39,9 +39,9 @@ import numpy as np
 from dataclasses import dataclass
 
 from .decompose import Dyad, DyadChain, Line
+from .linalg import CHUNK
 
 
-CHUNK = 8192  # steps per chunk: the working set stays in cache
 
 
 BRANCH_MARGIN = 2.0  # a dyad's roots must stay this many steps' motion apart (see branch_check)

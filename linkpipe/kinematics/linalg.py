@@ -7,6 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 
+#: steps per chunk of whole-sweep work (the dyad chain, batched Newton, block solves, the force
+#: stage's multipliers): about the largest that keeps each chunk's working set in cache
+CHUNK = 8192
+
 #: a step's condition c against the scene's ``singular_rcond`` r: ``c r >= SINGULAR_AT`` is
 #: singular (its derivatives and forces are undetermined); ``c r >= POLISH_FROM`` is iterated to
 #: rounding level before that is decided (a double root is approached only linearly);

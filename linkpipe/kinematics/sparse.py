@@ -275,10 +275,7 @@ class Engine:
             if k == 1:
                 x[cols[0]] = rhs[0] / E[inner[0][0]]
             elif k == 2:
-                a, b_, c, d = _block2(E, inner)
-                idet = 1.0 / (a * d - b_ * c)
-                x[cols[0]] = (rhs[0] * d - rhs[1] * b_) * idet
-                x[cols[1]] = (a * rhs[1] - c * rhs[0]) * idet
+                x[cols[0]], x[cols[1]] = _cramer2(*_block2(E, inner), *rhs)
             else:
                 S = E.shape[1]
                 M = _dense_block(E, inner)
@@ -313,9 +310,7 @@ class Engine:
                     y[rows[0]] = rhs[0] / E[inner[0][0]]
                 elif k == 2:  # the block transposed: [[a, c], [b, d]]
                     a, b_, c, d = _block2(E, inner)
-                    idet = 1.0 / (a * d - b_ * c)
-                    y[rows[0]] = (rhs[0] * d - rhs[1] * c) * idet
-                    y[rows[1]] = (a * rhs[1] - b_ * rhs[0]) * idet
+                    y[rows[0]], y[rows[1]] = _cramer2(a, c, b_, d, *rhs)
                 else:
                     S = E.shape[1]
                     M = _dense_block(E, inner).transpose(0, 2, 1)
@@ -407,6 +402,12 @@ def _components(succ: list) -> list:
         if index[v] is None:
             visit(v)
     return out[::-1]  # Tarjan emits sinks first: reversed, every component follows its sources
+
+
+def _cramer2(a, b, c, d, r0, r1):
+    """Solve [[a, b], [c, d]] x = [r0, r1] by Cramer's rule, elementwise over steps."""
+    idet = 1.0 / (a * d - b * c)
+    return (r0 * d - r1 * b) * idet, (a * r1 - c * r0) * idet
 
 
 def _block2(E: np.ndarray, inner) -> tuple:

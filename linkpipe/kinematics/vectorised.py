@@ -13,9 +13,9 @@ from .linalg import POLISH_FROM, is_singular
 from .sparse import _rows, engine
 from .start import start_state
 from ..status import OK
+from .linalg import CHUNK
 
 
-CHUNK = 8192
 
 
 COARSE_NODES = 128  # sequential continuation on at most about this many steps

@@ -74,21 +74,13 @@ EFFECT_NEEDS = {
 _REQUIRED = object()  # default of a key that must be given
 
 
+_TYPE_NAMES = ((bool, "a boolean"), (int, "an integer"), (float, "a float"), (str, "a string"),
+               (list, "an array"), (dict, "a table"))  # bool before int: a bool is an int
+
+
 def _type_name(value) -> str:
     """Name a TOML value's type as a user reads it: "a string", "a boolean", ..."""
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int):
-        return "an integer"
-    if isinstance(value, float):
-        return "a float"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "an array"
-    if isinstance(value, dict):
-        return "a table"
-    return "a date/time"
+    return next((name for kind, name in _TYPE_NAMES if isinstance(value, kind)), "a date/time")
 
 
 def _show(value) -> str:

@@ -27,7 +27,6 @@ class MotionTables:
                                   "all drivers advance together: make their step counts equal")
         return tuple(drivers)
 
-
     def driver(self, table: _Table) -> Driver:
         if table.one_of("angle", "coordinate") == "angle":
             kind, axis = "angle", None
@@ -134,7 +133,6 @@ class EffectTables:
     def gravity_table(self) -> tuple[float, float] | None:
         return self.table("gravity").pair("g") if self.top("gravity") is not None else None
 
-
     def spring_tables(self) -> tuple[Spring, ...]:
         springs = []
         for table in self.entries("springs"):
@@ -161,7 +159,6 @@ class EffectTables:
                                   table.number("preload", None), damping))
         return tuple(springs)
 
-
     def mass_tables(self) -> tuple[Mass, ...]:
         masses = []
         for table in self.entries("masses"):
@@ -185,7 +182,6 @@ class EffectTables:
                                   "write the moment of inertia about the center of mass")
             masses.append(Mass(link.name, mass, center, inertia))
         return tuple(masses)
-
 
     def load_tables(self) -> tuple[Load, ...]:
         loads = []
@@ -212,14 +208,10 @@ class EffectTables:
                                   torque=table.number("torque")))
         return tuple(loads)
 
-
     def analysis_table(self) -> tuple[str, ...]:
         table = self.table("analysis")
-        effects = table.strings("effects", (), what="effect")
+        effects = _choices(table, "effects", EFFECTS, "effect")
         for effect in effects:
-            if effect not in EFFECTS:
-                raise table.error("effects", f'unknown effect "{effect}"',
-                                  _suggest(effect, EFFECTS))
             for needed in EFFECT_NEEDS[effect]:
                 if not self.top(needed):
                     ref = _table_ref(needed)
@@ -227,14 +219,9 @@ class EffectTables:
                                       f"no {ref}", f'add {ref} or remove "{effect}" from effects')
         return effects
 
-
     def output_table(self) -> Outputs:
         table = self.table("outputs")
-        kinematics = table.strings("kinematics", (), what="kinematic order")
-        for order in kinematics:
-            if order not in KINEMATIC_ORDERS:
-                raise table.error("kinematics", f'unknown kinematic order "{order}"',
-                                  _suggest(order, KINEMATIC_ORDERS))
+        kinematics = _choices(table, "kinematics", KINEMATIC_ORDERS, "kinematic order")
         lists = {key: table.strings(key, (), what="point") for key in ("trace", "vectors")}
         for key, names in lists.items():
             for name in names:
@@ -242,3 +229,10 @@ class EffectTables:
         return Outputs(kinematics, lists["trace"], lists["vectors"])
 
 
+def _choices(table, key: str, allowed, what: str) -> tuple[str, ...]:
+    """The strings of ``key``, each one of ``allowed`` (an error with a hint otherwise)."""
+    values = table.strings(key, (), what=what)
+    for value in values:
+        if value not in allowed:
+            raise table.error(key, f'unknown {what} "{value}"', _suggest(value, allowed))
+    return values
