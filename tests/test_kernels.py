@@ -119,3 +119,28 @@ def test_layouts_agree_for_families_of_mechanisms(family, a, b, c, d, scale, sta
         text = hs.six_bar_text(1.0, 3.5, 3.0, 4.0, (1.2, 0.9), (5.5, 3.0), (4.6, 4.2), 0.0, 10.0, 3)
     model = build_model(linkpipe.parse_scene(text, f"{family}.toml"))
     _layouts_agree(model)
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
+def test_the_float_newton_is_the_batched_newton(path):
+    """The continuation's one-step Newton on floats (``step._Step.newton``, kept for speed: ~0.2
+    ms a step) iterates exactly as the batched :func:`kinematics.newton` does, from the same
+    guesses: same iterates, residuals, iteration counts and verdicts, to the last bit."""
+    from linkpipe.kinematics import newton as batched_newton
+
+    model = build_model(linkpipe.load_scene(str(path)))
+    if not model.n_q:
+        return
+    step = kinematics.step._step_kernels(model)
+    X0 = model.start_position[None]
+    q0 = model.q_of(X0)[0]
+    rng = np.random.default_rng(13)
+    tol_abs = model.scene.solver.tol * model.size
+    for k in range(4):
+        guess = q0 + rng.normal(size=q0.shape) * 1e-2 * model.size * k
+        s = rng.uniform(-0.1, 0.1, size=model.n_drivers) + model.driver_values_at(X0)[0]
+        for jac in ("analytic", "finite_difference"):
+            one = step.newton(guess, s, tol_abs, 25, jac)
+            many = batched_newton(model, guess[None], s[None], tol_abs, 25, jac)
+            for a, b in zip(one, many):
+                np.testing.assert_array_equal(a, b)
