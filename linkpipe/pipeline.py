@@ -9,7 +9,7 @@ import numpy as np
 from . import kinematics as kin
 from .model import build_model, check_mobility
 from .result import Motion, Result, units_of
-from .status import OK, counts, worst
+from .status import OK, assign, counts
 from .errors import SceneError
 from .scene import Scene, load_scene
 
@@ -95,6 +95,12 @@ def solve(scene: Scene | str, progress=None) -> Result:
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
+    # overflow and 0/0 are data here, not warnings: such steps are marked (status.assign)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _solve(scene, progress)
+
+
+def _solve(scene: Scene, progress) -> Result:
     stages = Stages.of(scene)
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
@@ -133,7 +139,6 @@ def solve(scene: Scene | str, progress=None) -> Result:
                   else (None, None))
 
     forces = None
-    status = kinematic_status
     if stages.forces:
         from .forces import compute_forces
 
@@ -144,8 +149,13 @@ def solve(scene: Scene | str, progress=None) -> Result:
                         jacobian_inverse=der["jacobian_inverse"],
                         link_angular_acceleration=link_rates[1])
         forces = compute_forces(model, motion, units_of(scene))
-        status = worst(kinematic_status, forces.status)
         seconds["forces"] = _time.perf_counter() - t0
+    stored = [X, link_angle, velocity, acceleration, *link_rates]
+    if forces:
+        stored += [data for dims, data, _ in forces.variables.values() if dims[:1] == ("step",)]
+    status = assign([kinematic_status] + ([forces.status] if forces else []),
+                    sweep.residual, scene.solver.tol * model.size,
+                    [a for a in stored if a is not None])
 
     time, time_note = _time_axis(scene, value)
     return Result(

@@ -17,25 +17,28 @@ class Status(IntEnum):
     OK = 0  # solved; everything stored is finite and met its tolerance
     NO_ASSEMBLY = 1  # the constraints have no solution there: NaN for every moving quantity
     SINGULAR = 2  # positions solved, Jacobian rank-deficient: NaN derivatives and forces
-    NOT_CONVERGED = 3  # a root exists but the iteration cap stopped short: NaN as no_assembly
-    NO_LEVERAGE = 4  # the input point does not move with its driver: NaN input force
+    NOT_CONVERGED = 3  # a root exists but did not reach tol (iteration cap): NaN as no_assembly
+    NO_INPUT = 4  # a logged driver value is missing at this step (format v2): NaN as no_assembly
+    NO_LEVERAGE = 5  # the input point does not move with its driver: NaN input force
+    NON_FINITE = 6  # solved, but a stored quantity overflowed (inf or NaN): not to be trusted
 
 
-OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED, NO_LEVERAGE = (int(s) for s in Status)
+OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED, NO_INPUT, NO_LEVERAGE, NON_FINITE = (int(s) for s in Status)
 
 #: the HDF5 ``flag_meanings``, in code order
 FLAG_MEANINGS = tuple(s.name.lower() for s in Status)
 
 #: severity of each code (index = code): a step keeps the most severe verdict any stage gave
-_SEVERITY = np.array([0, 4, 2, 3, 1], dtype=np.int8)
+_SEVERITY = np.array([0, 6, 3, 4, 5, 1, 2], dtype=np.int8)
 _BY_SEVERITY = np.argsort(_SEVERITY).astype(np.int8)
 
 
 def worst(*statuses: np.ndarray) -> np.ndarray:
     """Return, step by step, the most severe of the stages' statuses ``(S,)`` int8.
 
-    Severity, least to most: ok < no_leverage < singular < not_converged < no_assembly
-    (a step that did not assemble cannot be singular; a singular step has no leverage to test).
+    Severity, least to most: ok < no_leverage < non_finite < singular < not_converged <
+    no_input < no_assembly (a step that did not assemble cannot be singular; a singular step has
+    no leverage to test).
     """
     rank = np.maximum.reduce([_SEVERITY[np.asarray(s, dtype=np.intp)] for s in statuses])
     return _BY_SEVERITY[rank]
@@ -45,3 +48,32 @@ def counts(status: np.ndarray) -> dict[str, int]:
     """Return ``{name: number of steps}`` for the codes that occur, in code order."""
     found = np.bincount(np.asarray(status, dtype=np.intp), minlength=len(Status))
     return {FLAG_MEANINGS[c]: int(n) for c, n in enumerate(found) if n}
+
+
+def assign(stage_statuses, residual: np.ndarray, tol_abs: float, stored) -> np.ndarray:
+    """The one place a step's final status is decided (int8, (S,)).
+
+    The most severe verdict of the stages (:func:`worst`); then an ok step whose position
+    residual is above the tolerance that was asked for (``tol_abs``, a length) is
+    not_converged; then an ok step where anything ``stored`` (arrays, step axis first) is not
+    finite is non_finite (:func:`ok_only_if_finite`)."""
+    status = worst(*stage_statuses)
+    with np.errstate(invalid="ignore"):
+        loose = (status == OK) & ~(np.asarray(residual) <= tol_abs)
+    status = np.where(loose, NOT_CONVERGED, status).astype(np.int8)
+    return ok_only_if_finite(status, stored)
+
+
+def ok_only_if_finite(status: np.ndarray, arrays) -> np.ndarray:
+    """Return ``status`` with NON_FINITE at every ok step where one of ``arrays`` (each with the
+    step axis first) holds an inf or NaN: a step is ok only if everything stored at it is finite."""
+    status = np.asarray(status)
+    ok = status == OK
+    for a in arrays:
+        a = np.asarray(a)
+        if a.dtype.kind != "f" or not ok.any():
+            continue
+        with np.errstate(invalid="ignore"):
+            finite = np.isfinite(a.reshape(a.shape[0], -1)).all(axis=1)
+        ok &= finite
+    return np.where((status == OK) & ~ok, NON_FINITE, status).astype(np.int8)

@@ -256,7 +256,7 @@ if str(_HARD) not in sys.path:
     sys.path.insert(0, str(_HARD))
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(family=st_h.sampled_from(["fourbar", "slider_crank", "six_bar"]),
        a=st_h.floats(0.5, 1.2), b=st_h.floats(3.0, 4.0), c=st_h.floats(2.5, 3.5),
        start=st_h.floats(0.0, 360.0), branch=st_h.sampled_from([1, -1]),
@@ -265,9 +265,9 @@ def test_dyads_satisfy_the_models_equations_and_equal_newton(family, a, b, c, st
     """The closed-form dyads solve the model's own equations (model/equations.py): Φ = 0,
     Φq v = −Φt, Φq a = γ to 1e-12 of the size (and of the velocities' and accelerations'
     scales), and equal the general Newton path, on families of four-bars (Grashof
-    crank-rockers: a + 4 < b + c), offset slider-cranks and Watt six-bars. Two solutions of one
-    linear system agree to rounding times its condition: the derivatives are compared step by
-    step to (1e-12 + 1e-15 * condition) of their scale (near a toggle the condition is 1e5+)."""
+    crank-rockers: a + 4 < b + c), offset slider-cranks and Watt six-bars: positions to 1e-12
+    of the size (Newton's tolerance), derivatives step by step to (1e-11 + 1e-15 * condition)
+    of their scale (Newton's positions are 1e-12 off; near a toggle the condition is 1e5+)."""
     import hard_scenes as hs
 
     if family == "fourbar":
@@ -297,6 +297,8 @@ def test_dyads_satisfy_the_models_equations_and_equal_newton(family, a, b, c, st
     slow = linkpipe.solve(dc.replace(scene, solver=dc.replace(scene.solver, method="newton")))
     np.testing.assert_array_equal(slow.status, fast.status)
     assert np.abs(slow.position - X).max() <= 1e-12 * size
-    allowed = 1e-12 + 1e-15 * fast.condition  # (S,)
+    # Newton's positions meet tol = 1e-12 of the size, not rounding: its derivatives, taken
+    # there, carry that error times O(1) factors (1e-11), plus rounding times the condition
+    allowed = 1e-11 + 1e-15 * fast.condition  # (S,)
     assert (np.abs(slow.velocity - V).max(axis=(1, 2)) <= allowed * v_scale).all()
     assert (np.abs(slow.acceleration - A).max(axis=(1, 2)) <= 10 * allowed * a_scale).all()

@@ -8,6 +8,13 @@ from .keys import EFFECT_NEEDS, _Table, _show, _suggest, _table_ref
 from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver, Spring
 
 
+#: the loosest tolerance a scene may ask for: 1 % of the mechanism's size (looser would let a
+#: link come out several percent long, every step "ok")
+MAX_TOL = 1e-2
+#: the most Newton iterations per run (each run also stops when it stalls): bounds the work
+MAX_ITER = 1000
+
+
 class MotionTables:
     """The ``[[drivers]]`` and ``[solver]`` readers of :class:`~.parse._Parser`."""
 
@@ -105,11 +112,12 @@ class MotionTables:
     def solver_table(self) -> Solver:
         table = self.table("solver")
         tol = table.number("tol", Solver.tol)
-        if tol <= 0:
-            raise table.error("tol", f"must be positive, got {tol:g}", "write e.g. tol = 1e-12")
+        if not 0 < tol <= MAX_TOL:
+            raise table.error("tol", f"must be positive and at most {MAX_TOL:g} (a fraction of the "
+                              f"mechanism's size), got {tol:g}", "write e.g. tol = 1e-12")
         max_iter = table.integer("max_iter", Solver.max_iter)
-        if max_iter < 1:
-            raise table.error("max_iter", f"must be at least 1, got {max_iter}",
+        if not 1 <= max_iter <= MAX_ITER:
+            raise table.error("max_iter", f"must be from 1 to {MAX_ITER}, got {max_iter}",
                               "write e.g. max_iter = 25")
         choices = {}
         for key, allowed in SOLVER_CHOICES.items():
