@@ -117,7 +117,7 @@ class MotionTables:
                               f"mechanism's size), got {tol:g}", "write e.g. tol = 1e-12")
         max_iter = table.integer("max_iter", Solver.max_iter)
         if not 1 <= max_iter <= MAX_ITER:
-            raise table.error("max_iter", f"must be from 1 to {MAX_ITER}, got {max_iter}",
+            raise table.error("max_iter", f"must be at least 1 and at most {MAX_ITER}, got {max_iter}",
                               "write e.g. max_iter = 25")
         choices = {}
         for key, allowed in SOLVER_CHOICES.items():
