@@ -132,6 +132,12 @@ def _runs(path: np.ndarray) -> list[np.ndarray]:
 
 
 # ------------------------------------------------------------------------------ logging
+def path_of(*parts) -> str:
+    """The entity path of unescaped parts (scene names may hold ``/``, spaces, backslashes):
+    Rerun's own escaping (``rr.new_entity_path``), so that distinct names stay distinct."""
+    return rr.new_entity_path([str(p) for p in parts])
+
+
 def log_result(stream: rr.RecordingStream, result) -> None:
     """Log every entity of the contract for ``result`` to ``stream``."""
     steps = np.arange(result.n_steps)
@@ -201,7 +207,7 @@ def _log_links(stream, send, result) -> None:
         k = _point_index(result, link.points)
         if len(k) >= 3:
             k.append(k[0])
-        _send_strips(stream, send, f"mechanism/links/{link.name}", result.position[:, k],
+        _send_strips(stream, send, path_of("mechanism", "links", link.name), result.position[:, k],
                      radii=rr.components.Radius.ui_points(2.5),
                      colors=_PALETTE[j % len(_PALETTE)], draw_order=20.0)
 
@@ -236,7 +242,7 @@ def _log_guides(stream, send, result) -> None:
     for slider in result.scene.sliders:
         (k,) = _point_index(result, [slider.point])
         P = result.position[:, k]
-        entity = f"mechanism/guides/{slider.name}"
+        entity = path_of("mechanism", "guides", slider.name)
         style = dict(radii=rr.components.Radius.ui_points(1.5), colors=_GUIDE, draw_order=5.0)
         if not slider.moving:
             t0 = np.asarray(slider.through, float)
@@ -261,7 +267,7 @@ def _log_springs(stream, send, result) -> None:
     if not result.spring_names:
         return
     for spring in result.scene.springs:
-        _send_strips(stream, send, f"mechanism/springs/{spring.name}",
+        _send_strips(stream, send, path_of("mechanism", "springs", spring.name),
                      result.position[:, _point_index(result, spring.between)],
                      radii=rr.components.Radius.ui_points(1.0), colors=_SPRING, draw_order=15.0)
 
@@ -271,7 +277,7 @@ def _log_traces(stream, result) -> None:
         (k,) = _point_index(result, [name])
         runs = _runs(result.position[:, k])
         if runs:
-            stream.log(f"mechanism/trace/{name}", rr.LineStrips2D(
+            stream.log(path_of("mechanism", "trace", name), rr.LineStrips2D(
                 runs, radii=rr.components.Radius.ui_points(1.0), colors=_TRACE,
                 labels=[f"trace {name}"] * len(runs), show_labels=False, draw_order=10.0),
                 static=True)
@@ -291,7 +297,7 @@ def _log_vectors(stream, send, result) -> None:
             (k,) = _point_index(result, [name])
             origins, vectors = result.position[:, k], data[:, k]
             ok = _finite_rows(origins) & _finite_rows(vectors)
-            entity = f"mechanism/{quantity}/{name}"
+            entity = path_of("mechanism", quantity, name)
             stream.log(entity, rr.Arrows2D.from_fields(
                 labels=[f"{quantity[0]} {name} ({arrow_legend(result, quantity)})"],
                 colors=_VECTOR_COLORS[quantity], show_labels=False,
@@ -313,7 +319,7 @@ def _log_series(stream, send, result) -> None:
         if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2:
             continue
         for j, label in enumerate(labels[var.dims[1]]):
-            series.append((f"plots/{name}/{label}", f"{label} [{var.units}]", var.data[:, j]))
+            series.append((path_of("plots", name, label), f"{label} [{var.units}]", var.data[:, j]))
     for name in SOLVER:
         var = variables[name]
         series.append((f"solver/{name}", f"{name} [{var.units}]", var.data))
