@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     143 terminated (SIGTERM). Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
     command = {"run": _run, "check": _check, "accuracy": _accuracy}[args.command]
-    previous = _terminate_as_interrupt()
+    previous = _signals_as_interrupts()
     try:
         return command(args)
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the writers removed their temporaries
@@ -50,23 +50,29 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
               "outputs written before stay, the one being written was not kept", file=sys.stderr)
         return code
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the program is, so that it unwinds like Ctrl-C."""
 
 
-def _terminate_as_interrupt():
-    """Turn SIGTERM into :class:`_Terminated` (main thread only); return the previous handler."""
+def _signals_as_interrupts() -> dict:
+    """SIGINT and SIGTERM stop the run where it is (KeyboardInterrupt, :class:`_Terminated`)
+    and forbid any further rename of a temporary into place (a library that swallowed the
+    exception mid-write must not publish the file); returns the previous handlers."""
     if threading.current_thread() is not threading.main_thread():
-        return None
+        return {}
+    from .stores import interrupt
 
-    def handler(signum, frame):
-        raise _Terminated()
+    interrupt(False)
 
-    return signal.signal(signal.SIGTERM, handler)
+    def on_signal(signum, frame):
+        interrupt()
+        raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+    return {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
 
 
 class _Outcome:
@@ -90,8 +96,8 @@ def _reporting(path, outcome: _Outcome):
     traceback. The caller goes on with its next input."""
     try:
         yield
-    except LinkpipeError as exc:
-        outcome.fail(path, 2, str(exc))
+    except LinkpipeError as exc:  # a user's mistake (2), or an output not written (OutputError: 1)
+        outcome.fail(path, getattr(exc, "exit_code", 2), str(exc))
     except MemoryError:  # the estimate in pipeline.check_memory passed, the machine did not
         outcome.fail(path, 2, f"{path}: out of memory for this sweep: use fewer steps, or "
                               "split it into several scenes")
@@ -154,6 +160,14 @@ def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, f
     written, seconds = [], {}
     name = result.scene.name
     out.mkdir(parents=True, exist_ok=True)
+    from .stores import output_lock
+
+    with output_lock(out, name):  # another run writing this name waits: .h5 and .rrd pair up
+        return _write_locked(result, out, args, bar, written, seconds)
+
+
+def _write_locked(result, out: pathlib.Path, args, bar, written, seconds):
+    name = result.scene.name
     if not args.no_h5:
         from .stores import hdf5
 

@@ -2,27 +2,122 @@
 
 The only modules that import h5py (:mod:`.hdf5`) and rerun (:mod:`.rrd`); import them
 explicitly, so that writing one format never pays for importing the other.
+
+Every file is written to a temporary name beside its final one and renamed into place only when
+complete (:func:`atomic_path`): a temporary says whose it is (``.<name>.<pid>.<random>.tmp``),
+is removed on every exit path a process survives (errors, Ctrl-C, SIGTERM), and one left by a
+killed process is removed by the next write into that folder. :func:`output_lock` keeps two
+runs from interleaving one scene's ``.h5`` and ``.rrd``.
 """
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import os
 import pathlib
+import re
+import shutil
 import uuid
 from collections.abc import Iterator
 
+from ..errors import LinkpipeError
+
+#: what a write needs beyond its arrays' bytes (metadata, chunk indexes), and at least this much
+SPACE_MARGIN, SPACE_MINIMUM = 1.1, 1 << 20
+_TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{12}\.tmp$")
+_INTERRUPTED = False
+
+
+class OutputError(LinkpipeError, OSError):
+    """An output could not be written (no space, no permission): nothing was left under the
+    final name, the previous file (if any) is intact. The run goes on with the next scene."""
+
+    exit_code = 1
+
+    def __str__(self) -> str:
+        return self.strerror or super().__str__()
+
+
+def interrupt(interrupted: bool = True) -> None:
+    """Mark the process as interrupted: no temporary is renamed into place from now on (an
+    interrupt that a library swallowed while writing must not publish a half-meant file).
+    ``interrupt(False)`` clears the mark (a new command in the same process)."""
+    global _INTERRUPTED
+    _INTERRUPTED = interrupted
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[pathlib.Path]:
+    """Remove the temporaries of processes that no longer run; return what was removed."""
+    removed = []
+    for path in pathlib.Path(folder).glob(".*.tmp"):
+        m = _TEMP.match(path.name)
+        if m and int(m.group("pid")) != os.getpid() and not _alive(int(m.group("pid"))):
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
+
+
+def check_space(path: str | os.PathLike, n_bytes: int) -> None:
+    """OutputError before a write of about ``n_bytes`` that the folder's free space cannot hold."""
+    folder = pathlib.Path(path).parent
+    need = max(int(n_bytes * SPACE_MARGIN), SPACE_MINIMUM)
+    free = shutil.disk_usage(folder).free
+    if need > free:
+        raise OutputError(errno.ENOSPC, f"{path}: not written: it needs about {need / 2**20:.1f} MiB "
+                          f"and {free / 2**20:.1f} MiB are free in {folder}; free space or use "
+                          "--out on another disk")
+
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[pathlib.Path]:
-    """Yield a temporary path beside ``path``; rename it into place only if the block succeeds.
+def atomic_path(path: str | os.PathLike, n_bytes: int = 0) -> Iterator[pathlib.Path]:
+    """Yield a temporary path beside ``path``; rename it into place only if the block succeeds
+    (and the process was not interrupted). ``n_bytes``: the write's estimated size, checked
+    against the free space first.
 
-    On any exception the temporary file is removed and ``path`` keeps its previous content.
+    On any exception the temporary file is removed and ``path`` keeps its previous content; a
+    full disk (ENOSPC, EDQUOT) during the write becomes an :class:`OutputError` naming the file.
     """
     path = pathlib.Path(path)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    remove_stale_temporaries(path.parent)
+    check_space(path, n_bytes)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
     try:
         yield tmp
+        if _INTERRUPTED:
+            raise KeyboardInterrupt
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT) or "No space" in str(exc):
+            raise OutputError(errno.ENOSPC, f"{path}: not written: the disk is full "
+                              f"({shutil.disk_usage(path.parent).free / 2**20:.1f} MiB free); "
+                              "free space or use --out on another disk") from None
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+@contextlib.contextmanager
+def output_lock(folder: str | os.PathLike, name: str) -> Iterator[None]:
+    """Hold an advisory lock on one output name in ``folder`` (``.<name>.lock``, flock) while its
+    files are written: a second run writing the same name waits, so an ``.h5`` and its ``.rrd``
+    always come from the same run."""
+    lock = pathlib.Path(folder) / f".{name}.lock"
+    with open(lock, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)

@@ -22,13 +22,17 @@ _PHANTOM = "This is a netCDF dimension but not a netCDF variable."
 
 def write(result, path: str | os.PathLike) -> None:
     """Write ``result`` to ``path`` atomically (temporary file, then ``os.replace``)."""
-    write_layout(path, result.attributes(), result.coordinates(), result.variables())
+    variables = result.variables()
+    write_layout(path, result.attributes(), result.coordinates(), variables,
+                 n_bytes=sum(v.data.nbytes for v in variables))
 
 
-def write_layout(path: str | os.PathLike, attributes: dict, coordinates, variables) -> None:
+def write_layout(path: str | os.PathLike, attributes: dict, coordinates, variables,
+                 n_bytes: int = 0) -> None:
     """Write root attributes, coordinate variables and data variables (``result.Variable``)
-    to ``path`` atomically, in the netCDF-4 layout described above."""
-    with atomic_path(path) as tmp:
+    to ``path`` atomically, in the netCDF-4 layout described above (``n_bytes``: the estimated
+    size, checked against the free space before writing)."""
+    with atomic_path(path, n_bytes) as tmp:
         with h5py.File(tmp, "w", track_order=True) as f:
             for key, value in attributes.items():
                 _set_attr(f.attrs, key, value)

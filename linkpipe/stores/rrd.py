@@ -48,7 +48,9 @@ def write(result, path, spawn: bool = False, connect: str | None = None) -> None
         return
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
-    with atomic_path(path) if path is not None else contextlib.nullcontext() as tmp:
+    # the recording holds float32 copies of the plotted arrays: about half the arrays' bytes
+    n_bytes = result.position.nbytes + sum(v.data.nbytes for v in result.variables()) // 2
+    with atomic_path(path, n_bytes) if path is not None else contextlib.nullcontext() as tmp:
         sinks = [rr.FileSink(tmp)] if tmp is not None else []
         if spawn:
             rr.spawn(connect=False)

@@ -1,0 +1,142 @@
+"""Writes that fail cleanly and temporaries that say whose they are: what is kept, what is
+cleaned, on a real (small) disk where the machine allows mounting one, else on a patched writer."""
+import errno
+import os
+import pathlib
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import pytest
+from rerun.chunk import RrdReader
+
+import linkpipe
+from linkpipe import stores
+from linkpipe.__main__ import main
+from linkpipe.stores import hdf5
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+CRANK_ROCKER = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+
+
+def _scene(tmp_path, name, steps):
+    path = tmp_path / f"{name}_{steps}.toml"
+    path.write_text(CRANK_ROCKER.replace("steps = 361", f"steps = {steps}")
+                    .replace('name = "fourbar_crank_rocker"', f'name = "{name}"'))
+    return path
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 3 MiB tmpfs (root only; skipped where mounting is not allowed)."""
+    mount = tmp_path / "small"
+    mount.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mount)],
+                          capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here: {done.stderr.decode().strip()}")
+    yield mount
+    subprocess.run(["umount", str(mount)], capture_output=True)
+
+
+def test_a_full_disk_is_one_line_exit_1_and_the_other_scenes_run(small_disk, tmp_path, capsys):
+    big = _scene(tmp_path, "big", 200_001)
+    small = ROOT / "configs" / "shear_press.toml"
+    assert main(["run", str(big), str(small), "--out", str(small_disk), "--no-rrd"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err
+    assert f"{small_disk / 'big.h5'}: not written" in err and "failed: " in err
+    assert sorted(p.name for p in small_disk.iterdir() if not p.name.endswith(".lock")) == ["shear_press.h5"]
+
+
+def test_the_disk_filling_during_the_write_leaves_no_partial_file(small_disk, monkeypatch):
+    """The free-space estimate passes (patched), the disk fills while h5py writes: an
+    OutputError naming the file, no temporary, no file under the final name."""
+    result = linkpipe.solve(linkpipe.parse_scene(CRANK_ROCKER.replace("steps = 361", "steps = 200001"), "big.toml"))
+    monkeypatch.setattr(stores, "check_space", lambda path, n: None)
+    with pytest.raises(stores.OutputError) as info:
+        hdf5.write(result, small_disk / "big.h5")
+    assert "big.h5: not written: the disk is full" in str(info.value)
+    assert list(small_disk.iterdir()) == []
+
+
+def test_enospc_from_the_library_becomes_an_output_error(tmp_path, monkeypatch):
+    """Without a small disk: the writer raising ENOSPC mid-file is caught the same way."""
+    result = linkpipe.solve(str(ROOT / "configs" / "shear_press.toml"))
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(hdf5, "_write_variable", full)
+    (tmp_path / "shear_press.h5").write_bytes(b"previous")
+    with pytest.raises(stores.OutputError):
+        hdf5.write(result, tmp_path / "shear_press.h5")
+    assert (tmp_path / "shear_press.h5").read_bytes() == b"previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["shear_press.h5"]
+
+
+def test_stale_temporaries_of_dead_processes_are_removed_live_ones_kept(tmp_path):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    stale = tmp_path / f".x.h5.{dead}.0123456789ab.tmp"
+    live = tmp_path / f".x.h5.{os.getppid()}.0123456789ab.tmp"  # the test runner's parent
+    other = tmp_path / ".notes.tmp"
+    for p in (stale, live, other):
+        p.write_bytes(b"partial")
+    hdf5.write(linkpipe.solve(str(ROOT / "configs" / "shear_press.toml")), tmp_path / "shear_press.h5")
+    assert not stale.exists() and live.exists() and other.exists()
+
+
+_WRITER = """
+import sys, linkpipe
+from linkpipe.stores import hdf5
+r = linkpipe.solve(sys.argv[1])
+print("solved", flush=True)
+while True:
+    hdf5.write(r, sys.argv[2])
+"""
+
+
+def test_sigkill_while_writing_keeps_the_previous_file_and_the_next_write_cleans(tmp_path):
+    scene = _scene(tmp_path, "big", 100_001)
+    target = tmp_path / "big.h5"
+    hdf5.write(linkpipe.solve(str(ROOT / "configs" / "shear_press.toml")), target)
+    before = target.read_bytes()
+    rng = random.Random(5)
+    for _ in range(3):
+        proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(scene), str(target)],
+                                stdout=subprocess.PIPE, text=True)
+        assert proc.stdout.readline().strip() == "solved"
+        time.sleep(rng.uniform(0.0, 0.3))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        with h5py.File(target) as f:  # whatever is under the final name is a whole file
+            assert "status" in f and f["position"].shape[0] in (9, 100_001)
+    hdf5.write(linkpipe.solve(str(ROOT / "configs" / "shear_press.toml")), target)
+    assert not list(tmp_path.glob(".big.h5.*.tmp"))
+    with h5py.File(target) as f:
+        assert f["position"].shape[0] == 9  # the last write is whole
+    assert before  # the first file was there to protect
+
+
+def test_concurrent_runs_into_one_folder_pair_their_files(tmp_path):
+    """Two runs write the same name at once (different sweeps): each .h5 beside its own .rrd."""
+    out = tmp_path / "out"
+    a, b = _scene(tmp_path, "same", 20_001), _scene(tmp_path, "same", 30_001)
+    procs = [subprocess.Popen([sys.executable, "-m", "linkpipe", "run", str(s), "--out", str(out),
+                               "--quiet"], cwd=ROOT) for s in (a, b)]
+    assert [p.wait(timeout=300) for p in procs] == [0, 0]
+    with h5py.File(out / "same.h5") as f:
+        steps_h5 = f["step"].shape[0]
+    steps_rrd = _steps_in_recording(out / "same.rrd")
+    assert steps_h5 == steps_rrd and steps_h5 in (20_001, 30_001)
+
+
+def _steps_in_recording(path) -> int:
+    """The number of steps the recording's solver/residual series holds."""
+    store = RrdReader(path).stream().collect()
+    df = store.reader(index="step", contents="/solver/residual").to_pandas()
+    return int(df["/solver/residual:Scalars:scalars"].notna().sum())
