@@ -214,6 +214,9 @@ def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]
         return None, ""
     times = [np.abs(value[:, j] - d.from_value) / abs(d.rate) for j, d in enumerate(scene.drivers)]
     t = times[0]
+    if not all(np.isfinite(tj).all() for tj in times):
+        return None, ("no time axis: a rate this small gives times beyond the floating-point "
+                      "range")
     span = float(max(tj.max() for tj in times)) if value.shape[0] else 0.0
     for tj in times[1:]:
         if not np.allclose(tj, t, rtol=0, atol=1e-9 * max(span, 1e-300)):

@@ -9,6 +9,7 @@ drivers, lengths for coordinate drivers). The constraint rows themselves are wri
 """
 from __future__ import annotations
 
+import math
 import weakref
 from dataclasses import dataclass
 
@@ -286,7 +287,7 @@ def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray):
 
 def _check_reach(scene: Scene, link, pname: str, reach: float) -> None:
     """A further point far beyond the frame's second point makes every step singular."""
-    if reach**2 * scene.solver.singular_rcond < 1.0:
+    if not reach * math.sqrt(scene.solver.singular_rcond) >= 1.0:  # reach^2 rcond < 1, unsquared
         return
     # the Jacobian's condition grows as reach^2: every step would count as singular
     raise SceneError(
@@ -294,7 +295,7 @@ def _check_reach(scene: Scene, link, pname: str, reach: float) -> None:
         f'point "{pname}" is {reach:.3g} times farther from "{link.points[0]}" than '
         f'the link\'s second point "{link.points[1]}": a frame that short cannot hold '
         f"it (the constraint Jacobian's condition grows as the square of that ratio, "
-        f"about {reach**2:.1g} here, and every step would count as singular)",
+        f"about {reach * reach:.1g} here, and every step would count as singular)",
         f'list a far point second so that the frame is long, e.g. points = '
         f'["{link.points[0]}", "{pname}", ...] (lengths and local refer to the first '
         f"two points)")

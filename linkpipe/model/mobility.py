@@ -53,7 +53,10 @@ def _project(model: Model, X: np.ndarray, max_iter: int = 30) -> np.ndarray | No
         if not F.size or np.abs(F).max() <= 1e-13 * model.size:
             return Xq[0]
         J = model.jacobian(Xq, s0)[0, rows]
-        q = q - np.linalg.lstsq(J, F, rcond=None)[0][None]
+        try:
+            q = q - np.linalg.lstsq(J, F, rcond=None)[0][None]
+        except np.linalg.LinAlgError:  # non-finite entries (a degenerate drawing): not assembled
+            return None
         if not np.all(np.isfinite(q)):
             return None
     return None

@@ -7,8 +7,27 @@ from .keys import _Table, _show, _suggest, _type_name
 from .tables import Link, Point, Slider
 
 
+#: the shortest length a scene may give: its reciprocal and square stay inside double precision
+MIN_LENGTH = 1e-100
+#: a link's first two points must be farther apart than this part of the drawing's extent
+#: (they span the link's frame; nearer, every other point's local coordinates are noise)
+FRAME_RTOL = 1e-9
+
+
 class GeometryTables:
     """The ``[points]``, ``[[links]]`` and ``[[sliders]]`` readers of :class:`~.parse._Parser`."""
+
+    def _check_frame(self, table, names) -> None:
+        """The first two points of a link must be apart (relative to the drawing's extent)."""
+        pa, pb = self.points[names[0]], self.points[names[1]]
+        extent = max(max(abs(p.x), abs(p.y)) for p in self.points.values())
+        apart = math.hypot(pb.x - pa.x, pb.y - pa.y)
+        if 0 < apart <= FRAME_RTOL * extent:
+            raise table.error("points", f'points "{names[0]}" and "{names[1]}" are {apart:g} '
+                              f"apart, {apart / extent:.1g} of the drawing's extent: too close "
+                              "to span the link's frame",
+                              "move one of them in [points], or list two points farther apart "
+                              "first")
 
     def point_table(self) -> None:
         raw = self.top("points")
@@ -24,7 +43,8 @@ class GeometryTables:
                                  f"got {_type_name(value)} ({_show(value)})",
                                  f"write e.g. {name} = {{ x = 0.0, y = 0.0 }}")
             table = _Table(self.path, f"points.{name}", value, "point")
-            self.points[name] = Point(name, table.number("x"), table.number("y"),
+            self.points[name] = Point(name, table.number("x", geometric=True),
+                                      table.number("y", geometric=True),
                                       table.boolean("fixed", False))
 
 
@@ -36,6 +56,7 @@ class GeometryTables:
                                   f"{len(names)}", 'write e.g. points = ["A", "B"]')
             for name in names:
                 self.point(table, "points", name)
+            self._check_frame(table, names)
             for i, a in enumerate(names):
                 for b in names[i + 1:]:
                     pa, pb = self.points[a], self.points[b]
@@ -68,9 +89,9 @@ class GeometryTables:
                                 "may be given",
                                 "further points are held by `local`: write "
                                 f'local = {{ P = [u, v] }} for a point P after "{a}", "{b}"')
-            length = sub.number(key)
-            if length <= 0:
-                raise sub.error(key, f"must be positive, got {length:g}",
+            length = sub.number(key, geometric=True)
+            if length <= MIN_LENGTH:
+                raise sub.error(key, f"must be positive (above {MIN_LENGTH:g}), got {length:g}",
                                 f'write the distance of "{a}" and "{b}"')
             pa, pb = self.points[a], self.points[b]
             if pa.fixed and pb.fixed:  # nothing moves to meet this length: it must hold as drawn

@@ -74,6 +74,10 @@ EFFECT_NEEDS = {
 _REQUIRED = object()  # default of a key that must be given
 
 
+#: the largest magnitude of a coordinate or length: its square, and products of two, stay far
+#: inside double precision (1e308); any unit system for a real machine fits (nm to light years)
+MAX_MAGNITUDE = 1e100
+
 _TYPE_NAMES = ((bool, "a boolean"), (int, "an integer"), (float, "a float"), (str, "a string"),
                (list, "an array"), (dict, "a table"))  # bool before int: a bool is an int
 
@@ -161,8 +165,9 @@ class _Table:
         return self.error(key, f"expected {expected}, got {_type_name(value)} ({_show(value)})",
                           f"write e.g. {self.example(key)}")
 
-    def number(self, key: str, default=_REQUIRED) -> float | None:
-        """A finite number (an integer is accepted) as a float."""
+    def number(self, key: str, default=_REQUIRED, geometric: bool = False) -> float | None:
+        """A finite number (an integer is accepted) as a float; ``geometric``: a coordinate or
+        length, whose magnitude must stay within :data:`MAX_MAGNITUDE` (it gets squared)."""
         if not self._present(key, default):
             return default
         value = self.data[key]
@@ -171,6 +176,10 @@ class _Table:
         if not math.isfinite(value):
             raise self.error(key, f"must be a finite number, got {_show(value)}",
                              f"write e.g. {self.example(key)}")
+        if geometric and abs(value) > MAX_MAGNITUDE:
+            raise self.error(key, f"{_show(value)} is beyond {MAX_MAGNITUDE:g}: coordinates and "
+                             "lengths are squared, which overflows double precision",
+                             "choose a length unit that brings the mechanism's size nearer 1")
         return float(value)
 
     def integer(self, key: str, default=_REQUIRED) -> int | None:
@@ -202,8 +211,9 @@ class _Table:
             raise self.error(key, "is empty", f"write e.g. {self.example(key)}")
         return value
 
-    def pair(self, key: str, default=_REQUIRED, nonzero: bool = False):
-        """Two finite numbers ``[a, b]`` as a tuple of floats; ``nonzero``: not ``[0, 0]``."""
+    def pair(self, key: str, default=_REQUIRED, nonzero: bool = False, geometric: bool = True):
+        """Two finite numbers ``[a, b]`` as a tuple of floats; ``nonzero``: not ``[0, 0]``;
+        ``geometric`` (coordinates, directions): magnitudes within :data:`MAX_MAGNITUDE`."""
         if not self._present(key, default):
             return default
         value = self.data[key]
@@ -214,6 +224,10 @@ class _Table:
             raise self.error(key, f"must hold finite numbers, got {_show(value)}",
                              f"write e.g. {self.example(key)}")
         result = (float(value[0]), float(value[1]))
+        if geometric and max(abs(result[0]), abs(result[1])) > MAX_MAGNITUDE:
+            raise self.error(key, f"{_show(value)} is beyond {MAX_MAGNITUDE:g}: coordinates and "
+                             "lengths are squared, which overflows double precision",
+                             "choose a length unit that brings the mechanism's size nearer 1")
         if nonzero and result == (0.0, 0.0):
             raise self.error(key, "is zero: a direction needs a non-zero vector",
                              f"write e.g. {self.example(key)}")

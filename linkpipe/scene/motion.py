@@ -11,6 +11,8 @@ from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Output
 #: the loosest tolerance a scene may ask for: 1 % of the mechanism's size (looser would let a
 #: link come out several percent long, every step "ok")
 MAX_TOL = 1e-2
+#: the most steps a sweep may have (the memory check refuses far fewer on any real machine)
+MAX_STEPS = 1e12
 #: the most Newton iterations per run (each run also stops when it stalls): bounds the work
 MAX_ITER = 1000
 
@@ -102,7 +104,11 @@ class MotionTables:
                               "use a non-zero step with the sign of to - from, e.g. step = "
                               f"{better if stop > start else -better:g}")
         # from, from + s, ... up to and including `to` when it lands within 1e-9*|s| of it
-        steps = math.floor((stop - start) / step + 1e-9) + 1
+        count = (stop - start) / step + 1e-9
+        if not count < MAX_STEPS:
+            raise table.error("step", f"step = {step:g} with {span} gives {count:.3g} steps, "
+                              f"more than {MAX_STEPS:.0e}", "use a larger step")
+        steps = math.floor(count) + 1
         if steps == 1:
             raise table.error("step", f"step = {step:g} with {span} gives no steps: it "
                               "oversteps to, leaving a single position",
@@ -139,7 +145,7 @@ class EffectTables:
     ``[outputs]`` readers of :class:`~.parse._Parser`."""
 
     def gravity_table(self) -> tuple[float, float] | None:
-        return self.table("gravity").pair("g") if self.top("gravity") is not None else None
+        return self.table("gravity").pair("g", geometric=False) if self.top("gravity") is not None else None
 
     def spring_tables(self) -> tuple[Spring, ...]:
         springs = []
@@ -209,7 +215,7 @@ class EffectTables:
                                       f"and {table.example('torque')}")
                 loads.append(Load(table.data["name"],
                                   point=self.point(table, "point", table.string("point")),
-                                  force=table.pair("force")))
+                                  force=table.pair("force", geometric=False)))
             else:
                 loads.append(Load(table.data["name"],
                                   link=self.link(table, "link", table.string("link")).name,
