@@ -7,66 +7,35 @@ import numpy as np
 from ..model import Model
 from ..status import NO_ASSEMBLY, NOT_CONVERGED
 from .linalg import lin_solve
+from .step import _step_kernels
 
 
-NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
-
-
-def fd_jacobian(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Return Phi_q (S, n_rows, n_q) by central differences (the accuracy ladder's knob)."""
-    h = np.cbrt(np.finfo(float).eps) * model.size
-    cols = []
-    for k in range(q.shape[1]):
-        dq = np.zeros_like(q)
-        dq[:, k] = h
-        cols.append((model.phi(model.positions(q + dq), s) - model.phi(model.positions(q - dq), s)) / (2 * h))
-    return np.stack(cols, axis=2)
+  # Newton iterations without a new best residual before a step is given up
 
 
 def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,
            jacobian: str = "analytic"):
-    """Refine ``q`` (S, n_q) at driver values ``s`` (S, nd) by Newton-Raphson, all steps at once.
+    """Refine ``q`` (S, n_q) at driver values ``s`` (S, nd) by Newton-Raphson, step by step.
 
-    Returns (q, residual (S,), iterations (S,), converged (S,) bool). Steps are iterated until
-    their residual (max abs of Phi) is below ``tol_abs``; converged ones are frozen. A step whose
-    residual has made no progress (a new best, or half the previous residual) for
-    ``NEWTON_STALL`` iterations is given up early (Newton wandering where there is no solution:
-    a step past an assembly limit); near a singular root the residual falls by about 4 per
-    iteration after a jump, which counts as progress.
+    Returns (q, residual (S,), iterations (S,), converged (S,) bool). The iteration is the one
+    loop of :meth:`linkpipe.kinematics.step._Step.newton` (on Python floats: this is called for
+    one or a few steps at a time; whole sweeps go through the vectorised path's batched
+    refinement). A step is iterated until its residual (max abs of Phi) is below ``tol_abs``;
+    one whose residual has made no progress (a new best, or half the previous residual) for
+    ``NEWTON_STALL`` iterations is given up early (Newton wandering where there is no
+    solution: a step past an assembly limit).
     """
     q = np.array(q, dtype=float)
-    S = q.shape[0]
-    iters = np.zeros(S, dtype=np.int32)
-    res = np.full(S, np.inf)
-    best = np.full(S, np.inf)
-    prev = np.full(S, np.inf)
-    stall = np.zeros(S, dtype=np.int32)
-    active = np.arange(S)
-    step_cap = 0.5 * model.size
-    for it in range(max_iter + 1):
-        X = model.positions(q[active])
-        F = model.phi(X, s[active])
-        r = np.abs(F).max(axis=1) if F.shape[1] else np.zeros(len(active))
-        res[active] = r
-        progress = (r < best[active]) | (r < 0.5 * prev[active])
-        stall[active] = np.where(progress, 0, stall[active] + 1)
-        best[active] = np.fmin(best[active], r)
-        prev[active] = r
-        done = ~(r > tol_abs)  # NaN counts as not done
-        bad = ~np.isfinite(r) | (stall[active] >= NEWTON_STALL)
-        keep = ~done & ~bad
-        if it == max_iter or not keep.any():
-            break
-        active, F, X = active[keep], F[keep], X[keep]
-        J = (model.jacobian(X, s[active]) if jacobian == "analytic"
-             else fd_jacobian(model, q[active], s[active]))
-        dq = lin_solve(J, -F)
-        big = np.abs(dq).max(axis=1)
-        scale = np.where(big > step_cap, step_cap / np.where(big > 0, big, 1.0), 1.0)
-        q[active] += dq * scale[:, None]
-        iters[active] += 1
-    converged = res <= tol_abs
-    return q, res, iters, converged
+    n_steps = q.shape[0]
+    if not model.n_q:  # nothing to move: the residual is the drivers' own
+        F = model.phi(model.positions(q), s)
+        res = np.abs(F).max(axis=1) if F.shape[1] else np.zeros(n_steps)
+        return q, res, np.zeros(n_steps, dtype=np.int32), res <= tol_abs
+    kernels = _step_kernels(model)
+    out = [kernels.newton(q[i], s[i], tol_abs, max_iter, jacobian) for i in range(n_steps)]
+    if not out:
+        return q, np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(0, dtype=bool)
+    return tuple(np.concatenate(parts) for parts in zip(*out))
 
 
 def _polish(model: Model, q: np.ndarray, s_row: np.ndarray, max_iter: int):

@@ -16,6 +16,8 @@ CARRY_ANGLE_STEP = np.deg2rad(2.0)
 
 
 CARRY_LENGTH_STEP = 0.005
+#: the longest carry: a drawing farther than this many carry steps from ``from`` is not carried
+MAX_CARRY_STEPS = 10_000
 
 
 def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
@@ -104,7 +106,10 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
     angle = model.drv_angle
     delta[angle] = (delta[angle] + np.pi) % (2 * np.pi) - np.pi  # the shorter way round
     step = np.where(angle, CARRY_ANGLE_STEP, CARRY_LENGTH_STEP * model.size)
-    n = int(np.ceil(np.max(np.abs(delta) / step)))
+    n_needed = float(np.max(np.abs(delta) / step))
+    if not n_needed <= MAX_CARRY_STEPS:  # far off (or not finite): the direct solve at s0 decides
+        return None
+    n = int(np.ceil(n_needed))
     if n <= 1:
         return None
     start = s0 - delta  # the drawn values, next to s0 for the angles

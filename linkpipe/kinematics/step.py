@@ -7,7 +7,8 @@ import numpy as np
 from ..model import Model, derived
 from ..model import equations as eq
 from .linalg import lin_solve
-from .newton import NEWTON_STALL
+
+NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
 
 
 class _Step:
@@ -78,7 +79,8 @@ class _Step:
         return list(eq.phi_s_rows(self.rows, self._xy(q), cs, sn))
 
     def fd_jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Return Phi_q (m, n) by central differences, as :func:`fd_jacobian` computes it."""
+        """Return Phi_q (m, n) by central differences (step cbrt(eps) x the size): the
+        ``jacobian = "finite_difference"`` knob."""
         h = np.cbrt(np.finfo(float).eps) * self.model.size
         cols = []
         for k in range(self.n):
