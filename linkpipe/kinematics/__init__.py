@@ -4,9 +4,9 @@ One entry, :func:`solve_sweep`, and the registry :data:`METHODS` of the paths it
 (``[solver] method``: "auto" takes the closed-form dyads where the scene decomposes and every
 dyad stays clear of its singular shape, else the vectorised Newton path). Modules:
 :mod:`.dyads` (closed-form fast path), :mod:`.vectorised` (coarse continuation + batched
-Newton), :mod:`.continuation` (step by step), :mod:`.start` (the first step), :mod:`.newton`
+Newton), :mod:`.continuation` (step by step), :mod:`.start` (the first step), :mod:`.roots`
 (Newton and the rescues), :mod:`.step` (one-step float kernels), :mod:`.linalg` (sparse and
-dense solves, condition), :mod:`.derivatives` (velocities, accelerations, link rates).
+dense solves, condition), :mod:`.rates` (velocities, accelerations, link rates).
 """
 from __future__ import annotations
 
@@ -120,9 +120,9 @@ def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarr
             return sweep
     return solve_with_newton(model, s, note, start)
 
-from .derivatives import (dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
+from .rates import (dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
                           link_angles_unwrapped, link_rates)
-from .newton import newton  # noqa: E402
+from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 
 __all__ = ["solve_sweep", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",

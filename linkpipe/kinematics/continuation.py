@@ -11,7 +11,7 @@ import numpy as np
 from ..model import Model
 from ..status import NO_ASSEMBLY, NOT_CONVERGED
 from .linalg import MODE_SETTLED_BELOW, POLISH_FROM, condition, condition_and_inverse_one, is_singular, lin_solve
-from .newton import _classify_failure, _converging_at_cap, _lm_root, _mirror_root, _null_line_roots, _polish, aim_drivers, drivers_aligned, newton
+from .roots import _classify_failure, _converging_at_cap, _lm_root, _mirror_root, _null_line_roots, _polish, aim_drivers, drivers_aligned, newton
 from .start import start_state
 from .step import _step_kernels
 

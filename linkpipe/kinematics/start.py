@@ -6,7 +6,7 @@ import numpy as np
 from ..errors import SceneError
 from ..model import Model, constraint_source
 from .linalg import condition, is_singular
-from .newton import _null_line_roots, drivers_aligned, newton
+from .roots import _null_line_roots, drivers_aligned, newton
 from .step import _step_kernels
 
 
