@@ -10,7 +10,6 @@ drivers, lengths for coordinate drivers). The constraint rows themselves are wri
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +17,7 @@ import numpy as np
 from ..errors import SceneError
 from ..scene import Scene
 from . import equations as eq
+
 
 _R90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # d_perp = _R90 @ d
 
@@ -190,19 +190,6 @@ class Model:
         """Return each link's direction (first to second point) in radians ``(S, n_links)``."""
         d = X[:, self.link_b] - X[:, self.link_a]
         return np.arctan2(d[..., 1], d[..., 0])
-
-
-_DERIVED: dict[tuple[int, str], object] = {}
-
-
-def derived(model: "Model", name: str, build):
-    """Return ``build(model)``, built once per model and kept beside it (not on the frozen
-    dataclass) until the model is garbage-collected: the kinematics' engines and kernels."""
-    key = (id(model), name)
-    if key not in _DERIVED:
-        _DERIVED[key] = build(model)
-        weakref.finalize(model, _DERIVED.pop, key, None)
-    return _DERIVED[key]
 
 
 def _stacked(X: np.ndarray, s: np.ndarray):

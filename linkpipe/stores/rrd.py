@@ -18,6 +18,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from . import atomic_path
+from ..cache import derived
 
 APPLICATION_ID = "linkpipe"
 #: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
@@ -88,19 +89,20 @@ def _finite_rows(a: np.ndarray) -> np.ndarray:
 
 def mechanism_size(result) -> float:
     """Return the diagonal of the bounding box of every position of the sweep (1 if none)."""
-    cached = result.__dict__.get("_rrd_mechanism_size")  # asked for several times per write
-    if cached is None or cached[0] is not result.position:
-        lo, hi = _bounds(result, result.position.reshape(-1, 2))
-        cached = (result.position, float(np.hypot(*(hi - lo))) or 1.0)
-        result.__dict__["_rrd_mechanism_size"] = cached
-    return cached[1]
+    return derived(result, "rrd_mechanism_size", _mechanism_size)  # asked for several times
+
+
+def _mechanism_size(result) -> float:
+    lo, hi = _bounds(result, result.position.reshape(-1, 2))
+    return float(np.hypot(*(hi - lo))) or 1.0
 
 
 def arrow_scales(result) -> dict[str, float]:
     """Return the length per unit of each vector quantity: its longest arrow is 25 % of the size."""
-    cached = result.__dict__.get("_rrd_arrow_scales")  # asked for by the blueprint and the log
-    if cached is not None and cached[0] is result.position:
-        return dict(cached[1])
+    return dict(derived(result, "rrd_arrow_scales", _arrow_scales))  # blueprint and log ask
+
+
+def _arrow_scales(result) -> dict[str, float]:
     k = _point_index(result, result.scene.outputs.vectors)
     scales = {}
     for name in ("velocity", "acceleration"):
@@ -110,7 +112,6 @@ def arrow_scales(result) -> dict[str, float]:
         norm = np.linalg.norm(data[:, k], axis=-1)
         vmax = np.nanmax(norm) if np.isfinite(norm).any() else 0.0
         scales[name] = ARROW_FRACTION * mechanism_size(result) / vmax if vmax > 0 else 1.0
-    result.__dict__["_rrd_arrow_scales"] = (result.position, dict(scales))
     return scales
 
 

@@ -1,0 +1,19 @@
+"""Objects derived from a frozen one (a model's engine, a result's drawing scales), built once
+and kept beside it (never set on it) until it is garbage-collected. A leaf: anyone may import it."""
+from __future__ import annotations
+
+import weakref
+
+_DERIVED: dict[tuple[int, str], object] = {}
+
+
+def derived(owner, name: str, build):
+    """Return ``build(owner)``, built once per owner and kept beside it (not on the frozen
+    dataclass) until the owner is garbage-collected."""
+    key = (id(owner), name)
+    if key not in _DERIVED:
+        _DERIVED[key] = build(owner)
+        weakref.finalize(owner, _DERIVED.pop, key, None)
+    return _DERIVED[key]
+
+
