@@ -18,6 +18,7 @@ import os
 import pathlib
 import re
 import shutil
+import time
 import uuid
 from collections.abc import Iterator
 
@@ -26,6 +27,9 @@ from ..errors import LinkpipeError
 #: what a write needs beyond its arrays' bytes (metadata, chunk indexes), and at least this much
 SPACE_MARGIN, SPACE_MINIMUM = 1.1, 1 << 20
 _TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{12}\.tmp$")
+#: temporaries of earlier versions carry no process id: removed once they are this old (s)
+_UNOWNED = re.compile(r"^\.(?P<name>.+)\.[0-9a-f]{12}\.tmp$")
+UNOWNED_AGE_S = 3600
 _INTERRUPTED = False
 
 
@@ -60,9 +64,16 @@ def _alive(pid: int) -> bool:
 def remove_stale_temporaries(folder: str | os.PathLike) -> list[pathlib.Path]:
     """Remove the temporaries of processes that no longer run; return what was removed."""
     removed = []
+    now = time.time()
     for path in pathlib.Path(folder).glob(".*.tmp"):
         m = _TEMP.match(path.name)
-        if m and int(m.group("pid")) != os.getpid() and not _alive(int(m.group("pid"))):
+        dead = m and int(m.group("pid")) != os.getpid() and not _alive(int(m.group("pid")))
+        unowned = not m and _UNOWNED.match(path.name)
+        try:
+            old = unowned and now - path.stat().st_mtime > UNOWNED_AGE_S
+        except OSError:
+            continue
+        if dead or old:
             path.unlink(missing_ok=True)
             removed.append(path)
     return removed
@@ -96,6 +107,7 @@ def atomic_path(path: str | os.PathLike, n_bytes: int = 0) -> Iterator[pathlib.P
         yield tmp
         if _INTERRUPTED:
             raise KeyboardInterrupt
+        _fsync(tmp)  # the data on disk before the name points at it (a crash keeps old or new)
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
@@ -107,6 +119,15 @@ def atomic_path(path: str | os.PathLike, n_bytes: int = 0) -> Iterator[pathlib.P
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _fsync(path: pathlib.Path) -> None:
+    if path.exists():
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 @contextlib.contextmanager

@@ -49,8 +49,10 @@ def write(result, path, spawn: bool = False, connect: str | None = None) -> None
         return
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
-    # the recording holds float32 copies of the plotted arrays: about half the arrays' bytes
-    n_bytes = result.position.nbytes + sum(v.data.nbytes for v in result.variables()) // 2
+    # generous on purpose: the recording holds float32 copies of the arrays plus labels, and
+    # Rerun's file writer does not fail cleanly on a full disk (it can hang flushing): twice
+    # the arrays' bytes and 256 KiB
+    n_bytes = 2 * sum(v.data.nbytes for v in result.variables()) + (256 << 10)
     with atomic_path(path, n_bytes) if path is not None else contextlib.nullcontext() as tmp:
         sinks = [rr.FileSink(tmp)] if tmp is not None else []
         if spawn:

@@ -140,3 +140,13 @@ def _steps_in_recording(path) -> int:
     store = RrdReader(path).stream().collect()
     df = store.reader(index="step", contents="/solver/residual").to_pandas()
     return int(df["/solver/residual:Scalars:scalars"].notna().sum())
+
+
+def test_pid_less_temporaries_of_earlier_versions_go_once_an_hour_old(tmp_path):
+    old = tmp_path / ".x.h5.0123456789ab.tmp"
+    new = tmp_path / ".y.h5.0123456789ab.tmp"
+    for p in (old, new):
+        p.write_bytes(b"partial")
+    os.utime(old, (time.time() - 7200, time.time() - 7200))
+    removed = stores.remove_stale_temporaries(tmp_path)
+    assert removed == [old] and new.exists()
