@@ -19,9 +19,7 @@ import argparse
 import collections
 import concurrent.futures
 import copy
-import io
 import math
-import multiprocessing as mp
 import os
 import pathlib
 import sys
@@ -143,29 +141,42 @@ def _wrong_ok(outdir: pathlib.Path) -> int:
     return bad
 
 
+def _run_forked(path: str, outdir: str, log: str) -> tuple[int | None, float]:
+    """Run one scene in a forked child; return (exit code or None if it hung, seconds).
+    os.fork and os.waitpid of this child only (multiprocessing reaps other threads' children)."""
+    t0 = time.perf_counter()
+    pid = os.fork()
+    if pid == 0:  # the child
+        try:
+            _child(path, outdir, log)
+        finally:
+            os._exit(70)
+    while time.perf_counter() - t0 < TIMEOUT_S:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status), time.perf_counter() - t0
+        time.sleep(0.01)
+    os.kill(pid, 9)
+    os.waitpid(pid, 0)
+    return None, time.perf_counter() - t0
+
+
 def run_one(label_path, work: pathlib.Path):
     label, path = label_path
     outdir = pathlib.Path(tempfile.mkdtemp(dir=work))
     log = outdir / "_log"
-    ctx = mp.get_context("fork")
-    proc = ctx.Process(target=_child, args=(str(path), str(outdir), str(log)))
-    t0 = time.perf_counter()
-    proc.start()
-    proc.join(TIMEOUT_S)
-    seconds = time.perf_counter() - t0
-    if proc.is_alive():
-        proc.kill()
-        proc.join()
+    code, seconds = _run_forked(str(path), str(outdir), str(log))
+    if code is None:
         return label, "hang", seconds, ""
     text = log.read_text(errors="replace") if log.exists() else ""
     if "Traceback" in text:
         return label, "traceback", seconds, text[-400:]
-    if proc.exitcode not in (0, 2) or "internal error" in text:
-        return label, f"exit {proc.exitcode}", seconds, text[-400:]
+    if code not in (0, 2) or "internal error" in text:
+        return label, f"exit {code}", seconds, text[-400:]
     wrong = _wrong_ok(outdir)
     if wrong:
         return label, "wrong ok", seconds, f"{wrong} ok steps hold non-finite values"
-    return label, f"clean (exit {proc.exitcode})", seconds, ""
+    return label, f"clean (exit {code})", seconds, ""
 
 
 def main(argv=None) -> int:
