@@ -37,18 +37,18 @@ def _parser(prog: str) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
     """Run the command line and return the exit status: 0 ok, 1 a scene failed inside linkpipe
-    or its output could not be written, 2 bad input (scene, option), 130 interrupted (Ctrl-C),
-    143 terminated (SIGTERM). Temporary output files are removed on every one of these paths."""
+    or its output could not be written, 2 bad input (scene, option), 130 stopped by Ctrl-C or
+    SIGTERM. Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
     command = {"run": _run, "check": _check, "accuracy": _accuracy}[args.command]
     previous = _signals_as_interrupts()
     try:
         return command(args)
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the writers removed their temporaries
-        code = 143 if isinstance(exc, _Terminated) else 130
-        print(f"linkpipe: {'terminated' if code == 143 else 'interrupted'}; "
+        # one status for a run stopped from outside, whichever signal (130, as for Ctrl-C)
+        print(f"linkpipe: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}; "
               "outputs written before stay, the one being written was not kept", file=sys.stderr)
-        return code
+        return 130
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
