@@ -61,7 +61,7 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
     if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
         start = start_state(model, s[0], tol_abs, sc.max_iter)
     qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
-    qn, resn = _polish_soa(eng, qn, s[nodes], stn == OK, resn)
+    qn, resn = _one_more_newton_step(eng, qn, s[nodes], stn == OK, resn)
     out = dict(q=np.full((S, model.n_q), np.nan), residual=np.full(S, np.nan),
                iterations=np.zeros(S, dtype=np.int32), status=np.zeros(S, dtype=np.int8),
                sequential=np.zeros(S, dtype=bool))
@@ -216,7 +216,7 @@ def _newton_soa(eng, qT, sT, tol_abs, max_iter: int = NEWTON_ITERATIONS):
     return qT, res, its, res <= tol_abs, eng.entries_T(qT, sT)
 
 
-def _polish_soa(eng, q, s, ok, residual):
+def _one_more_newton_step(eng, q, s, ok, residual):
     """One more Newton step at the steps ``ok`` (the sequential path stops at ``tol``, up to
     ~1e-12 of the size away); kept where it lowers the residual."""
     idx = np.flatnonzero(ok & np.isfinite(q).all(axis=1))
