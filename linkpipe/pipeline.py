@@ -152,7 +152,7 @@ def _solve(scene: Scene, progress) -> Result:
         seconds["forces"] = _time.perf_counter() - t0
     stored = [X, link_angle, velocity, acceleration, *link_rates]
     if forces:
-        stored += [data for dims, data, _ in forces.variables.values() if dims[:1] == ("step",)]
+        stored += forces.defined_arrays()
     status = assign([kinematic_status] + ([forces.status] if forces else []),
                     sweep.residual, scene.solver.tol * model.size,
                     [a for a in stored if a is not None])

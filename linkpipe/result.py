@@ -65,6 +65,19 @@ class Forces:
     variables: dict[str, tuple[tuple[str, ...], np.ndarray, str]]
     coords: dict[str, list[str]]
     status: np.ndarray
+    #: {variable: (n_columns,) bool} columns the scene does not define (NaN at every step by
+    #: construction: the force in a link between two fixed points), left out of status checks
+    undefined: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def defined_arrays(self) -> list[np.ndarray]:
+        """Every step-first variable, (S, n_defined_columns), without its undefined columns."""
+        out = []
+        for name, (dims, data, _) in self.variables.items():
+            if dims[:1] != ("step",):
+                continue
+            columns = data.reshape(data.shape[0], -1)
+            out.append(columns[:, ~self.undefined[name]] if name in self.undefined else columns)
+        return out
 
 
 @dataclass(frozen=True)

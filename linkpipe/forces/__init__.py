@@ -79,14 +79,14 @@ def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
                                           motion.status, units)
     variables["input_force"] = (("step", "driver"), input_force, unit)
     variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
-    internal, internal_coords = internal_forces(model, lam, undetermined, units)
+    internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)
     variables.update(internal)
     coords.update(internal_coords)
     pins, pin_coords = _reactions(model, ctx, lam, q_minus_m_qdd, bodies, Xz, ok, undetermined,
                                   applied.get("loads"))
     variables.update(pins)
     coords.update(pin_coords)
-    return Forces(variables=variables, coords=coords, status=status)
+    return Forces(variables=variables, coords=coords, status=status, undefined=undefined)
 
 
 def _reactions(model: Model, ctx: Context, lam, q_minus_m_qdd, bodies, Xz, ok, undetermined,

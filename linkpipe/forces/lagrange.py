@@ -55,8 +55,8 @@ def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:
     return np.abs(U[:, :, n:]).max(axis=(0, 2)) > tol
 
 
-def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict]:
-    """Return (variables, coords): ``link_force`` (tension positive, from each link's distance
+def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict, dict]:
+    """Return (variables, coords, undefined columns): ``link_force`` (tension positive, from each link's distance
     row), ``slider_force`` (the guide's normal force) and, under redundancy, which are unique."""
     scene, force_unit = model.scene, units["force"]
     n_links = len(scene.links)
@@ -70,13 +70,15 @@ def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict]
     for li, r in row_of_link.items():
         link_force[:, li] = lam[:, r]
     out, coords = {"link_force": (("step", "link"), link_force, force_unit)}, {}
+    # a link without a distance row (between two fixed points) carries no computed force
+    undefined = {"link_force": ~np.isin(np.arange(n_links), list(row_of_link))}
     if undetermined.any():  # redundant constraints: the minimum-norm choice, not the answer
         unique = np.ones(n_links, dtype=np.int8)
         for li, r in row_of_link.items():
             unique[li] = 0 if undetermined[r] else 1
         out["link_force_unique"] = (("link",), unique, "1")
     if not scene.sliders:
-        return out, coords
+        return out, coords, undefined
     first = n_dist + 2 * len(model.loc_a)
     fixed_i = [i for i, x in enumerate(scene.sliders) if not x.moving]
     moving_i = [i for i, x in enumerate(scene.sliders) if x.moving]
@@ -91,7 +93,7 @@ def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict]
             unique[i] = 0 if undetermined[r] else 1
         out["slider_force_unique"] = (("slider",), unique, "1")
     coords["slider"] = [x.name for x in scene.sliders]
-    return out, coords
+    return out, coords, undefined
 
 
 def reactions(model: Model, lam, point_forces, bodies, X, s, ok):

@@ -65,3 +65,16 @@ def test_assign_is_the_one_rule():
                                         st.SINGULAR, st.NO_ASSEMBLY])
     assert st.FLAG_MEANINGS == ("ok", "no_assembly", "singular", "not_converged", "no_input",
                                 "no_leverage", "non_finite")
+
+
+def test_a_quantity_the_scene_does_not_define_does_not_fail_its_steps():
+    """A link between two fixed points carries no computed force (NaN at every step): that is
+    an undefined quantity, not a non-finite result, so the steps stay ok."""
+    text = CRANK_ROCKER.replace('[[links]]\nname = "crank"',
+                                '[[links]]\nname = "ground"\npoints = ["O2", "O4"]\n\n'
+                                '[[links]]\nname = "crank"', 1)
+    text += '\n[analysis]\neffects = ["loads"]\n\n[[loads]]\nname = "push"\npoint = "P"\nforce = [0.0, -1.0]\n'
+    r = linkpipe.solve(linkpipe.parse_scene(text, "ground_link.toml"))
+    link_force = r.forces["link_force"][1]
+    assert np.isnan(link_force[:, r.link_names.index("ground")]).all()
+    assert (r.status == st.OK).all()
