@@ -116,22 +116,22 @@ def linkpipe_model(S: int, method: str = "auto"):
 
 
 def linkpipe_fast(model, theta):
-    from linkpipe import kinematics as batch
+    from linkpipe import kinematics as kin
 
     S = len(theta)
-    out = batch.solve_sweep(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
+    out = kin.solve_sweep(model, theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1)), order=2)
     assert out.method == "dyads"
     return out.position, out.velocity, out.acceleration
 
 
 def linkpipe_newton(model, theta):
-    from linkpipe import kinematics as batch
+    from linkpipe import kinematics as kin
 
     S = len(theta)
     s, s_dot, s_ddot = theta[:, None], np.full((S, 1), OMEGA), np.zeros((S, 1))
-    out = batch.solve_sweep(model, s, s_dot, s_ddot, order=2)  # positions, as the pipeline runs them
+    out = kin.solve_sweep(model, s, s_dot, s_ddot, order=2)  # positions, as the pipeline runs them
     assert out.method == "newton"
-    der = batch.derivatives(model, out.position, s, s_dot, s_ddot, out.status, True)
+    der = kin.derivatives(model, out.position, s, s_dot, s_ddot, out.status, True)
     return out.position, der["velocity"], der["acceleration"]
 
 

@@ -16,7 +16,6 @@ from hypothesis import strategies as st_h
 
 import linkpipe
 from linkpipe import status as st
-from linkpipe import kinematics as batch
 from linkpipe.kinematics import dyads
 from linkpipe import kinematics as kin
 from linkpipe.errors import SceneError
@@ -78,13 +77,13 @@ def test_dyads_agree_with_newton(pair):
 
 
 def test_engine_derivatives_match_the_dense_ones(pair):
-    """batch.derivatives (block-triangular sparse solves) == kinematics.derivatives (dense)."""
+    """kin.derivatives (block-triangular sparse solves) == kinematics.derivatives (dense)."""
     _, r = pair
     model = r.model
     value, s, sd, sdd = kin.driver_motion(model)
     X = np.where(np.isfinite(r.position), r.position, 0.0)
     status = np.where(np.isfinite(r.position).all(axis=(1, 2)), st.OK, st.NO_ASSEMBLY).astype(np.int8)
-    a = batch.derivatives(model, X, s, sd, sdd, status, True)
+    a = kin.derivatives(model, X, s, sd, sdd, status, True)
     b = kin.dense_derivatives(model, X, s, sd, sdd, status, True)
     np.testing.assert_array_equal(a["status"], b["status"])
     for key in ("velocity", "acceleration", "jacobian_inverse"):
@@ -107,7 +106,7 @@ def test_max_abs_phi_is_the_models_residual(path):
     s = rng.uniform(-3, 3, size=(S, model.n_drivers))
     want = np.abs(model.phi(X, s)).max(axis=1)
     pts = {int(p): (X[:, p, 0].copy(), X[:, p, 1].copy()) for p in model.moving}
-    got = batch.vectorised.max_abs_phi(model)(pts, np.ascontiguousarray(s.T))
+    got = kin.vectorised.max_abs_phi(model)(pts, np.ascontiguousarray(s.T))
     assert np.isnan(got[7]) and np.isnan(want[7])
     keep = np.arange(S) != 7
     # the same rows by the same operations up to association: a few roundings of the size
@@ -120,9 +119,9 @@ def test_vectorised_general_path_on_a_long_sweep():
     scene = with_steps(linkpipe.load_scene(str(CONFIG_DIR / "fourbar_crank_rocker.toml")), 3001)
     model = build_model(scene)
     value, s, sd, sdd = kin.driver_motion(model)
-    out = batch.vectorised.solve_newton(model, s)
+    out = kin.vectorised.solve_newton(model, s)
     assert (out["status"] == st.OK).all()
-    der = batch.derivatives(model, model.positions(out["q"]), s, sd, sdd, out["status"], True)
+    der = kin.derivatives(model, model.positions(out["q"]), s, sd, sdd, out["status"], True)
     out.update(velocity=der["velocity"], acceleration=der["acceleration"])
     assert out["sequential"].sum() < 200  # the coarse nodes only: the rest went vectorised
     cf = fourbar(1.0, 3.5, 3.0, 4.0, s[:, 0], 10.0, 0.0, branch=+1, coupler_uv=(1.5, 0.8))
@@ -134,7 +133,7 @@ def test_vectorised_general_path_on_a_long_sweep():
         np.testing.assert_allclose(out["velocity"][:, i], cf["V" + p], atol=1e-12 * 40.0)
         np.testing.assert_allclose(out["acceleration"][:, i], cf["A" + p], atol=1e-11 * 400.0)
     # and the dyads on the same sweep
-    plan = batch.decompose(model)
+    plan = kin.decompose(model)
     dyads.set_branches(plan, X[0], s[0])
     sw = dyads.solve_chain(plan, s, sd, sdd)
     assert rel_err(sw.position, X) <= REL
@@ -181,7 +180,7 @@ kinematics = ["velocity", "acceleration"]
 
 def test_a_triad_does_not_decompose_and_auto_runs_newton():
     scene = linkpipe.parse_scene(STEPHENSON, "triad.toml")
-    plan = batch.decompose(build_model(scene))
+    plan = kin.decompose(build_model(scene))
     assert not plan.ok and "B" in plan.reason
     r = linkpipe.solve(scene)
     assert r.solver_method_used == "newton" and "no closed-form dyad" in r.solver_note

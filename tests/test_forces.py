@@ -226,13 +226,13 @@ def test_skipped_stages_do_not_run(monkeypatch, method):
 
     import linkpipe.forces
     import linkpipe.model
-    from linkpipe import kinematics as batch
+    from linkpipe import kinematics as kin
 
     def boom(*a, **k):
         raise AssertionError("this stage must not run")
 
     orders = []
-    real_stage1 = batch.solve_sweep
+    real_stage1 = kin.solve_sweep
 
     def recording_stage1(model, s, s_dot, s_ddot, order, *a, **k):
         orders.append(order)
@@ -242,7 +242,7 @@ def test_skipped_stages_do_not_run(monkeypatch, method):
         scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, method=method))
         return linkpipe.solve(scene)
 
-    monkeypatch.setattr(batch, "solve_sweep", recording_stage1)
+    monkeypatch.setattr(kin, "solve_sweep", recording_stage1)
     monkeypatch.setattr(linkpipe.forces, "compute_forces", boom)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
     text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
@@ -253,7 +253,7 @@ def test_skipped_stages_do_not_run(monkeypatch, method):
     assert r.solver_method_used == ("newton" if method == "newton" else "dyads")
     # the shear press asks for loads only: forces run, velocities and accelerations still do not
     monkeypatch.undo()
-    monkeypatch.setattr(batch, "solve_sweep", recording_stage1)
+    monkeypatch.setattr(kin, "solve_sweep", recording_stage1)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
     r = solve(linkpipe.load_scene(CONFIGS / "shear_press.toml"))
     assert r.forces is not None and r.acceleration is None and r.velocity is None

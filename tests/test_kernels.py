@@ -2,7 +2,7 @@
 
 ``linkpipe/model/equations.py`` writes every constraint row once. ``Model`` evaluates the rows
 on stacked sweeps, the sequential continuation's one-step kernels (``kinematics._Step``) on
-Python floats, and the sparse engine (``batch.sparse.Engine``) on per-coordinate arrays. Here, for
+Python floats, and the sparse engine (``kin.sparse.Engine``) on per-coordinate arrays. Here, for
 every shipped scene and for hypothesis-drawn four-bars, slider-cranks and six-bars:
 
 * Φ, Φq, Φs of the float kernels equal the model's to the last bit (the continuation's branch
@@ -21,7 +21,7 @@ from hypothesis import given, settings, strategies as st
 
 import linkpipe
 from linkpipe import kinematics
-from linkpipe import kinematics as batch
+from linkpipe import kinematics as kin
 from linkpipe.model import build_model
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -50,7 +50,7 @@ def _layouts_agree(model):
         np.testing.assert_array_equal(step.phi(q[i], s[i]), model.phi(X[i:i + 1], s[i:i + 1])[0])
         np.testing.assert_array_equal(step.jac(q[i], s[i]), model.jacobian(X[i:i + 1], s[i:i + 1])[0])
         np.testing.assert_array_equal(step.phi_s(q[i], s[i]), model.phi_s(X[i:i + 1], s[i:i + 1])[0])
-    eng = batch.sparse.engine(model)
+    eng = kin.sparse.engine(model)
     if eng is None:  # non-square (redundant) scenes take the dense path, by declaration
         assert model.n_rows != model.n_q
         return

@@ -152,7 +152,6 @@ def test_max_iter_caps_the_vectorised_path_too():
     may retry in sub-steps, counted in its iterations)."""
     import dataclasses as dc
 
-    from linkpipe import kinematics as batch
     from linkpipe import kinematics as kin
     from linkpipe.model import build_model
 
@@ -162,7 +161,7 @@ def test_max_iter_caps_the_vectorised_path_too():
         model = build_model(dc.replace(scene, solver=dc.replace(scene.solver, method="newton",
                                                                 max_iter=max_iter)))
         _, s, _, _ = kin.driver_motion(model)
-        out = batch.vectorised.solve_newton(model, s)
+        out = kin.vectorised.solve_newton(model, s)
         batched = ~out["sequential"]
         assert batched.sum() > 2500 and (out["status"] == OK).all()
         assert out["iterations"][batched].max() <= max_iter

@@ -44,9 +44,10 @@ class Sweep:
 
 
 def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
-    """The closed-form fast path: ``(Sweep, start)``, or ``(None, note)`` saying why the path
-    does not apply (auto then runs Newton; ``forced``, i.e. method = "dyads", raises
-    SceneError where the scene does not decompose and keeps the dyads' own branches)."""
+    """The closed-form fast path: ``(Sweep, "", start)``, or ``(None, note, start)`` with the
+    reason the path does not apply (auto then runs Newton from ``start``, the assembled first
+    step or None); ``forced`` (method = "dyads") raises SceneError where the scene does not
+    decompose and keeps the dyads' own branches."""
     sc = model.scene.solver
     chain = decompose(model)
     if not chain.ok:

@@ -15,12 +15,13 @@ from ..status import OK, SINGULAR
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
                 need_inverse: bool = True, chunk: int = CHUNK):
-    """Return what :func:`linkpipe.kinematics.derivatives` returns, computed on the engine.
+    """Velocities, accelerations, condition and Jacobian inverse of a solved sweep, on the
+    sparse engine; a dict as :func:`dense_derivatives` returns (the path of a model without an
+    engine, which this falls back to).
 
     Condition ``|J|_1 |J^-1|_1`` and SINGULAR flags as there; velocities and accelerations from
     the inverse (or the given ``velocity``/``acceleration``, e.g. the dyads', NaN where singular).
-    ``need_inverse=False`` leaves ``jacobian_inverse`` None (no force stage). Falls back to
-    :func:`linkpipe.kinematics.derivatives` when the model has no engine.
+    ``need_inverse=False`` leaves ``jacobian_inverse`` None (no force stage).
     """
     eng = engine(model)
     if eng is None:

@@ -165,6 +165,11 @@ class _Table:
         return self.error(key, f"expected {expected}, got {_type_name(value)} ({_show(value)})",
                           f"write e.g. {self.example(key)}")
 
+    def too_large(self, key: str, value) -> SceneError:
+        return self.error(key, f"{_show(value)} is beyond {MAX_MAGNITUDE:g}: coordinates and "
+                          "lengths are squared, which overflows double precision",
+                          "choose a length unit that brings the mechanism's size nearer 1")
+
     def number(self, key: str, default=_REQUIRED, geometric: bool = False) -> float | None:
         """A finite number (an integer is accepted) as a float; ``geometric``: a coordinate or
         length, whose magnitude must stay within :data:`MAX_MAGNITUDE` (it gets squared)."""
@@ -177,9 +182,7 @@ class _Table:
             raise self.error(key, f"must be a finite number, got {_show(value)}",
                              f"write e.g. {self.example(key)}")
         if geometric and abs(value) > MAX_MAGNITUDE:
-            raise self.error(key, f"{_show(value)} is beyond {MAX_MAGNITUDE:g}: coordinates and "
-                             "lengths are squared, which overflows double precision",
-                             "choose a length unit that brings the mechanism's size nearer 1")
+            raise self.too_large(key, value)
         return float(value)
 
     def integer(self, key: str, default=_REQUIRED) -> int | None:
@@ -225,9 +228,7 @@ class _Table:
                              f"write e.g. {self.example(key)}")
         result = (float(value[0]), float(value[1]))
         if geometric and max(abs(result[0]), abs(result[1])) > MAX_MAGNITUDE:
-            raise self.error(key, f"{_show(value)} is beyond {MAX_MAGNITUDE:g}: coordinates and "
-                             "lengths are squared, which overflows double precision",
-                             "choose a length unit that brings the mechanism's size nearer 1")
+            raise self.too_large(key, value)
         if nonzero and result == (0.0, 0.0):
             raise self.error(key, "is zero: a direction needs a non-zero vector",
                              f"write e.g. {self.example(key)}")
