@@ -157,16 +157,15 @@ def _run(args) -> int:
 
 def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
     """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each)."""
-    written, seconds = [], {}
-    name = result.scene.name
     out.mkdir(parents=True, exist_ok=True)
     from .stores import output_lock
 
-    with output_lock(out, name):  # another run writing this name waits: .h5 and .rrd pair up
-        return _write_locked(result, out, args, bar, written, seconds)
+    with output_lock(out, result.scene.name):  # another run of this name waits: .h5, .rrd pair
+        return _write_locked(result, out, args, bar)
 
 
-def _write_locked(result, out: pathlib.Path, args, bar, written, seconds):
+def _write_locked(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
+    written, seconds = [], {}
     name = result.scene.name
     if not args.no_h5:
         from .stores import hdf5
