@@ -76,7 +76,7 @@ def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
     lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
-                                          motion.status, units)
+                                          motion.status, units, Xz)
     variables["input_force"] = (("step", "driver"), input_force, unit)
     variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
     internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)

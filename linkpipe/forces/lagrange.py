@@ -7,6 +7,7 @@ import numpy as np
 
 from ..kinematics.sparse import engine
 from ..model import Model
+from ..model import equations as eq
 from ..kinematics.linalg import CHUNK
 
 
@@ -119,14 +120,42 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
         Jp = model.jacobian_points(X[ii], s[ii])  # (s, rows, P, 2)
         if len(fixed):
             R[ii] = np.einsum("sr,srfj->sfj", lam[ii], Jp[:, :, fixed]) - point_forces[ii][:, fixed]
+        motors = motor_terms(model, X[ii], s[ii], lam[ii])
         for li, rs in rows_of.items():
             own = np.einsum("sr,srpj->spj", lam[ii][:, rs], Jp[:, rs])
             if li in bodies:
                 own = own + bodies[li][ii]
+            if li in motors:
+                own = own + motors[li]
             for k, (lj, p) in enumerate(pairs):
                 if lj == li:
                     F[ii, k] = own[:, p]
     return R, F
+
+
+def motor_terms(model: Model, X, s, lam) -> dict:
+    """Return {link: (S, P, 2)}: the part of each relative angle row ``lambda_r dPhi_r/dX`` that
+    acts on each of the two links a motor turns against each other (the driven vector's points
+    on the first, the reference vector's on the second; ground takes its part through the
+    ground reactions). X (S, P, 2), s (S, nd), lam (S, n_rows)."""
+    out = {}
+    links = {ln.name: li for li, ln in enumerate(model.scene.links)}
+
+    def xy(p):
+        return X[:, p, 0], X[:, p, 1]
+
+    for j in np.flatnonzero(model.drv_kind == eq.RELATIVE):
+        driver, r = model.rows.drivers[j], model.n_constraints + j
+        terms = list(eq.relative_gradient(driver, xy, np.cos(s[:, j]), np.sin(s[:, j])))
+        for name, part in zip(model.scene.drivers[j].bodies, (terms[:2], terms[2:])):
+            if name not in links:
+                continue  # ground
+            li = links[name]
+            acc = out.setdefault(li, np.zeros(X.shape))
+            for p, gx, gy in part:
+                acc[:, p, 0] += lam[:, r] * gx
+                acc[:, p, 1] += lam[:, r] * gy
+    return out
 
 
 def body_rows(model: Model) -> np.ndarray:
@@ -134,7 +163,9 @@ def body_rows(model: Model) -> np.ndarray:
 
     Body rows: each link's distance and local rows, and an angle driver whose two points lie on
     one link (its multiplier is the actuator's couple on that body, reacted by the ground).
-    Slider rows and coordinate drivers act on points (pins), not on a body.
+    Slider rows, coordinate and distance drivers act on points (pins), not on a body (a
+    cylinder's force is a load at its two pins); a relative angle acts on two bodies at once
+    (:func:`motor_terms`).
     """
     out = np.full(model.n_rows, -1, dtype=np.intp)
     nd = len(model.dist_a)
@@ -142,7 +173,7 @@ def body_rows(model: Model) -> np.ndarray:
     out[nd:nd + 2 * len(model.loc_a)] = np.repeat(model.loc_link, 2)
     names = model.point_names
     with_rows = set(out[out >= 0].tolist())
-    for j in np.flatnonzero(model.drv_angle):
+    for j in np.flatnonzero(model.drv_kind == eq.ANGLE):
         ends = {names[model.drv_a[j]], names[model.drv_b[j]]}
         for li, link in enumerate(model.scene.links):
             if li in with_rows and ends <= set(link.points):

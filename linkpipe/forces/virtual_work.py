@@ -42,10 +42,12 @@ class Influence:
                 + np.einsum("sl,sld->sd", applied.couples, self.link_angles))
 
 
-def along_input_directions(model: Model, influence: Influence, forces: list, status, units: dict):
+def along_input_directions(model: Model, influence: Influence, forces: list, status, units: dict,
+                           X: np.ndarray):
     """Divide each driver's generalized forces by its input point's leverage ``n . dr_H/ds``
-    where the scene gives ``input``; a step where that leverage vanishes gets NO_LEVERAGE (and
-    NaN); any step not ok gets NaN. Returns (status, unit of the input force)."""
+    where the scene gives ``input`` (``n`` global, or turning with ``input.link``: positions X
+    (S, P, 2)); a step where that leverage vanishes gets NO_LEVERAGE (and NaN); any step not ok
+    gets NaN. Returns (status, unit of the input force)."""
     force_unit, length_unit = units["force"], units["length"]
     status = status.copy()
     unit_by_driver = []
@@ -53,10 +55,9 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
         if driver.input is None:
             unit_by_driver.append(f"{force_unit}*{length_unit}" if driver.kind == "angle" else force_unit)
             continue
-        n = np.asarray(driver.input.direction, dtype=float)
-        n = n / np.hypot(*n)
+        n = input_direction(model, driver.input, X)  # (S, 2)
         ip = model.point_names.index(driver.input.point)
-        leverage = influence.points[:, ip, 0, j] * n[0] + influence.points[:, ip, 1, j] * n[1]
+        leverage = influence.points[:, ip, 0, j] * n[:, 0] + influence.points[:, ip, 1, j] * n[:, 1]
         scale = model.size if driver.kind == "angle" else 1.0  # length/rad, or length/length
         flat = np.abs(leverage) < LEVERAGE_RTOL * scale
         status[flat & (status == OK)] = NO_LEVERAGE
@@ -67,3 +68,17 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
     for force in forces:
         force[status != OK] = np.nan
     return status, unit_by_driver[0] if len(set(unit_by_driver)) == 1 else "mixed"
+
+
+def input_direction(model: Model, driver_input, X: np.ndarray) -> np.ndarray:
+    """Return the unit direction (S, 2) an actuator pushes along at every step: the scene's
+    global direction, or with ``link`` its (u, v) in that link's frame (u from the link's first
+    point to its second, v a quarter turn counter-clockwise), turning with the link."""
+    n = np.asarray(driver_input.direction, dtype=float)
+    n = n / np.hypot(*n)
+    if driver_input.link is None:
+        return np.broadcast_to(n, (X.shape[0], 2))
+    li = [ln.name for ln in model.scene.links].index(driver_input.link)
+    d = X[:, model.link_b[li]] - X[:, model.link_a[li]]
+    e = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    return np.stack([n[0] * e[:, 0] - n[1] * e[:, 1], n[0] * e[:, 1] + n[1] * e[:, 0]], axis=1)

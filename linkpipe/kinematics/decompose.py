@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model import Model
+from ..model import equations as eq
 
 
 @dataclass
@@ -54,6 +55,9 @@ class Dyad:
     r1: float = 0.0
     c2: int = -1
     r2: float = 0.0
+    # a circle whose radius is a distance driver's value (a cylinder): its index, else -1
+    r1_driver: int = -1
+    r2_driver: int = -1
     line1: Line | None = None
     line2: Line | None = None
     sign: float = 1.0
@@ -65,10 +69,12 @@ class Dyad:
             return f"angle({tg} about {names[self.c]}, driver {self.driver})"
         if self.kind == "linear":
             return f"linear({tg} from {names[self.i]},{names[self.j]})"
+        r1 = f"r{self.r1:g}" if self.r1_driver < 0 else f"r=driver {self.r1_driver}"
+        r2 = f"r{self.r2:g}" if self.r2_driver < 0 else f"r=driver {self.r2_driver}"
         if self.kind == "circles":
-            return f"circles({tg}: {names[self.c1]} r{self.r1:g}, {names[self.c2]} r{self.r2:g})"
+            return f"circles({tg}: {names[self.c1]} {r1}, {names[self.c2]} {r2})"
         if self.kind == "circle_line":
-            return f"circle_line({tg}: {names[self.c1]} r{self.r1:g}, {self.line1.kind} line)"
+            return f"circle_line({tg}: {names[self.c1]} {r1}, {self.line1.kind} line)"
         return f"lines({tg})"
 
 
@@ -194,7 +200,7 @@ class _Placer:
         """Rule 2: an angle driver turns a body pinned at one known point."""
         model, progress = self.model, False
         for jd in range(model.n_drivers):
-            if self.used_driver[jd] or not model.drv_angle[jd]:
+            if self.used_driver[jd] or model.drv_kind[jd] != eq.ANGLE:
                 continue
             a, bpt = int(model.drv_a[jd]), int(model.drv_b[jd])
             for b in self.bodies:
@@ -229,12 +235,13 @@ class _Placer:
                 st = Dyad("lines", [p], line1=lines[0][0], line2=lines[1][0])
                 use = lines[:2]
             elif len(lines) == 1 and circles:
-                st = Dyad("circle_line", [p], c1=circles[0][0], r1=circles[0][1], line1=lines[0][0])
-                use = lines[:1]
+                (c1, r1, j1), = circles[:1]
+                st = Dyad("circle_line", [p], c1=c1, r1=r1, r1_driver=j1, line1=lines[0][0])
+                use = lines[:1] + [(None, "d", j1)] * (j1 >= 0)
             elif len(circles) >= 2:
-                st = Dyad("circles", [p], c1=circles[0][0], r1=circles[0][1], c2=circles[1][0],
-                          r2=circles[1][1])
-                use = []
+                (c1, r1, j1), (c2, r2, j2) = circles[:2]
+                st = Dyad("circles", [p], c1=c1, r1=r1, c2=c2, r2=r2, r1_driver=j1, r2_driver=j2)
+                use = [(None, "d", j) for j in (j1, j2) if j >= 0]
             else:
                 continue
             for _, kind, k in use:
@@ -244,8 +251,9 @@ class _Placer:
             return True
         return False
 
-    def _circles_of(self, p: int) -> list[tuple[int, float]]:
-        """(centre, radius) of each body through p pinned at one known point (distinct centres)."""
+    def _circles_of(self, p: int) -> list[tuple[int, float, int]]:
+        """(centre, radius, -1) of each body through p pinned at one known point, and (centre,
+        0.0, driver) of each unused distance driver from a known point to p (distinct centres)."""
         circles = []
         for b in self.bodies:
             if p in b.points:
@@ -253,8 +261,16 @@ class _Placer:
                 if len(kk) == 1:
                     c = b.points[kk[0]]
                     r = float(np.hypot(*(b.local[b.points.index(p)] - b.local[kk[0]])))
-                    if r > 0 and all(c != cc for cc, _ in circles):
-                        circles.append((c, r))
+                    if r > 0 and all(c != cc for cc, _, _ in circles):
+                        circles.append((c, r, -1))
+        model = self.model
+        for jd in np.flatnonzero(model.drv_kind == eq.DISTANCE):
+            ends = (int(model.drv_a[jd]), int(model.drv_b[jd]))
+            if self.used_driver[jd] or p not in ends:
+                continue
+            c = ends[1] if ends[0] == p else ends[0]
+            if self.known[c] and all(c != cc for cc, _, _ in circles):
+                circles.append((c, 0.0, int(jd)))
         return circles
 
     def _lines_of(self, p: int) -> list[tuple[Line, str, int]]:
@@ -267,7 +283,8 @@ class _Placer:
             if pp == p and not self.used_moving[k] and self.known[d] and self.known[e]:
                 lines.append((Line("moving", d=d, e=e), "m", k))
         for jd in range(model.n_drivers):
-            if not self.used_driver[jd] and not model.drv_angle[jd] and int(model.drv_a[jd]) == p:
+            if (not self.used_driver[jd] and model.drv_kind[jd] == eq.COORDINATE
+                    and int(model.drv_a[jd]) == p):
                 ax = int(model.drv_axis[jd])
                 lines.append((Line("coord", t=(0.0, 1.0) if ax == 0 else (1.0, 0.0), driver=jd,
                                    axis=ax), "d", jd))

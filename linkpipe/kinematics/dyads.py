@@ -183,11 +183,12 @@ def _position(st: Dyad, ch: _Chunk) -> None:
         return
     p = st.targets[0]
     if st.kind == "circles":
+        r1, r2 = _radius(st.r1, st.r1_driver, ch), _radius(st.r2, st.r2_driver, ch)
         c1x, c1y = px[st.c1], py[st.c1]
         dx, dy = px[st.c2] - c1x, py[st.c2] - c1y
         inv = 1.0 / (dx * dx + dy * dy)
-        k = 0.5 + (0.5 * (st.r1 * st.r1 - st.r2 * st.r2)) * inv
-        h = (st.r1 * st.r1) * inv - k * k
+        k = 0.5 + (0.5 * (r1 * r1 - r2 * r2)) * inv
+        h = (r1 * r1) * inv - k * k
         if ch.gap2 is not None:  # squared distance between the two roots: (2 h |d|)^2
             ch.gap2.append((p, 4.0 * h / inv))
         h = np.sqrt(h) if st.sign > 0 else -np.sqrt(h)
@@ -203,7 +204,8 @@ def _position(st: Dyad, ch: _Chunk) -> None:
         ox, oy, tx, ty = _line_geometry(st.line1, ch)
         # signed distance of the centre from the line along n = perp(t), then the half chord
         m = (cx - ox) * (-ty) + (cy - oy) * tx
-        h = st.r1 * st.r1 - m * m
+        r1 = _radius(st.r1, st.r1_driver, ch)
+        h = r1 * r1 - m * m
         if ch.gap2 is not None:  # squared distance between the two roots: (2 half-chord)^2
             ch.gap2.append((p, 4.0 * h))
         h = np.sqrt(h) if st.sign > 0 else -np.sqrt(h)
@@ -218,6 +220,22 @@ def _position(st: Dyad, ch: _Chunk) -> None:
     det = (-t1y) * t2x - t1x * (-t2y)
     px[p] = (b1 * t2x - b2 * t1x) / det
     py[p] = ((-t1y) * b2 - (-t2y) * b1) / det
+
+
+def _radius(r: float, driver: int, ch: _Chunk):
+    """A circle's radius: fixed, or a distance driver's value at each step of the chunk."""
+    return r if driver < 0 else ch.s[driver]
+
+
+def _plus_radius_rate(b, driver: int, ch: _Chunk, order: int):
+    """A distance row's right-hand side with a driven radius r = s: g . (v_p - v_c) = r r' and
+    g . (a_p - a_c) + |v_p - v_c|^2 = r r'' + r'^2 (b holds the rest)."""
+    if driver < 0:
+        return b
+    r, rd = ch.s[driver], ch.sd[driver]
+    if order == 1:
+        return b + r * rd
+    return b + (r * ch.sdd[driver] + rd * rd)
 
 
 def _line_geometry(line: Line, ch: _Chunk):
@@ -279,6 +297,8 @@ def _derivative(st: Dyad, ch: _Chunk, order: int) -> None:
         if order == 2:
             b1 = _minus_rel_speed2(b1, ch, p, st.c1)
             b2 = _minus_rel_speed2(b2, ch, p, st.c2)
+        b1 = _plus_radius_rate(b1, st.r1_driver, ch, order)
+        b2 = _plus_radius_rate(b2, st.r2_driver, ch, order)
         ox[p] = _cramer(b1, g2y, b2, g1y, idet)
         oy[p] = _cramer(b2, g1x, b1, g2x, idet)
         return
@@ -288,6 +308,7 @@ def _derivative(st: Dyad, ch: _Chunk, order: int) -> None:
         b = _dot(gx, gy, ox[c], oy[c])
         if order == 2:
             b = _minus_rel_speed2(b, ch, p, c)
+        b = _plus_radius_rate(b, st.r1_driver, ch, order)
         (g1x, g1y, b1), (g2x, g2y, b2) = (gx, gy, b), _rows_line(st.line1, px[p], py[p], ch, order)
     else:  # lines
         (g1x, g1y, b1), (g2x, g2y, b2) = (_rows_line(st.line1, px[p], py[p], ch, order),

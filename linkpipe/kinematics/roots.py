@@ -248,16 +248,20 @@ def aim_drivers(model: Model, q: np.ndarray, s_row: np.ndarray) -> np.ndarray:
         if model.fixed[b] or not np.all(np.isfinite(X[[a, b]])):
             continue
         L = np.hypot(*(X[b] - X[a]))
-        X[b] = X[a] + L * np.array([np.cos(s_row[j]), np.sin(s_row[j])])
+        direction = np.array([np.cos(s_row[j]), np.sin(s_row[j])])
+        if model.drv_c[j] >= 0:  # relative: turned from the reference vector's direction
+            r = X[model.drv_d[j]] - X[model.drv_c[j]]
+            if not np.all(np.isfinite(r)) or not np.hypot(*r) > 0:
+                continue
+            r = r / np.hypot(*r)
+            direction = np.array([direction[0] * r[0] - direction[1] * r[1],
+                                  direction[1] * r[0] + direction[0] * r[1]])
+        X[b] = X[a] + L * direction
     return model.q_of(X[None])[0]
 
 
 def drivers_aligned(model: Model, q: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Return (S,) True where every angle driver's vector points along (not against) its angle."""
-    ang = model.drv_angle
-    if not ang.any():
+    if not model.drv_angle.any():
         return np.ones(q.shape[0], dtype=bool)
-    X = model.positions(q)
-    d = X[:, model.drv_b[ang]] - X[:, model.drv_a[ang]]
-    dot = d[..., 0] * np.cos(s[:, ang]) + d[..., 1] * np.sin(s[:, ang])
-    return (dot > 0).all(axis=1)
+    return model.aligned(model.positions(q), s)

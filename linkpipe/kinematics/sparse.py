@@ -32,19 +32,32 @@ class Engine:
         m, n = model.n_rows, model.n_q
         if m != n or n == 0:
             raise EngineUnavailable("the Jacobian is not square (redundant constraints, or fewer rows than unknowns)")
-        self.angle = np.flatnonzero(model.drv_angle)
+        self.angle = np.flatnonzero(model.drv_kind == eq.ANGLE)  # cos, sin among the features
+        self.trig_drivers = np.flatnonzero(model.drv_angle)  # every driver whose value is an angle
+        # relative angle rows are bilinear in (cos s, sin s) and q: their entries are evaluated
+        # from the equations at every step (the driver's few terms), not read off features
+        self.relative = np.flatnonzero(model.drv_kind == eq.RELATIVE)
         na = len(self.angle)
         self.n_features = 1 + n + 2 * na
         C = self._coefficients()  # (n_features, m, n)
         nz = np.abs(C).max(axis=0) > 0
+        for j in self.relative:
+            r = model.n_constraints + j
+            C[:, r] = 0.0
+            nz[r] = False
+            kind, a, b, axis, c, d, L = model.rows.drivers[j]
+            for p in (a, b, c, d):
+                if not model.fixed[p]:
+                    k = int(np.searchsorted(model.moving, p))
+                    nz[r, 2 * k:2 * k + 2] = True
         self.rows, self.cols = np.nonzero(nz)  # entries, row-major
         self.C = np.ascontiguousarray(C[:, self.rows, self.cols])  # (n_features, nnz)
         self.CT = np.ascontiguousarray(self.C.T)
         self._terms = [(float(col[0]), [(int(f), float(col[f])) for f in np.flatnonzero(col) if f > 0])
                        for col in self.C.T]  # per entry: constant, [(feature, coefficient)]
-        self._check()
         self._rows_setup()
         self._blocks()
+        self._check()
 
     # ------------------------------------------------------------------ the affine map
     def _jac(self, q, s):
@@ -172,7 +185,7 @@ class Engine:
     def _trig(self, sT, trig=None):
         """Return the drivers' cos and sin (lists by driver; None for coordinate drivers)."""
         cos_s, sin_s = [None] * len(sT), [None] * len(sT)
-        for j in self.angle:
+        for j in self.trig_drivers:
             cos_s[j], sin_s[j] = trig[j] if trig and j in trig else (np.cos(sT[j]), np.sin(sT[j]))
         return cos_s, sin_s
 
@@ -186,7 +199,8 @@ class Engine:
         md = self.model
         out = np.empty((md.n_drivers, X2.shape[2]))
         cos_s, sin_s = self._trig(sT)
-        for j, row in enumerate(eq.phi_s_rows(md.rows, lambda p: (X2[p, 0], X2[p, 1]), cos_s, sin_s)):
+        for j, row in enumerate(eq.phi_s_rows(md.rows, lambda p: (X2[p, 0], X2[p, 1]), sT, cos_s,
+                                              sin_s)):
             out[j] = row
         return out
 
@@ -204,10 +218,12 @@ class Engine:
             feats += list(np.cos(th)) + list(np.sin(th))
         E = np.empty((len(self.rows), S))
         tmp = np.empty(S)
+        self._relative_entries(E, qT, sT)
         for e, (c0, terms) in enumerate(self._terms):
             row = E[e]
             if not terms:
-                row.fill(c0)
+                if e not in self._direct:
+                    row.fill(c0)
                 continue
             f, c = terms[0]
             np.multiply(feats[f], c, out=row)
@@ -217,6 +233,27 @@ class Engine:
                 np.multiply(feats[f], c, out=tmp)
                 row += tmp
         return E
+
+    def _relative_entries(self, E: np.ndarray, qT: np.ndarray, sT: np.ndarray) -> None:
+        """Fill the entries of the relative angle rows from :mod:`linkpipe.model.equations`."""
+        if not len(self.relative):
+            return
+        md, fx = self.model, self._fixed_xy
+        X2 = qT.reshape(-1, 2, qT.shape[1])
+        slot = {int(p): k for k, p in enumerate(md.moving)}
+
+        def xy(p):
+            return fx[p] if p in fx else (X2[slot[p], 0], X2[slot[p], 1])
+
+        for j in self.relative:
+            r = md.n_constraints + j
+            c, sn = np.cos(sT[j]), np.sin(sT[j])
+            for e in self._relative_slots[j]:
+                E[e] = 0.0
+            for _, p, gx, gy in eq.driver_jacobian_terms(md.rows.drivers[j], r, xy, c, sn):
+                if p in slot:
+                    E[self.entry_of[(r, 2 * slot[p])]] += gx
+                    E[self.entry_of[(r, 2 * slot[p] + 1)]] += gy
 
     # ------------------------------------------------------------------ block-triangular order
     def _blocks(self):
@@ -252,6 +289,9 @@ class Engine:
                       if int(self.cols[e]) not in cols] for r in rows]
             self.blocks.append((rows, cols, inner, outer))
         self.col_entries = [np.flatnonzero(self.cols == c) for c in range(m)]
+        self._relative_slots = {j: [e for e in np.flatnonzero(self.rows == self.model.n_constraints + j)]
+                                for j in self.relative}
+        self._direct = {int(e) for slots in self._relative_slots.values() for e in slots}
 
     # ------------------------------------------------------------------ solves
     def solve(self, E: np.ndarray, b) -> list:

@@ -29,8 +29,6 @@ class _Step:
         self.col = [-1] * (2 * md.n_points)  # point coordinate -> column of q (-1: fixed)
         for k, pc in enumerate(self.qpos):
             self.col[pc] = k
-        self.drv = [(bool(md.drv_angle[j]), 2 * int(md.drv_a[j]), 2 * int(md.drv_b[j]),
-                     int(md.drv_axis[j])) for j in range(md.n_drivers)]
         self.angle = np.flatnonzero(md.drv_angle)
 
     def _xy(self, q):
@@ -66,17 +64,13 @@ class _Step:
         """:func:`drivers_aligned` at one step."""
         if not len(self.angle):
             return True
-        X = self.points(q)
         cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
-        for j, (ang, a, b, _) in enumerate(self.drv):
-            if ang and not (X[b] - X[a]) * cs[j] + (X[b + 1] - X[a + 1]) * sn[j] > 0:
-                return False
-        return True
+        return all(value > 0 for _, value in eq.alignment_rows(self.rows, self._xy(q), cs, sn))
 
     def phi_s(self, q: np.ndarray, s: np.ndarray) -> list:
         """:meth:`Model.phi_s` at one step, as a list (nd,)."""
         cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
-        return list(eq.phi_s_rows(self.rows, self._xy(q), cs, sn))
+        return list(eq.phi_s_rows(self.rows, self._xy(q), s.tolist(), cs, sn))
 
     def fd_jac(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Return Phi_q (m, n) by central differences (step cbrt(eps) x the size): the

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
+from ..model import equations as eq
 from .continuation import solve_positions
 from .linalg import POLISH_FROM, is_singular
 from .sparse import _rows, engine
@@ -177,12 +178,11 @@ def _colmax(a: np.ndarray) -> np.ndarray:
 
 def _aligned(eng, qT, sT):
     """kinematics.drivers_aligned on SoA arrays: every angle driver's vector along its angle."""
-    md = eng.model
     X2 = eng.points(qT)
     ok = np.ones(qT.shape[1], dtype=bool)
-    for j in np.flatnonzero(md.drv_angle):
-        d = X2[md.drv_b[j]] - X2[md.drv_a[j]]
-        ok &= d[0] * np.cos(sT[j]) + d[1] * np.sin(sT[j]) > 0
+    cos_s, sin_s = eng._trig(sT)
+    for _, value in eq.alignment_rows(eng.model.rows, lambda p: (X2[p, 0], X2[p, 1]), cos_s, sin_s):
+        ok &= value > 0
     return ok
 
 

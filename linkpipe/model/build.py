@@ -53,10 +53,14 @@ class Model:
     smov_e: np.ndarray
     smov_len: np.ndarray
     # drivers
-    drv_angle: np.ndarray  # (n_drivers,) bool
-    drv_a: np.ndarray  # angle: tail point; coordinate: the point
-    drv_b: np.ndarray  # angle: head point; coordinate: -1
-    drv_axis: np.ndarray  # coordinate: 0/1; angle: -1
+    drv_kind: np.ndarray  # (n_drivers,) equations.COORDINATE / ANGLE / DISTANCE / RELATIVE
+    drv_angle: np.ndarray  # (n_drivers,) bool: the value is an angle (absolute or relative)
+    drv_a: np.ndarray  # angle, distance: tail point; coordinate: the point
+    drv_b: np.ndarray  # angle, distance: head point; coordinate: -1
+    drv_axis: np.ndarray  # coordinate: 0/1; else -1
+    drv_c: np.ndarray  # relative angle: the reference vector's tail; else -1
+    drv_d: np.ndarray  # relative angle: the reference vector's head; else -1
+    drv_len: np.ndarray  # distance: its largest length; relative: |d - c| at the start; else 0
     # link frames (every link, ground links included) for link angles
     link_a: np.ndarray
     link_b: np.ndarray
@@ -158,7 +162,7 @@ class Model:
         """Return dPhi_driver/ds ``(S, n_drivers)`` (each driver row depends on its own value)."""
         xy, cos_s, sin_s = _stacked(X, s)
         out = np.empty((X.shape[0], self.n_drivers))
-        for j, row in enumerate(eq.phi_s_rows(self.rows, xy, cos_s, sin_s)):
+        for j, row in enumerate(eq.phi_s_rows(self.rows, xy, s.T, cos_s, sin_s)):
             out[:, j] = row
         return out
 
@@ -167,24 +171,42 @@ class Model:
         xy, cos_s, sin_s = _stacked(X, s)
         vxy, _, _ = _stacked(V, s[:, :0])
         out = np.empty((X.shape[0], self.n_rows))
-        rows = eq.gamma_rows(self.rows, xy, vxy, s_dot.T, s_ddot.T, cos_s, sin_s)
+        rows = eq.gamma_rows(self.rows, xy, vxy, s.T, s_dot.T, s_ddot.T, cos_s, sin_s)
         for r, row in enumerate(rows):
             out[:, r] = row
         return out
 
     def driver_values_at(self, X: np.ndarray) -> np.ndarray:
         """Return the driver values ``(S, n_drivers)`` that positions ``X`` (S, n_points, 2) show,
-        in internal units: an angle driver's direction in radians (in (-pi, pi]), a coordinate
-        driver's coordinate."""
+        in internal units: an angle driver's direction in radians (in (-pi, pi]; a relative one's
+        from its reference vector), a coordinate driver's coordinate, a distance driver's
+        distance."""
         out = np.empty((X.shape[0], self.n_drivers))
         for j in range(self.n_drivers):
             a = X[:, self.drv_a[j]]
-            if self.drv_angle[j]:
-                d = X[:, self.drv_b[j]] - a
-                out[:, j] = np.arctan2(d[:, 1], d[:, 0])
-            else:
+            kind = self.drv_kind[j]
+            if kind == eq.COORDINATE:
                 out[:, j] = a[:, self.drv_axis[j]]
+                continue
+            d = X[:, self.drv_b[j]] - a
+            if kind == eq.ANGLE:
+                out[:, j] = np.arctan2(d[:, 1], d[:, 0])
+            elif kind == eq.DISTANCE:
+                out[:, j] = np.hypot(d[:, 0], d[:, 1])
+            else:
+                r = X[:, self.drv_d[j]] - X[:, self.drv_c[j]]
+                out[:, j] = np.arctan2(r[:, 0] * d[:, 1] - r[:, 1] * d[:, 0],
+                                       r[:, 0] * d[:, 0] + r[:, 1] * d[:, 1])
         return out
+
+    def aligned(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return (S,) True where every angle driver's vector points along (not against) the
+        direction its value asks for (:func:`equations.alignment_rows`)."""
+        xy, cos_s, sin_s = _stacked(X, s)
+        ok = np.ones(X.shape[0], dtype=bool)
+        for _, value in eq.alignment_rows(self.rows, xy, cos_s, sin_s):
+            ok &= value > 0
+        return ok
 
     def link_angles(self, X: np.ndarray) -> np.ndarray:
         """Return each link's direction (first to second point) in radians ``(S, n_links)``."""
@@ -221,7 +243,7 @@ def build_model(scene: Scene) -> Model:
 
     dist, loc = _link_rows(scene, index, X0, fixed)
     sfix_p, sfix_c, sfix_n, smov = _slider_rows(scene, index, X0)
-    drv_angle, drv_a, drv_b, drv_axis = _driver_rows(scene, index)
+    drivers = _driver_rows(scene, index, X0)
     arrays = dict(
         dist_a=ints(dist["a"]), dist_b=ints(dist["b"]), dist_len=flts(dist["len"]),
         loc_a=ints(loc["a"]), loc_b=ints(loc["b"]), loc_p=ints(loc["p"]),
@@ -229,8 +251,10 @@ def build_model(scene: Scene) -> Model:
         sfix_p=ints(sfix_p), sfix_c=flts(sfix_c, (-1, 2)), sfix_n=flts(sfix_n, (-1, 2)),
         smov_p=ints(smov["p"]), smov_d=ints(smov["d"]), smov_e=ints(smov["e"]),
         smov_len=flts(smov["len"]),
-        drv_angle=np.array(drv_angle, dtype=bool), drv_a=ints(drv_a), drv_b=ints(drv_b),
-        drv_axis=ints(drv_axis))
+        drv_kind=ints(drivers["kind"]), drv_a=ints(drivers["a"]), drv_b=ints(drivers["b"]),
+        drv_axis=ints(drivers["axis"]), drv_c=ints(drivers["c"]), drv_d=ints(drivers["d"]),
+        drv_len=flts(drivers["len"]))
+    arrays["drv_angle"] = np.isin(arrays["drv_kind"], (eq.ANGLE, eq.RELATIVE))
     ia = np.array([index[l.points[0]] for l in scene.links], dtype=np.intp)
     ib = np.array([index[l.points[1]] for l in scene.links], dtype=np.intp)
     return Model(
@@ -309,16 +333,30 @@ def _slider_rows(scene: Scene, index: dict, X0: np.ndarray):
     return sfix_p, sfix_c, sfix_n, smov
 
 
-def _driver_rows(scene: Scene, index: dict):
-    """Per driver: whether it drives an angle, its (tail) point, head point (-1) and axis (-1)."""
-    drv_angle, drv_a, drv_b, drv_axis = [], [], [], []
+def _driver_rows(scene: Scene, index: dict, X0: np.ndarray) -> dict:
+    """Per driver (dict of lists): its kind, (tail) point, head point, axis, the reference
+    vector's points of a relative angle and the row's length scale (-1 / 0.0 where unused)."""
+    out = {k: [] for k in ("kind", "a", "b", "axis", "c", "d", "len")}
     for dr in scene.drivers:
-        angle = dr.kind == "angle"
-        drv_angle.append(angle)
-        drv_a.append(index[dr.points[0]])
-        drv_b.append(index[dr.points[1]] if angle else -1)
-        drv_axis.append(-1 if angle else int(dr.axis))
-    return drv_angle, drv_a, drv_b, drv_axis
+        kind = eq.KIND_OF[dr.kind]
+        c = d = -1
+        scale = 0.0
+        if dr.relative_to is not None:
+            kind = eq.RELATIVE
+            c, d = index[dr.relative_to[0]], index[dr.relative_to[1]]
+            scale = float(np.hypot(*(X0[d] - X0[c])))
+            if not scale > 0:
+                raise SceneError(scene.path, f'drivers "{dr.name}"', "relative_to",
+                                 f'"{dr.relative_to[0]}" and "{dr.relative_to[1]}" are drawn at '
+                                 "the same place: they give no direction to measure from",
+                                 "name two distinct points of the reference link")
+        elif kind == eq.DISTANCE:
+            scale = max(abs(dr.from_value), abs(dr.to_value))
+        values = (kind, index[dr.points[0]], index[dr.points[1]] if len(dr.points) > 1 else -1,
+                  -1 if dr.axis is None else int(dr.axis), c, d, scale)
+        for key, val in zip(out, values):
+            out[key].append(val)
+    return out
 
 
 def driver_values(scene: Scene) -> np.ndarray:

@@ -44,9 +44,10 @@ KEYS: dict[str, dict[str, str]] = {
                 "along": "{ through = [0.0, 0.0], direction = [0.0, 1.0] }"},
     "sliders.along": {"through": "[0.0, 0.0]", "direction": "[0.0, 1.0]"},
     "drivers": {"name": '"crank"', "angle": '["O2", "A"]', "coordinate": '"P.y"',
+                "distance": '["C1", "C2"]', "relative_to": '["B", "A"]',
                 "from": "0.0", "to": "360.0", "steps": "361", "step": "1.0", "rate": "0.0",
                 "acceleration": "0.0", "input": '{ point = "H", direction = [0.0, 1.0] }'},
-    "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]"},
+    "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]", "link": '"handle"'},
     "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
                "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
                "singular_rcond": "1e-6"},
@@ -257,6 +258,18 @@ class _Table:
         if not isinstance(self.data[key], dict):
             raise self.wrong_type(key, "a table")
         return _Table(self.path, f"{self.label}.{key}", self.data[key], f"{self.kind}.{key}")
+
+    def exactly_one(self, keys: tuple[str, ...]) -> str:
+        """Which one of several exclusive keys is given; raise when none or more than one is."""
+        given = [k for k in keys if self.has(k)]
+        listed = ", ".join(keys[:-1]) + f" or {keys[-1]}"
+        if len(given) > 1:
+            raise self.error(given[1], f"give one of {listed}, not both {' and '.join(given)}",
+                             f"keep one of {' or '.join(self.example(k) for k in given)}")
+        if not given:
+            raise self.error(keys[0], f"missing: give {listed}",
+                             "add " + " or ".join(self.example(k) for k in keys))
+        return given[0]
 
     def one_of(self, first: str, second: str) -> str:
         """Which of two exclusive keys is given; raise when neither or both are."""

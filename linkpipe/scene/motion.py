@@ -37,45 +37,109 @@ class MotionTables:
         return tuple(drivers)
 
     def driver(self, table: _Table) -> Driver:
-        if table.one_of("angle", "coordinate") == "angle":
-            kind, axis = "angle", None
-            points = table.strings("angle", what="point")
-            if len(points) != 2:
-                raise table.error("angle", f"expected two point names, got {len(points)}",
-                                  f"write e.g. {table.example('angle')}")
-            for name in points:
-                self.point(table, "angle", name)
-            if all(self.points[p].fixed for p in points):
-                raise table.error("angle", f'"{points[0]}" and "{points[1]}" are both fixed: '
-                                  "their direction cannot be driven",
-                                  "drive the direction from a point to a moving point")
+        kind = table.exactly_one(("angle", "coordinate", "distance"))
+        relative_to = bodies = None
+        axis = None
+        if kind == "coordinate":
+            points, axis = self.driven_coordinate(table)
         else:
-            kind = "coordinate"
-            text = table.string("coordinate")
-            name, dot, axis_name = text.rpartition(".")
-            if not dot or axis_name not in ("x", "y"):
-                raise table.error("coordinate", f"{_show(text)} is not a point coordinate",
-                                  'write "<point>.x" or "<point>.y", e.g. coordinate = "P.y"')
-            self.point(table, "coordinate", name)
-            if self.points[name].fixed:
-                raise table.error("coordinate", f'point "{name}" is fixed: its coordinate '
-                                  "cannot be driven", "drive a moving point")
-            points, axis = (name,), "xy".index(axis_name)
+            points = self.point_pair(table, kind)
+        if table.has("relative_to"):
+            if kind != "angle":
+                raise table.error("relative_to", f"relative_to belongs to an angle driver, not "
+                                  f"a {kind} driver", "remove relative_to, or drive an angle")
+            relative_to = self.point_pair(table, "relative_to")
+            bodies = self.motor_bodies(table, points, relative_to)
+        elif kind == "angle" and all(self.points[p].fixed for p in points):
+            raise table.error("angle", f'"{points[0]}" and "{points[1]}" are both fixed: '
+                              "their direction cannot be driven",
+                              "drive the direction from a point to a moving point")
         start, stop = table.number("from"), table.number("to")
+        if kind == "distance":
+            self.check_distance_driver(table, points, start, stop)
         steps, step = self.driver_steps(table, start, stop)
-        driver_input = None
-        if table.has("input"):
-            sub = table.sub("input")
-            driver_input = Input(self.point(sub, "point", sub.string("point")),
-                                 sub.pair("direction", nonzero=True))
-            if self.points[driver_input.point].fixed:
-                raise sub.error("point", f'point "{driver_input.point}" is fixed: it never moves, '
-                                "so an actuator there does no work (every step would be "
-                                "no_leverage)", "name the moving point the actuator pushes")
         return Driver(table.data["name"], kind, tuple(points), axis, start, stop, steps, step,
                       rate=table.number("rate", 0.0),
-                      acceleration=table.number("acceleration", 0.0), input=driver_input)
+                      acceleration=table.number("acceleration", 0.0),
+                      input=self.driver_input(table), relative_to=relative_to, bodies=bodies)
 
+    def driven_coordinate(self, table: _Table) -> tuple[tuple[str], int]:
+        text = table.string("coordinate")
+        name, dot, axis_name = text.rpartition(".")
+        if not dot or axis_name not in ("x", "y"):
+            raise table.error("coordinate", f"{_show(text)} is not a point coordinate",
+                              'write "<point>.x" or "<point>.y", e.g. coordinate = "P.y"')
+        self.point(table, "coordinate", name)
+        if self.points[name].fixed:
+            raise table.error("coordinate", f'point "{name}" is fixed: its coordinate '
+                              "cannot be driven", "drive a moving point")
+        return (name,), "xy".index(axis_name)
+
+    def point_pair(self, table: _Table, key: str) -> tuple[str, str]:
+        points = table.strings(key, what="point")
+        if len(points) != 2:
+            raise table.error(key, f"expected two point names, got {len(points)}",
+                              f"write e.g. {table.example(key)}")
+        for name in points:
+            self.point(table, key, name)
+        return tuple(points)
+
+    def body_of(self, pair) -> str | None:
+        """The link carrying both points of ``pair`` ("ground" when both are fixed), or None."""
+        carrying = [ln.name for ln in self.links.values() if set(pair) <= set(ln.points)]
+        moving = [n for n in carrying if not all(self.points[p].fixed for p in self.links[n].points)]
+        if all(self.points[p].fixed for p in pair):
+            return "ground"
+        return (moving or carrying or [None])[0]
+
+    def motor_bodies(self, table: _Table, points, relative_to) -> tuple[str, str]:
+        """The links a motor between links turns against each other: (driven, reference)."""
+        first, second = self.body_of(points), self.body_of(relative_to)
+        for key, pair, body in (("angle", points, first), ("relative_to", relative_to, second)):
+            if body is None:
+                raise table.error(key, f'no link carries both "{pair[0]}" and "{pair[1]}": a '
+                                  "motor between links turns one link against another",
+                                  "name two points of one link (or two fixed points for ground)")
+        if first == second:
+            raise table.error("relative_to", f'"{relative_to[0]}" and "{relative_to[1]}" lie on '
+                              f'link "{first}" like the driven points: a link\'s angle against '
+                              "itself cannot change", "measure against a point pair of the "
+                              "other link the motor turns against")
+        return first, second
+
+    def check_distance_driver(self, table: _Table, points, start: float, stop: float) -> None:
+        """A linear actuator joins two bodies and has a positive length at every step."""
+        a, b = points
+        if a == b:
+            raise table.error("distance", f'"{a}" is named twice: a cylinder joins two points',
+                              f"write e.g. {table.example('distance')}")
+        if all(self.points[p].fixed for p in points):
+            raise table.error("distance", f'"{a}" and "{b}" are both fixed: their distance '
+                              "cannot be driven", "attach the cylinder to a moving point")
+        body = next((ln.name for ln in self.links.values() if set(points) <= set(ln.points)), None)
+        if body is not None:
+            raise table.error("distance", f'"{a}" and "{b}" are both points of link "{body}": '
+                              "their distance is fixed by the link",
+                              "attach the cylinder's ends to two different bodies")
+        for key, value in (("from", start), ("to", stop)):
+            if not value > 0:
+                raise table.error(key, f"{key} = {value:g}: a cylinder's length must be positive",
+                                  "give the pin-to-pin length, e.g. from = 1.2, to = 1.65")
+
+    def driver_input(self, table: _Table):
+        if not table.has("input"):
+            return None
+        sub = table.sub("input")
+        link = None
+        if sub.has("link"):
+            link = self.link(sub, "link", sub.string("link")).name
+        driver_input = Input(self.point(sub, "point", sub.string("point")),
+                             sub.pair("direction", nonzero=True), link)
+        if self.points[driver_input.point].fixed:
+            raise sub.error("point", f'point "{driver_input.point}" is fixed: it never moves, '
+                            "so an actuator there does no work (every step would be "
+                            "no_leverage)", "name the moving point the actuator pushes")
+        return driver_input
 
     @staticmethod
     def driver_steps(table: _Table, start: float, stop: float) -> tuple[int, float | None]:

@@ -53,16 +53,23 @@ class Slider:
 
 @dataclass(frozen=True)
 class Input:
+    """Where the actuator pushes: a moving point and a direction, global or, with ``link``, in
+    that link's frame (u along its first two points, v to their left), turning with it."""
+
     point: str
     direction: tuple[float, float]
+    link: str | None = None
 
 
 @dataclass(frozen=True)
 class Driver:
     """One driven coordinate.
 
-    ``kind`` is ``"angle"`` (``points`` = (a, b): direction of a->b, degrees from +x, CCW) or
-    ``"coordinate"`` (``points`` = (p,), ``axis`` 0 for x, 1 for y). ``steps`` is the resolved
+    ``kind`` is ``"angle"`` (``points`` = (a, b): direction of a->b, degrees from +x, CCW; with
+    ``relative_to`` = (c, d): measured CCW from the direction of c->d instead), ``"distance"``
+    (``points`` = (a, b): their distance, a linear actuator) or ``"coordinate"`` (``points`` =
+    (p,), ``axis`` 0 for x, 1 for y). ``bodies``: for a relative angle, the links carrying
+    the two vectors (the second may be ``"ground"``). ``steps`` is the resolved
     number of steps; ``step`` is the step size when the scene gave ``step`` (values are then
     ``from + i*step``), else None (values ``from + i*(to-from)/(steps-1)``).
     ``rate`` and ``acceleration`` in driver units per s and s^2 (degrees for angles).
@@ -79,6 +86,13 @@ class Driver:
     rate: float = 0.0
     acceleration: float = 0.0
     input: Input | None = None
+    relative_to: tuple[str, str] | None = None
+    bodies: tuple[str, str] | None = None
+
+    @property
+    def is_angle(self) -> bool:
+        """Whether the driven value is an angle (degrees in the file, radians inside)."""
+        return self.kind == "angle"
 
 
 #: Choices of the [solver] knobs that trade accuracy for speed (first = default).
