@@ -2,7 +2,9 @@
 
 Four-bar: Norton, Design of Machinery, eqs. 4.10 (position), 6.18 (velocity), 7.12
 (acceleration), with ground O2 at the origin and O4 at (d, 0). Slider-crank with offset e:
-x_B = a cos(t) + sqrt(b^2 - (a sin(t) - e)^2), differentiated by hand.
+x_B = a cos(t) + sqrt(b^2 - (a sin(t) - e)^2), differentiated by hand. Cylinder-driven rocker
+(a body pinned at O, a linear actuator of length s from a fixed pin C to its pin P): the law of
+cosines s^2 = rp^2 + rc^2 - 2 rp rc cos(beta), differentiated by hand.
 All functions take arrays of crank angles (rad) and return arrays, step axis first.
 
 :func:`detect` recognises these mechanisms in a scene *structurally* (links, fixed pivots,
@@ -18,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["fourbar", "slider_crank", "ClosedForm", "detect", "evaluate"]
+__all__ = ["fourbar", "slider_crank", "cylinder_rocker", "ClosedForm", "detect", "evaluate"]
 
 
 def _nan_quietly(fn):
@@ -106,13 +108,30 @@ def slider_crank(a, b, e, theta, omega, alpha, branch=+1):
     return dict(A=A, B=B, VA=VA, VB=VB, AA=AA, AB=AB)
 
 
+@_nan_quietly
+def cylinder_rocker(rp, rc, s, s_dot, s_ddot, branch=+1):
+    """Return the angle (from O->C to O->P, signed by ``branch``), its rate and its acceleration
+    (S,) of a body pinned at O whose pin P (rp from O) is pushed by a cylinder of length s from
+    the fixed pin C (rc from O); out of reach: NaN."""
+    s = np.asarray(s, float)
+    k = 1.0 / (rp * rc)
+    cos_b = (rp * rp + rc * rc - s * s) * (0.5 * k)
+    sin_b = np.sqrt(1.0 - cos_b * cos_b)
+    beta = np.arccos(cos_b)
+    d1 = s * k / sin_b  # d beta / ds
+    d2 = k / sin_b - s * s * k * k * cos_b / sin_b ** 3  # d2 beta / ds2
+    return branch * beta, branch * d1 * s_dot, branch * (d2 * s_dot * s_dot + d1 * s_ddot)
+
+
 # ------------------------------------------------------------------ scenes with a closed form
 @dataclass(frozen=True)
 class ClosedForm:
     """A scene recognised as a textbook mechanism, in the canonical frame of the formulas.
 
-    ``kind`` "fourbar" or "slider_crank". ``joints`` maps the formula's roles to point indices
-    (fourbar: O2, A, B, O4; slider_crank: O, A, B). ``origin`` and ``angle`` place the canonical
+    ``kind`` "fourbar", "slider_crank" or "cylinder_rocker". ``joints`` maps the formula's
+    roles to point indices (fourbar: O2, A, B, O4; slider_crank: O, A, B; cylinder_rocker: O,
+    C, P and ``body``, every point of the rocker; its ``angle`` is that of O->C, ``flip`` the
+    drawn angle of O->P, ``lengths`` (rp, rc)). ``origin`` and ``angle`` place the canonical
     frame (crank pivot at the origin, x axis towards O4 / along the guide) in the scene.
     ``lengths``: a, b, c, d (fourbar) or a, b, e (slider-crank). ``flip``: pi when the driver's
     vector points from the crank's joint to its pivot. ``branch``: the assembly of the start
@@ -132,6 +151,8 @@ class ClosedForm:
     def description(self) -> str:
         if self.kind == "fourbar":
             return "closed form (four-bar, Norton 4.10/6.18/7.12)"
+        if self.kind == "cylinder_rocker":
+            return "closed form (cylinder-driven rocker, law of cosines)"
         return "closed form (offset slider-crank)"
 
 
@@ -175,7 +196,11 @@ def detect(scene, start: np.ndarray | None = None) -> ClosedForm | None:
     their local coordinates). ``start`` (n_points, 2): an assembled configuration that picks the
     branch (default: the scene's start as written).
     """
+    if len(scene.drivers) == 1 and scene.drivers[0].kind == "distance":
+        return _detect_cylinder_rocker(scene, start)
     if len(scene.drivers) != 1 or scene.drivers[0].kind != "angle":
+        return None
+    if scene.drivers[0].relative_to is not None:
         return None
     index, X0, fixed, frames, further = _frames(scene)
     X = X0 if start is None else np.asarray(start, dtype=float)
@@ -235,6 +260,50 @@ def detect(scene, start: np.ndarray | None = None) -> ClosedForm | None:
     return None
 
 
+def _detect_cylinder_rocker(scene, start) -> ClosedForm | None:
+    """One link pinned at one fixed point O, every moving point on it, no sliders, one distance
+    driver from a fixed pin C to a point P of the link."""
+    index, X0, fixed, frames, further = _frames(scene)
+    X = X0 if start is None else np.asarray(start, dtype=float)
+    moving_links = [l for l in scene.links if not all(fixed[index[p]] for p in l.points)]
+    if len(moving_links) != 1 or scene.sliders:
+        return None
+    body = [index[p] for p in moving_links[0].points]
+    pivots = [i for i in body if fixed[i]]
+    a, b = (index[p] for p in scene.drivers[0].points)
+    C, P = (a, b) if fixed[a] else (b, a)
+    if (len(pivots) != 1 or not fixed[C] or fixed[P] or P not in body
+            or any(not fixed[i] and i not in body for i in range(len(X0)))):
+        return None
+    O = pivots[0]
+    branch = 1 if _cross(X[C] - X[O], X[P] - X[O]) > 0 else -1
+    rp, rc = float(np.hypot(*(X0[P] - X0[O]))), float(np.hypot(*(X0[C] - X0[O])))
+    angle = float(np.arctan2(*(X0[C] - X0[O])[::-1]))
+    drawn_p = float(np.arctan2(*(X0[P] - X0[O])[::-1]))
+    return ClosedForm("cylinder_rocker", dict(O=O, C=C, P=P, body=tuple(body)), X0[O].copy(),
+                      angle, (rp, rc), drawn_p, branch, ())
+
+
+def _evaluate_cylinder_rocker(form: ClosedForm, X0, s, w, al):
+    """Every point of the rocker turned rigidly about O from its drawing (S, P, 2) x 3."""
+    rp, rc = form.lengths
+    beta, beta_d, beta_dd = cylinder_rocker(rp, rc, s, w, al, form.branch)
+    turn = form.angle + beta - form.flip  # the body's rotation from the drawing
+    S = len(s)
+    X = np.broadcast_to(X0, (S,) + X0.shape).copy()
+    V, A = np.zeros_like(X), np.zeros_like(X)
+    c, sn = np.cos(turn), np.sin(turn)
+    for i in form.joints["body"]:
+        if i == form.joints["O"]:
+            continue
+        r0 = X0[i] - form.origin
+        rx, ry = c * r0[0] - sn * r0[1], sn * r0[0] + c * r0[1]
+        X[:, i] = form.origin + np.stack([rx, ry], -1)
+        V[:, i] = np.stack([-beta_d * ry, beta_d * rx], -1)
+        A[:, i] = np.stack([-beta_dd * ry - beta_d ** 2 * rx, beta_dd * rx - beta_d ** 2 * ry], -1)
+    return X, V, A
+
+
 def evaluate(form: ClosedForm, scene, s, s_dot, s_ddot):
     """Return positions, velocities, accelerations (S, n_points, 2) of every point.
 
@@ -245,6 +314,8 @@ def evaluate(form: ClosedForm, scene, s, s_dot, s_ddot):
     w = float(np.asarray(s_dot, dtype=float).reshape(-1)[0]) if np.size(s_dot) else 0.0
     al = float(np.asarray(s_ddot, dtype=float).reshape(-1)[0]) if np.size(s_ddot) else 0.0
     X0 = np.array([[p.x, p.y] for p in scene.points], dtype=float)
+    if form.kind == "cylinder_rocker":
+        return _evaluate_cylinder_rocker(form, X0, s, w, al)
     S = len(s)
     theta = s + form.flip - form.angle  # crank angle in the canonical frame
     if form.kind == "fourbar":

@@ -33,7 +33,7 @@ def coarse(name: str, steps: int = 37) -> linkpipe.Scene:
 def tol_ladders():
     """The tolerance ladder (and the tightest analytic setting) of the two closed-form scenes."""
     return {name: accuracy.measure(coarse(name), repeats=1, knobs=("tol", "jacobian"))
-            for name in ("fourbar_crank_rocker", "slider_crank")}
+            for name in ("fourbar_crank_rocker", "slider_crank", "dump_truck")}
 
 
 def rows(ladder, knob, value=None):
@@ -44,7 +44,9 @@ def rows(ladder, knob, value=None):
 @pytest.mark.parametrize("name, kind", [("fourbar_crank_rocker", "fourbar"),
                                         ("slider_crank", "slider_crank"),
                                         ("basketball_goal", "fourbar"),
-                                        ("shear_press", None)])
+                                        ("shear_press", None),
+                                        ("dump_truck", "cylinder_rocker"),
+                                        ("excavator_arm", None)])
 def test_closed_forms_are_detected_structurally(name, kind):
     scene = linkpipe.load_scene(str(CONFIGS / f"{name}.toml"))
     form = closed_forms.detect(scene)
@@ -111,7 +113,28 @@ rate = -200.0
 """
 
 
-@pytest.mark.parametrize("text", [FOURBAR_MOVED, SLIDER_TILTED], ids=["fourbar", "slider_crank"])
+CYLINDER_OTHER_BRANCH = """
+[points]
+C = { x = 2.0, y = 1.0, fixed = true }
+O = { x = -1.0, y = 0.5, fixed = true }
+P = { x = -0.2, y = -0.9 }
+E = { x = 0.5, y = -2.0 }
+[[links]]
+name = "arm"
+points = ["O", "P", "E"]
+[[drivers]]
+name = "jack"
+distance = ["P", "C"]
+from = 2.9
+to = 4.2
+steps = 73
+rate = -0.3
+acceleration = 0.7
+"""
+
+
+@pytest.mark.parametrize("text", [FOURBAR_MOVED, SLIDER_TILTED, CYLINDER_OTHER_BRANCH],
+                         ids=["fourbar", "slider_crank", "cylinder_rocker"])
 def test_closed_forms_anywhere_in_the_plane(tmp_path, text):
     # moved pivots, a tilted ground line or guide, the other assembly branch, a reversed or
     # accelerating driver, further points on the coupler: the closed form still matches
@@ -156,7 +179,7 @@ def test_errors_fall_as_the_tolerance_tightens(tol_ladders, name):
             assert r.relative_error[q] <= max(30 * float(r.value), floor), (q, r.label)
 
 
-@pytest.mark.parametrize("name", ["fourbar_crank_rocker", "slider_crank"])
+@pytest.mark.parametrize("name", ["fourbar_crank_rocker", "slider_crank", "dump_truck"])
 def test_tightest_analytic_setting_matches_the_closed_form(tol_ladders, name):
     ladder = tol_ladders[name]
     (tight,) = rows(ladder, "tol", "1e-14")
