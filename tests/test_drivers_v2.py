@@ -333,3 +333,18 @@ def test_bad_relative_angles_name_the_key(name, ref, key, words):
         parse_scene(text, "bad.toml")
     msg = str(err.value)
     assert "bad.toml" in msg and key in msg and words in msg, msg
+
+
+@pytest.mark.parametrize("name,edit,key,words", BAD[:4], ids=[b[0] for b in BAD[:4]])
+def test_bad_cylinder_on_the_command_line_is_one_message_exit_2_nothing_written(
+        tmp_path, capsys, name, edit, key, words):
+    from linkpipe.__main__ import main
+
+    path = tmp_path / "bad.toml"
+    path.write_text(edit(cylinder_rocker().text))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert str(path) in err and key in err and words in err
+    assert not out.exists() or not any(out.iterdir())
