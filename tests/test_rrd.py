@@ -85,6 +85,8 @@ def _expected_entities(result) -> set[str]:
     if "spring_force" in forces:
         out |= {f"/plots/spring_force/{s}" for s in result.spring_names}
         out |= {f"/mechanism/springs/{s}" for s in result.spring_names}   # an addition
+    if "torsion_spring_torque" in forces:
+        out |= {f"/plots/torsion_spring_torque/{t}" for t in result.force_coords["torsion_spring"]}
     return out
 
 

@@ -52,6 +52,7 @@ def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
         effect = effect_of(ctx)
         applied[name] = effect.applied
         variables.update(effect.variables)
+        coords.update(effect.coords)
         if effect.lagrange is None:
             lagrange_points += effect.applied.point_forces
             lagrange_couples += effect.applied.couples

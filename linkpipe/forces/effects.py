@@ -4,7 +4,7 @@ Each effect takes the :class:`Context` of a solved sweep and returns an :class:`
 loads it applies (for virtual work), what it adds to the Lagrange side ``Q - M qdd`` where that
 differs (inertia enters there through the mass matrix), what it adds to each body's own
 ``M_k Xdd - Q_k`` (for the pin forces) and the output variables it stores. Adding an effect or a
-spring kind is one function here and one entry in :data:`EFFECTS`.
+spring kind is one function here (or a law in :mod:`.springs`) and one entry in :data:`EFFECTS`.
 """
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ import numpy as np
 
 from ..model import Model
 from ..result import Motion
-from .applied import Applied, add_at_body_point, body_point, center_frame, link_index, scatter_pairs
+from .applied import Applied, add_at_body_point, body_point, center_frame, link_index
+from .springs import SpringGeometry, TorsionSprings, couples_on_bodies, spring_law
 
 
 @dataclass(frozen=True)
@@ -56,73 +57,43 @@ class Context:
 class Effect:
     """What one effect contributes. ``lagrange``: its point forces on the Lagrange side when
     they differ from ``applied`` (None: the applied loads themselves); ``bodies``: {link index:
-    (S, P, 2)} added to that body's ``M_k Xdd - Q_k``; ``variables``: output variables."""
+    (S, P, 2)} added to that body's ``M_k Xdd - Q_k``; ``variables``: output variables;
+    ``coords``: {dimension: labels} of the dimensions those add."""
 
     applied: Applied
     lagrange: np.ndarray | None = None
     bodies: dict = field(default_factory=dict)
     variables: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class SpringGeometry:
-    """Every spring's end points, length (S, n_springs), unit vector a->b (S, n_springs, 2),
-    free length and preload (n_springs,) and stiffness."""
-
-    ia: np.ndarray
-    ib: np.ndarray
-    length: np.ndarray
-    unit: np.ndarray
-    free_length: np.ndarray
-    preload: np.ndarray
-    k: np.ndarray
-
-    @classmethod
-    def of(cls, ctx: Context) -> "SpringGeometry":
-        model, springs = ctx.model, ctx.model.scene.springs
-        names = model.point_names
-        ia = np.array([names.index(sp.between[0]) for sp in springs])
-        ib = np.array([names.index(sp.between[1]) for sp in springs])
-        d = ctx.position[:, ib] - ctx.position[:, ia]
-        length = np.hypot(d[..., 0], d[..., 1])
-        start_len = np.hypot(*(model.start_position[ib] - model.start_position[ia]).T)
-        free = np.array([sp.free_length if sp.free_length is not None else start_len[i]
-                         for i, sp in enumerate(springs)])
-        preload = np.array([0.0 if sp.free_length is not None else sp.preload for sp in springs])
-        unit = d / np.where(length > 0, length, np.nan)[..., None]
-        return cls(ia, ib, length, unit, free, preload, np.array([sp.k for sp in springs], dtype=float))
-
-    def tension(self) -> np.ndarray:
-        """(S, n_springs) the elastic tension (positive pulls the ends together)."""
-        return self.preload + self.k * (self.length - self.free_length)
-
-    def damping_force(self, ctx: Context) -> np.ndarray:
-        """(S, n_springs) the damper's force, c times the rate of lengthening."""
-        c = np.array([sp.damping for sp in ctx.model.scene.springs], dtype=float)
-        rate = np.einsum("skj,skj->sk", ctx.velocity[:, self.ib] - ctx.velocity[:, self.ia], self.unit)
-        return c * rate
-
-    def as_point_forces(self, ctx: Context, force: np.ndarray) -> Applied:
-        point_forces = ctx.zeros_points()
-        scatter_pairs(point_forces, self.ia, self.ib, force[..., None] * self.unit)
-        return Applied(point_forces, ctx.zeros_links())
+    coords: dict = field(default_factory=dict)
 
 
 def springs(ctx: Context) -> Effect:
-    """Linear springs: tension ``k (length - free_length)`` (or the preload at the start)."""
-    geo = SpringGeometry.of(ctx)
+    """Two-point springs of every kind (:func:`.springs.spring_law`) and torsion springs
+    (couples on their links, each also part of its body's own equations)."""
     F, L = ctx.units["force"], ctx.units["length"]
-    tension = geo.tension()
-    stretch = geo.length - geo.free_length
-    energy = geo.preload * stretch + 0.5 * geo.k * stretch ** 2
-    unloaded = np.where(geo.k > 0, geo.free_length - geo.preload / np.where(geo.k > 0, geo.k, 1),
-                        geo.free_length)
-    total = tension + (geo.damping_force(ctx) if "damping" in ctx.effects else 0.0)
-    return Effect(geo.as_point_forces(ctx, tension), variables={
-        "spring_length": (("step", "spring"), geo.length, L),
-        "spring_extension": (("step", "spring"), geo.length - unloaded, L),
-        "spring_energy": (("step", "spring"), energy, f"{F}*{L}"),
-        "spring_force": (("step", "spring"), total, F)})
+    applied, variables = Applied(ctx.zeros_points(), ctx.zeros_links()), {}
+    if ctx.model.scene.springs:
+        geo = SpringGeometry.of(ctx)
+        tension, energy, extension = spring_law(geo, ctx.model.scene.springs)
+        total = tension + (geo.damping_force(ctx) if "damping" in ctx.effects else 0.0)
+        applied = geo.as_point_forces(ctx, tension)
+        variables = {
+            "spring_length": (("step", "spring"), geo.length, L),
+            "spring_extension": (("step", "spring"), extension, L),
+            "spring_energy": (("step", "spring"), energy, f"{F}*{L}"),
+            "spring_force": (("step", "spring"), total, F)}
+    if not ctx.model.scene.torsion_springs:
+        return Effect(applied, variables=variables)
+    tors = TorsionSprings.of(ctx.model, ctx.position)
+    couples = tors.couples(len(ctx.model.scene.links))
+    dims = ("step", "torsion_spring")
+    variables.update({"torsion_spring_angle": (dims, tors.angle, "rad"),
+                      "torsion_spring_torque": (dims, tors.torque, f"{F}*{L}"),
+                      "torsion_spring_energy": (dims, tors.energy, f"{F}*{L}")})
+    return Effect(Applied(applied.point_forces, applied.couples + couples),
+                  bodies=couples_on_bodies(ctx.model, couples, ctx.position),
+                  variables=variables,
+                  coords={"torsion_spring": [t.name for t in ctx.model.scene.torsion_springs]})
 
 
 def damping(ctx: Context) -> Effect:
@@ -186,7 +157,9 @@ def inertia(ctx: Context) -> Effect:
 def applies(name: str, ctx: Context) -> bool:
     """Whether the named effect has anything to act on in this scene."""
     scene = ctx.model.scene
-    if name in ("springs", "damping"):
+    if name == "springs":
+        return bool(scene.springs or scene.torsion_springs)
+    if name == "damping":
         return bool(scene.springs)
     if name in ("gravity", "inertia"):
         return bool(scene.masses)

@@ -27,6 +27,7 @@ TABLES = {
     "analysis": "table",
     "gravity": "table",
     "springs": "array",
+    "torsion_springs": "array",
     "masses": "array",
     "loads": "array",
     "outputs": "table",
@@ -54,7 +55,11 @@ KEYS: dict[str, dict[str, str]] = {
     "analysis": {"effects": '["springs", "gravity"]'},
     "gravity": {"g": "[0.0, -9.81]"},
     "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",
-                "free_length": "0.5", "preload": "10.0", "damping": "0.0"},
+                "free_length": "0.5", "preload": "10.0", "damping": "0.0",
+                "kind": '"linear"', "force_extended": "450.0", "extended_length": "0.50",
+                "dead_length": "0.20", "gamma": "1.0"},
+    "torsion_springs": {"name": '"hinge"', "links": '["boom", "arm"]', "k": "2.5",
+                        "free_angle": "30.0"},
     "masses": {"link": '"coupler"', "mass": "1.0", "center": '"G" (or [u, v] in the link frame)',
                "inertia": "0.0"},
     "loads": {"name": '"cut"', "point": '"C"', "force": "[0.0, 500.0]", "link": '"rocker"',
@@ -63,9 +68,10 @@ KEYS: dict[str, dict[str, str]] = {
                 "vectors": '["P"]'},
 }
 
-#: What each effect needs in the file: effect -> the tables that must be present.
+#: What each effect needs in the file: effect -> the tables that must be present (a tuple
+#: among them: one of those tables).
 EFFECT_NEEDS = {
-    "springs": ("springs",),
+    "springs": (("springs", "torsion_springs"),),
     "gravity": ("gravity", "masses"),
     "inertia": ("masses",),
     "loads": ("loads",),

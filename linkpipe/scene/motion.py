@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from .keys import EFFECT_NEEDS, _Table, _show, _suggest, _table_ref
-from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver, Spring
+from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver
 
 
 #: the loosest tolerance a scene may ask for: 1 % of the mechanism's size (looser would let a
@@ -205,37 +205,11 @@ class MotionTables:
 
 
 class EffectTables:
-    """The ``[gravity]``, ``[[springs]]``, ``[[masses]]``, ``[[loads]]``, ``[analysis]`` and
-    ``[outputs]`` readers of :class:`~.parse._Parser`."""
+    """The ``[gravity]``, ``[[masses]]``, ``[[loads]]``, ``[analysis]`` and ``[outputs]``
+    readers of :class:`~.parse._Parser` (springs: :mod:`.springs`)."""
 
     def gravity_table(self) -> tuple[float, float] | None:
         return self.table("gravity").pair("g", geometric=False) if self.top("gravity") is not None else None
-
-    def spring_tables(self) -> tuple[Spring, ...]:
-        springs = []
-        for table in self.entries("springs"):
-            between = table.strings("between", what="point")
-            if len(between) != 2:
-                raise table.error("between", f"expected two different points, got "
-                                  f"{len(between)}", f"write e.g. {table.example('between')}")
-            for name in between:
-                self.point(table, "between", name)
-            k = table.number("k")
-            if k < 0:
-                raise table.error("k", f"negative stiffness k = {k:g}",
-                                  "use k >= 0 (the force is tension when stretched)")
-            table.one_of("free_length", "preload")
-            free_length = table.number("free_length", None)
-            if free_length is not None and free_length < 0:
-                raise table.error("free_length", f"must be >= 0, got {free_length:g}",
-                                  "write the spring's unstretched length")
-            damping = table.number("damping", 0.0)
-            if damping < 0:
-                raise table.error("damping", f"must be >= 0, got {damping:g}",
-                                  "write e.g. damping = 0.0")
-            springs.append(Spring(table.data["name"], between, k, free_length,
-                                  table.number("preload", None), damping))
-        return tuple(springs)
 
     def mass_tables(self) -> tuple[Mass, ...]:
         masses = []
@@ -291,8 +265,9 @@ class EffectTables:
         effects = _choices(table, "effects", EFFECTS, "effect")
         for effect in effects:
             for needed in EFFECT_NEEDS[effect]:
-                if not self.top(needed):
-                    ref = _table_ref(needed)
+                options = (needed,) if isinstance(needed, str) else needed
+                if not any(self.top(t) for t in options):
+                    ref = " or ".join(_table_ref(t) for t in options)
                     raise table.error("effects", f'effect "{effect}" is on but the scene has '
                                       f"no {ref}", f'add {ref} or remove "{effect}" from effects')
         return effects

@@ -15,9 +15,10 @@ from .keys import KEYS, TABLES, UNIT_KEYS, _Table, _show, _suggest, _type_name
 from .tables import Link, Point, Scene
 from .geometry import GeometryTables
 from .motion import EffectTables, MotionTables
+from .springs import SpringTables
 
 
-class _Parser(GeometryTables, MotionTables, EffectTables):
+class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
     """Read one scene; the table readers run in dependency order (names before their users)."""
 
     def __init__(self, data: dict, text: str, path: str):
@@ -104,6 +105,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables):
         solver = self.solver_table()
         gravity = self.gravity_table()
         springs = self.spring_tables()
+        torsion_springs = self.torsion_spring_tables()
         masses = self.mass_tables()
         loads = self.load_tables()
         effects = self.analysis_table()
@@ -112,7 +114,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables):
                      points=tuple(self.points.values()), links=tuple(self.links.values()),
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
-                     outputs=outputs)
+                     outputs=outputs, torsion_springs=torsion_springs)
 
 
     def scene_table(self) -> dict:

@@ -10,6 +10,9 @@ from dataclasses import dataclass, field
 
 
 EFFECTS = ("springs", "gravity", "inertia", "damping", "loads")
+#: ``[[springs]] kind`` (first = default); "ground" as a torsion spring's second link
+SPRING_KINDS = ("linear", "tension_only", "compression_only", "gas")
+GROUND = "ground"
 KINEMATIC_ORDERS = ("velocity", "acceleration")
 
 
@@ -130,12 +133,35 @@ class Solver:
 
 @dataclass(frozen=True)
 class Spring:
+    """A spring between two points. ``kind`` (:data:`SPRING_KINDS`): ``linear`` tension
+    ``k (length - free_length)`` (or ``preload`` at the start); ``tension_only`` and
+    ``compression_only`` the same law where it pulls (a cable) or pushes, else 0; ``gas``
+    tension ``-force_extended ((extended_length - dead_length) / (length - dead_length))**gamma``
+    (k = 0 and no free length). ``damping`` applies to every kind."""
+
     name: str
     between: tuple[str, str]
     k: float
     free_length: float | None = None
     preload: float | None = None
     damping: float = 0.0
+    kind: str = "linear"
+    force_extended: float | None = None
+    extended_length: float | None = None
+    dead_length: float | None = None
+    gamma: float = 1.0
+
+
+@dataclass(frozen=True)
+class TorsionSpring:
+    """A torsion spring: angle = direction of ``links[0]``'s u axis minus ``links[1]``'s
+    (``"ground"``: 0); torque ``k (angle - free_angle)`` turns the second link CCW and the first
+    CW. ``k`` per radian, ``free_angle`` in degrees as written."""
+
+    name: str
+    links: tuple[str, str]
+    k: float
+    free_angle: float
 
 
 @dataclass(frozen=True)
@@ -184,6 +210,7 @@ class Scene:
     masses: tuple[Mass, ...] = ()
     loads: tuple[Load, ...] = ()
     outputs: Outputs = Outputs()
+    torsion_springs: tuple[TorsionSpring, ...] = ()
 
     @property
     def point_names(self) -> tuple[str, ...]:
@@ -197,7 +224,7 @@ class Scene:
     def present_but_off(self) -> tuple[str, ...]:
         """Effect tables present in the file but not named in ``effects`` (validated, unused)."""
         present = {
-            "springs": bool(self.springs),
+            "springs": bool(self.springs or self.torsion_springs),
             "gravity": self.gravity is not None,
             "inertia": bool(self.masses),
             "loads": bool(self.loads),

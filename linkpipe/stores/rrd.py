@@ -22,7 +22,7 @@ from ..cache import derived
 
 APPLICATION_ID = "linkpipe"
 #: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
-PLOTTED = ("input_force", "spring_force", "link_angle")
+PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle")
 SOLVER = ("residual", "iterations")
 #: longest velocity / acceleration arrow, as a fraction of the mechanism's size
 ARROW_FRACTION = 0.25

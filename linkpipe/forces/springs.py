@@ -1,0 +1,157 @@
+"""Springs as arrays: two-point springs of every kind (their tension and potential energy) and
+torsion springs between links (their angle, torque, energy and couples).
+
+Each law comes with its potential energy ``V`` such that the tension is ``dV/dlength`` (a torsion
+spring's torque ``dV/dangle``), so the input force by virtual work is the derivative of the
+total potential energy along a quasi-static sweep (``tests/test_springs.py`` checks both)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kinematics.rates import link_angles_unwrapped
+from ..model import Model
+from ..scene.tables import GROUND
+from .applied import Applied, link_index, scatter_pairs, with_couples_as_pairs
+
+
+@dataclass(frozen=True)
+class SpringGeometry:
+    """Every spring's end points, length (S, n_springs), unit vector a->b (S, n_springs, 2),
+    free length and preload (n_springs,) and stiffness."""
+
+    ia: np.ndarray
+    ib: np.ndarray
+    length: np.ndarray
+    unit: np.ndarray
+    free_length: np.ndarray
+    preload: np.ndarray
+    k: np.ndarray
+
+    @classmethod
+    def of(cls, ctx) -> "SpringGeometry":
+        model, springs = ctx.model, ctx.model.scene.springs
+        names = model.point_names
+        ia = np.array([names.index(sp.between[0]) for sp in springs], dtype=np.intp)
+        ib = np.array([names.index(sp.between[1]) for sp in springs], dtype=np.intp)
+        d = ctx.position[:, ib] - ctx.position[:, ia]
+        length = np.hypot(d[..., 0], d[..., 1])
+        start_len = np.hypot(*(model.start_position[ib] - model.start_position[ia]).T)
+        free = np.array([sp.free_length if sp.free_length is not None else start_len[i]
+                         for i, sp in enumerate(springs)])
+        preload = np.array([0.0 if sp.free_length is not None or sp.preload is None else sp.preload
+                            for sp in springs])
+        unit = d / np.where(length > 0, length, np.nan)[..., None]
+        return cls(ia, ib, length, unit, free, preload, np.array([sp.k for sp in springs], dtype=float))
+
+    def damping_force(self, ctx) -> np.ndarray:
+        """(S, n_springs) the damper's force, c times the rate of lengthening."""
+        c = np.array([sp.damping for sp in ctx.model.scene.springs], dtype=float)
+        rate = np.einsum("skj,skj->sk", ctx.velocity[:, self.ib] - ctx.velocity[:, self.ia], self.unit)
+        return c * rate
+
+    def as_point_forces(self, ctx, force: np.ndarray) -> Applied:
+        point_forces = ctx.zeros_points()
+        scatter_pairs(point_forces, self.ia, self.ib, force[..., None] * self.unit)
+        return Applied(point_forces, ctx.zeros_links())
+
+
+def spring_law(geo: SpringGeometry, springs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (tension, energy, extension), each (S, n_springs), by each spring's kind.
+
+    linear: ``T = p + k s`` with ``s = length - free_length``, ``V = p s + k s^2 / 2`` (zero at
+    the free length, or at the start with a preload p); tension_only / compression_only: ``T``
+    where it pulls / pushes, else 0, ``V = k e^2 / 2`` there (``e`` the extension, so
+    ``V = T^2 / (2 k)``), 0 where slack (k = 0: ``V = T s``);
+    gas: ``T = -F1 r^gamma`` with ``r = (L1 - d) / (length - d)``, ``V = F1 (L1 - d) (r^(gamma-1)
+    - 1) / (gamma - 1)`` (``F1 (L1 - d) ln r`` at gamma = 1), zero at the extended length;
+    infinite at and below the dead length. Extension: length minus the length at zero tension
+    (a gas spring, which has none: length minus its extended length)."""
+    stretch = geo.length - geo.free_length
+    tension = geo.preload + geo.k * stretch
+    energy = geo.preload * stretch + 0.5 * geo.k * stretch ** 2
+    k_pos = np.where(geo.k > 0, geo.k, 1.0)
+    extension = geo.length - np.where(geo.k > 0, geo.free_length - geo.preload / k_pos, geo.free_length)
+    for j, sp in enumerate(springs):
+        if sp.kind in ("tension_only", "compression_only"):
+            t = tension[:, j]
+            active = t > 0 if sp.kind == "tension_only" else t < 0
+            one_sided = (0.5 * geo.k[j] * extension[:, j] ** 2 if geo.k[j] > 0
+                         else t * stretch[:, j])
+            tension[:, j] = np.where(active, t, 0.0)
+            energy[:, j] = np.where(active, one_sided, 0.0)
+        elif sp.kind == "gas":
+            tension[:, j], energy[:, j] = gas_law(geo.length[:, j], sp)
+            extension[:, j] = geo.length[:, j] - sp.extended_length
+    return tension, energy, extension
+
+
+def gas_law(length: np.ndarray, sp) -> tuple[np.ndarray, np.ndarray]:
+    """(tension, energy) of a gas spring at ``length``: -inf and +inf at or below dead_length
+    (the gas volume is gone: that step's stored force is not finite, status non_finite)."""
+    f1, d, gamma = sp.force_extended, sp.dead_length, sp.gamma
+    volume = length - d
+    alive = volume > 0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        x = np.log((sp.extended_length - d) / np.where(alive, volume, 1.0))  # ln r
+        tension = -f1 * np.exp(gamma * x)
+        shape = x if gamma == 1.0 else np.expm1((gamma - 1.0) * x) / (gamma - 1.0)
+        energy = f1 * (sp.extended_length - d) * shape
+    # NaN length (a failed step) stays NaN; a reached dead length is an infinite push
+    dead = ~alive & ~np.isnan(length)
+    return np.where(dead, -np.inf, tension), np.where(dead, np.inf, energy)
+
+
+@dataclass(frozen=True)
+class TorsionSprings:
+    """Every torsion spring's links (``second`` -1 for ground), angle (S, n) unwrapped along
+    the sweep, torque and energy."""
+
+    first: np.ndarray
+    second: np.ndarray
+    angle: np.ndarray
+    torque: np.ndarray
+    energy: np.ndarray
+
+    @classmethod
+    def of(cls, model: Model, X) -> "TorsionSprings":
+        """The angle is first link minus second, continuous over the sweep (a full turn winds
+        the spring), taken at the first solved step within half a turn of the free angle."""
+        tsprings = model.scene.torsion_springs
+        first = np.array([link_index(model, t.links[0]) for t in tsprings], dtype=np.intp)
+        second = np.array([-1 if t.links[1] == GROUND else link_index(model, t.links[1])
+                           for t in tsprings], dtype=np.intp)
+        theta = link_angles_unwrapped(model, X)  # (S, n_links), NaN at failed steps
+        ground = np.zeros((X.shape[0], 1))
+        angle = theta[:, first] - np.concatenate([theta, ground], axis=1)[:, second]
+        free = np.deg2rad([t.free_angle for t in tsprings])
+        for j in range(len(tsprings)):
+            finite = np.flatnonzero(np.isfinite(angle[:, j]))
+            if len(finite):
+                angle[:, j] -= 2 * np.pi * np.round((angle[finite[0], j] - free[j]) / (2 * np.pi))
+        k = np.array([t.k for t in tsprings], dtype=float)
+        torque = k * (angle - free)
+        return cls(first, second, angle, torque, 0.5 * k * (angle - free) ** 2)
+
+    def couples(self, n_links: int) -> np.ndarray:
+        """(S, n_links) the couples on the links, CCW positive: -torque on the first link,
+        +torque on the second (none on ground)."""
+        out = np.zeros((self.torque.shape[0], n_links))
+        for j, (a, b) in enumerate(zip(self.first, self.second)):
+            out[:, a] -= self.torque[:, j]
+            if b >= 0:
+                out[:, b] += self.torque[:, j]
+        return out
+
+
+def couples_on_bodies(model: Model, couples, X) -> dict:
+    """{link: (S, P, 2)} each link's couple as a force pair, negated: its part of that body's
+    own ``M_k Xdd - Q_k`` (a couple acts on the body, not at a pin)."""
+    bodies = {}
+    zeros = np.zeros((X.shape[0], model.n_points, 2))
+    for li in np.flatnonzero(np.any(couples != 0, axis=0)):
+        only = np.zeros_like(couples)
+        only[:, li] = couples[:, li]
+        bodies[int(li)] = -with_couples_as_pairs(model, zeros, only, X)
+    return bodies
