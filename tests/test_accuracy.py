@@ -349,3 +349,18 @@ def test_a_rung_that_crashes_is_a_row_with_its_error_and_the_command_fails(tmp_p
         labels = [x.decode() for x in f["row"][()]]
     assert failures[[i for i, x in enumerate(labels) if x.startswith("tol=") and "04" in x][0]] == "ZeroDivisionError: injected"
     assert sum(bool(x) for x in failures) == 1
+
+
+@pytest.mark.parametrize("name", ["hatch_gas_spring", "dump_truck"])
+def test_version_2_springs_and_cylinders_show_their_force_error_in_the_ladder(name):
+    """A gas-sprung hatch and a cylinder-driven tipper on the tolerance ladder: the input force
+    (a torque from gas struts and gravity; a cylinder's axial force) converges as tol tightens
+    and the tightest setting agrees with the reference to rounding."""
+    ladder = accuracy.measure(coarse(name, 41), repeats=1, knobs=("tol",))
+    tol = sorted(rows(ladder, "tol"), key=lambda r: -float(r.value))
+    forces = [r.relative_error["input_force"] for r in tol if r.steps_failed == 0]
+    assert len(forces) == len(accuracy.FULL["tol"])
+    for looser, tighter in zip(forces, forces[1:]):
+        assert tighter <= 2 * looser + 1e-14, forces
+    assert forces[0] > 1e-4  # tol 1e-2 is visibly wrong: the ladder measures something
+    assert forces[-1] <= 1e-12
