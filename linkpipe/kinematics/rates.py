@@ -14,38 +14,38 @@ from ..status import OK, SINGULAR
 
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
-                need_inverse: bool = True, chunk: int = CHUNK):
-    """Velocities, accelerations, condition and Jacobian inverse of a solved sweep, on the
-    sparse engine; a dict as :func:`dense_derivatives` returns (the path of a model without an
-    engine, which this falls back to).
+                need_inverse: bool = True, chunk: int = CHUNK, dense: bool = False):
+    """Velocities, accelerations, condition and Jacobian inverse of a solved sweep: the one
+    place they are solved, from one factorisation of each ok step's Jacobian.
 
-    Condition ``|J|_1 |J^-1|_1`` and SINGULAR flags as there; velocities and accelerations from
-    the inverse (or the given ``velocity``/``acceleration``, e.g. the dyads', NaN where singular).
-    ``need_inverse=False`` leaves ``jacobian_inverse`` None (no force stage).
+    The factorisation is the sparse engine's block-triangular inverse (:class:`.sparse.Engine`)
+    or, for a model without an engine (or ``dense=True``, the accuracy ladder's independent
+    check), the dense inverse (pseudo-inverse under redundant constraints). Per step: the
+    condition ``|J|_1 |J^-1|_1`` (sigma_1/sigma_n when redundant) flags SINGULAR steps (their
+    derivatives NaN); ``qd = J^-1 (-Phi_t)``, ``qdd = J^-1 gamma`` (or the given ``velocity``
+    / ``acceleration``, e.g. the dyads', checked by their residuals); the inverse is kept for
+    the force stage's influence coefficients unless ``need_inverse=False``.
+
+    Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
+    acceleration_residual, status, jacobian_inverse (S, n_q, n_rows) or None.
     """
-    eng = engine(model)
-    if eng is None:
-        return dense_derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration)
+    eng = None if dense else engine(model)
+    factorise = _dense_factors if eng is None else _engine_factors(eng)
     S = X.shape[0]
-    n, m = model.n_q, model.n_rows
     status = status.copy()
     condition = np.full(S, np.nan)
-    Jinv = np.full((S, n, m), np.nan) if need_inverse else None
+    Jinv = np.full((S, model.n_q, model.n_rows), np.nan) if need_inverse else None
     V = np.full((S, model.n_points, 2), np.nan)
     A = np.full((S, model.n_points, 2), np.nan) if need_acceleration else None
     vres = np.full(S, np.nan)
     ares = np.full(S, np.nan) if need_acceleration else None
     rcond = model.scene.solver.singular_rcond
     for lo in range(0, S, chunk):
-        hi = min(S, lo + chunk)
-        idx = lo + np.flatnonzero(status[lo:hi] == OK)
+        idx = lo + np.flatnonzero(status[lo:min(S, lo + chunk)] == OK)
         if not len(idx):
             continue
         Xc, sc_ = X[idx], s[idx]
-        q = model.q_of(Xc)
-        E = eng.entries(q, sc_)
-        invs = eng.inverse(E)  # (n, m, k)
-        cond = eng.condition(E, invs)
+        cond, inv, times_jacobian = factorise(model, Xc, sc_)  # inv (k, n, m)
         condition[idx] = cond
         sing = is_singular(cond, rcond)
         status[idx[sing]] = SINGULAR
@@ -53,29 +53,21 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         gi = idx[good]
         if not len(gi):
             continue
-        invg = invs[:, :, good]  # (n, m, g)
+        invg = inv[good]
         if Jinv is not None:
-            Jinv[gi] = np.moveaxis(invg, 2, 0)
-        Eg = E[:, good]
+            Jinv[gi] = invg
         Xg, sg = Xc[good], sc_[good]
         phit = -model.phi_t(Xg, sg, s_dot[gi])  # (g, m)
-        if velocity is None:
-            qd = np.einsum("imk,km->ik", invg, phit)  # (n, g)
-        else:
-            qd = model.q_of(velocity[gi]).T
-        res = eng.matvec(Eg, list(qd))
-        vres[gi] = np.abs(np.stack(res) - phit.T).max(axis=0)
-        Vg = model.velocities(qd.T)
-        V[gi] = Vg
+        qd = (np.einsum("kim,km->ki", invg, phit) if velocity is None
+              else model.q_of(velocity[gi]))
+        vres[gi] = np.abs(times_jacobian(qd, good) - phit).max(axis=1)
+        V[gi] = model.velocities(qd)
         if need_acceleration:
-            g = model.gamma(Xg, Vg, sg, s_dot[gi], s_ddot[gi])  # (g, m)
-            if acceleration is None:
-                qdd = np.einsum("imk,km->ik", invg, g)
-            else:
-                qdd = model.q_of(acceleration[gi]).T
-            res = eng.matvec(Eg, list(qdd))
-            ares[gi] = np.abs(np.stack(res) - g.T).max(axis=0)
-            A[gi] = model.velocities(qdd.T)
+            g = model.gamma(Xg, V[gi], sg, s_dot[gi], s_ddot[gi])  # (g, m)
+            qdd = (np.einsum("kim,km->ki", invg, g) if acceleration is None
+                   else model.q_of(acceleration[gi]))
+            ares[gi] = np.abs(times_jacobian(qdd, good) - g).max(axis=1)
+            A[gi] = model.velocities(qdd)
     V[:, model.fixed] = 0.0
     if A is not None:
         A[:, model.fixed] = 0.0
@@ -84,52 +76,35 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
 
 
 def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool):
-    """Return velocities and (optionally) accelerations for all steps by linear solves.
+    """:func:`derivatives` on dense Jacobians (the independent check of the accuracy ladder)."""
+    return derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration, dense=True)
 
-    Marks steps whose Jacobian is rank-deficient SINGULAR (their dense_derivatives NaN). Returns a
-    dict with velocity, acceleration (or None), condition, velocity_residual,
-    acceleration_residual, status, jacobian_inverse.
-    """
-    S = X.shape[0]
-    nq, m = model.n_q, model.n_rows
-    status = status.copy()
-    ok = status == OK
-    condition = np.full(S, np.nan)
-    Jinv = np.full((S, nq, m), np.nan)
-    idx = np.flatnonzero(ok)
-    if len(idx):
-        J = model.jacobian(X[idx], s[idx])
-        cond, inv = condition_and_inverse(J)
-        condition[idx] = cond
-        Jinv[idx] = inv
-        sing = is_singular(cond, model.scene.solver.singular_rcond)
-        status[idx[sing]] = SINGULAR
-        Jinv[idx[sing]] = np.nan
-    good = status == OK
-    nan_rows = ~good
-    V = np.full((S, model.n_points, 2), np.nan)
-    A = None
-    qd = np.einsum("sij,sj->si", Jinv, -model.phi_t(X, s, s_dot))
-    V = model.velocities(qd)
-    V[nan_rows] = np.nan
-    V[:, model.fixed] = 0.0
-    vres = np.full(S, np.nan)
-    if good.any():
-        Jg = model.jacobian(X[good], s[good])
-        vres[good] = np.abs(np.einsum("sij,sj->si", Jg, qd[good]) + model.phi_t(X[good], s[good], s_dot[good])).max(axis=1)
-    ares = None
-    if need_acceleration:
-        Vz = np.where(np.isfinite(V), V, 0.0)
-        g = model.gamma(X, Vz, s, s_dot, s_ddot)
-        qdd = np.einsum("sij,sj->si", Jinv, g)
-        A = model.velocities(qdd)
-        A[nan_rows] = np.nan
-        A[:, model.fixed] = 0.0
-        ares = np.full(S, np.nan)
-        if good.any():
-            ares[good] = np.abs(np.einsum("sij,sj->si", Jg, qdd[good]) - g[good]).max(axis=1)
-    return dict(velocity=V, acceleration=A, condition=condition, velocity_residual=vres,
-                acceleration_residual=ares, status=status, jacobian_inverse=Jinv)
+
+def _engine_factors(eng):
+    """The sparse engine's factorisation of a chunk: (condition (k,), inverse (k, n, m),
+    ``times_jacobian(x (g, n), rows (k,) bool) -> J x (g, m)``)."""
+    def factorise(model: Model, X, s):
+        E = eng.entries(model.q_of(X), s)
+        inv = eng.inverse(E)  # (n, m, k): one block solve per unit right-hand side
+        cond = eng.condition(E, inv)
+
+        def times_jacobian(x, rows):
+            return np.stack(eng.matvec(E[:, rows], list(x.T)), axis=1)
+
+        return cond, np.moveaxis(inv, 2, 0), times_jacobian
+
+    return factorise
+
+
+def _dense_factors(model: Model, X, s):
+    """The dense factorisation of a chunk, as :func:`_engine_factors` returns it."""
+    J = model.jacobian(X, s)
+    cond, inv = condition_and_inverse(J)
+
+    def times_jacobian(x, rows):
+        return np.einsum("sij,sj->si", J[rows], x)
+
+    return cond, inv, times_jacobian
 
 
 def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,
