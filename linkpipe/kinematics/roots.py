@@ -10,7 +10,7 @@ from .linalg import lin_solve
 from .step import _step_kernels
 
 
-  # Newton iterations without a new best residual before a step is given up
+
 
 
 def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,

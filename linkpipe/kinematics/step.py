@@ -7,8 +7,8 @@ import numpy as np
 from ..model import Model, derived
 from ..model import equations as eq
 from .linalg import lin_solve
+from .newton import ONE, iterate
 
-NEWTON_STALL = 8  # Newton iterations without a new best residual before a step is given up
 
 
 class _Step:
@@ -85,35 +85,19 @@ class _Step:
 
     def newton(self, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,
                jacobian: str = "analytic"):
-        """:func:`newton` at one step; same returns, shapes (1, n), (1,)."""
+        """:func:`linkpipe.kinematics.newton.iterate` at one step (q (n,), s (nd,)); returns
+        (q (1, n), residual (1,), iterations (1,), converged (1,))."""
         jac = self.jac if jacobian == "analytic" else self.fd_jac
-        q = np.array(q, dtype=float).reshape(-1)
-        best = prev = np.inf
-        stall = 0
-        it_done = 0
-        res = np.inf
-        step_cap = 0.5 * self.model.size
-        for it in range(max_iter + 1):
-            F = self.phi(q, s)
-            r = float(np.abs(F).max()) if F.shape[0] else 0.0
-            res = r
-            progress = (r < best) or (r < 0.5 * prev)
-            stall = 0 if progress else stall + 1
-            best = min(best, r) if r == r else best  # np.fmin: NaN does not replace a number
-            prev = r
-            done = not (r > tol_abs)
-            bad = not np.isfinite(r) or stall >= NEWTON_STALL
-            if it == max_iter or done or bad:
-                break
-            dq = lin_solve(jac(q, s)[None], -F[None])[0]
-            big = np.abs(dq).max()
-            if big > step_cap:
-                dq = dq * (step_cap / big)
-            q = q + dq
-            it_done += 1
-        conv = res <= tol_abs
-        return (q[None], np.array([res]), np.array([it_done], dtype=np.int32),
-                np.array([conv]))
+
+        def residual(qc):
+            return self.phi(qc, s)
+
+        def correction(qc, F):
+            return lin_solve(jac(qc, s)[None], -F[None])[0]
+
+        q, res, its, conv = iterate(residual, correction, np.array(q, dtype=float).reshape(-1),
+                                    tol_abs, max_iter, self.model.size, layout=ONE)
+        return (q[None], np.array([res]), np.array([its], dtype=np.int32), np.array([conv]))
 
 
 def _step_kernels(model: Model) -> _Step:

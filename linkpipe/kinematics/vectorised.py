@@ -12,6 +12,7 @@ from ..model import equations as eq
 from .continuation import solve_positions
 from .linalg import POLISH_FROM, is_singular
 from .sparse import _rows, engine
+from .newton import _colmax, iterate
 from .start import start_state
 from ..status import OK
 from .linalg import CHUNK
@@ -168,14 +169,6 @@ def _hermite_T(q0, d0, q1, d1, t):
     return h00 * q0 + h10 * d0 + h01 * q1 + h11 * d1
 
 
-def _colmax(a: np.ndarray) -> np.ndarray:
-    """Return ``a.max(axis=0)`` of a (m, k) array (NaN propagates) row by row: no strided reduce."""
-    out = a[0].copy()
-    for row in a[1:]:
-        np.maximum(out, row, out=out)
-    return out
-
-
 def _aligned(eng, qT, sT):
     """kinematics.drivers_aligned on SoA arrays: every angle driver's vector along its angle."""
     X2 = eng.points(qT)
@@ -187,33 +180,20 @@ def _aligned(eng, qT, sT):
 
 
 def _newton_soa(eng, qT, sT, tol_abs, max_iter: int = NEWTON_ITERATIONS):
-    """Newton on a chunk from predictions qT (n_q, k); return (qT, residual, its, converged, E).
+    """:func:`linkpipe.kinematics.newton.iterate` on a chunk from predictions qT (n_q, k) on the
+    sparse engine, polishing one quadratic step past the tolerance; return (qT, residual, its,
+    converged, E), E the Jacobian's entries at the returned positions (for the derivatives).
 
-    At most ``max_iter`` iterations (the scene's cap, if lower than NEWTON_ITERATIONS). E: the
-    Jacobian's entries at the returned positions (for the derivatives)."""
-    k = qT.shape[1]
-    its = np.zeros(k, dtype=np.int32)
-    res = np.full(k, np.inf)
-    E = None
-    step = np.full(k, np.inf)  # the last correction: Newton goes on while it is not tiny
-    small = 1e-8 * eng.model.size  # (quadratic convergence: the next one is at rounding level)
-    for it in range(max_iter + 1):
-        F = eng.phi(eng.points(qT), sT)
-        r = _colmax(np.abs(F)) if F.shape[0] else np.zeros(k)
-        res = r
-        keep = (r > tol_abs) | (step > small)  # NaN: not kept, not converged
-        keep &= np.isfinite(r)
-        if it == max_iter or not keep.any():
-            break
-        E = eng.entries_T(qT, sT)
-        dq = np.stack(eng.solve(E, list(-F)))
-        if keep.all():
-            qT += dq
-        else:
-            qT[:, keep] += dq[:, keep]
-        step = np.where(keep, _colmax(np.abs(dq)) if dq.shape[0] else 0.0, 0.0)
-        its[keep] += 1
-    return qT, res, its, res <= tol_abs, eng.entries_T(qT, sT)
+    At most ``max_iter`` iterations (the scene's cap, if lower than NEWTON_ITERATIONS)."""
+    def residual(q):
+        return eng.phi(eng.points(q), sT)
+
+    def correction(q, F):
+        return np.stack(eng.solve(eng.entries_T(q, sT), list(-F)))
+
+    qT, res, its, conv = iterate(residual, correction, qT, tol_abs, max_iter, eng.model.size,
+                                 polish=True)
+    return qT, res, its, conv, eng.entries_T(qT, sT)
 
 
 def _one_more_newton_step(eng, q, s, ok, residual):
