@@ -45,7 +45,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         if not len(idx):
             continue
         Xc, sc_ = X[idx], s[idx]
-        cond, inv, times_jacobian = factorise(model, Xc, sc_)  # inv (k, n, m)
+        cond, regular_steps = factorise(model, Xc, sc_)
         condition[idx] = cond
         sing = is_singular(cond, rcond)
         status[idx[sing]] = SINGULAR
@@ -53,21 +53,21 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         gi = idx[good]
         if not len(gi):
             continue
-        invg = inv[good]
+        solve, inverse, times_jacobian = regular_steps(good)
         if Jinv is not None:
-            Jinv[gi] = invg
+            Jinv[gi] = inverse()
         Xg, sg = Xc[good], sc_[good]
         phit = -model.phi_t(Xg, sg, s_dot[gi])  # (g, m)
-        qd = (np.einsum("kim,km->ki", invg, phit) if velocity is None
-              else model.q_of(velocity[gi]))
-        vres[gi] = np.abs(times_jacobian(qd, good) - phit).max(axis=1)
-        V[gi] = model.velocities(qd)
+        # coordinates first, steps last (n, g): the engine's contiguous layout
+        qd = solve(phit) if velocity is None else model.q_of(velocity[gi]).T
+        vres[gi] = np.abs(times_jacobian(qd) - phit.T).max(axis=0)
+        Vg = model.velocities(qd.T)
+        V[gi] = Vg
         if need_acceleration:
-            g = model.gamma(Xg, V[gi], sg, s_dot[gi], s_ddot[gi])  # (g, m)
-            qdd = (np.einsum("kim,km->ki", invg, g) if acceleration is None
-                   else model.q_of(acceleration[gi]))
-            ares[gi] = np.abs(times_jacobian(qdd, good) - g).max(axis=1)
-            A[gi] = model.velocities(qdd)
+            g = model.gamma(Xg, Vg, sg, s_dot[gi], s_ddot[gi])  # (g, m)
+            qdd = solve(g) if acceleration is None else model.q_of(acceleration[gi]).T
+            ares[gi] = np.abs(times_jacobian(qdd) - g.T).max(axis=0)
+            A[gi] = model.velocities(qdd.T)
     V[:, model.fixed] = 0.0
     if A is not None:
         A[:, model.fixed] = 0.0
@@ -81,17 +81,21 @@ def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, nee
 
 
 def _engine_factors(eng):
-    """The sparse engine's factorisation of a chunk: (condition (k,), inverse (k, n, m),
-    ``times_jacobian(x (g, n), rows (k,) bool) -> J x (g, m)``)."""
+    """The sparse engine's factorisation of a chunk of k steps: (condition (k,),
+    ``regular_steps(rows (k,) bool)`` -> the g picked steps' ``solve(b (g, m)) -> J^-1 b``
+    (n, g), ``inverse()`` (g, n, m) and ``times_jacobian(x (n, g)) -> J x`` (m, g))."""
     def factorise(model: Model, X, s):
         E = eng.entries(model.q_of(X), s)
         inv = eng.inverse(E)  # (n, m, k): one block solve per unit right-hand side
         cond = eng.condition(E, inv)
 
-        def times_jacobian(x, rows):
-            return np.stack(eng.matvec(E[:, rows], list(x.T)), axis=1)
+        def regular_steps(rows):
+            invg, Eg = (inv, E) if rows.all() else (inv[:, :, rows], E[:, rows])
+            return (lambda b: np.einsum("imk,km->ik", invg, b),
+                    lambda: np.moveaxis(invg, 2, 0),
+                    lambda x: np.stack(eng.matvec(Eg, list(x))))
 
-        return cond, np.moveaxis(inv, 2, 0), times_jacobian
+        return cond, regular_steps
 
     return factorise
 
@@ -99,12 +103,14 @@ def _engine_factors(eng):
 def _dense_factors(model: Model, X, s):
     """The dense factorisation of a chunk, as :func:`_engine_factors` returns it."""
     J = model.jacobian(X, s)
-    cond, inv = condition_and_inverse(J)
+    cond, inv = condition_and_inverse(J)  # inv (k, n, m)
 
-    def times_jacobian(x, rows):
-        return np.einsum("sij,sj->si", J[rows], x)
+    def regular_steps(rows):
+        invg, Jg = inv[rows], J[rows]
+        return (lambda b: np.einsum("sij,sj->is", invg, b), lambda: invg,
+                lambda x: np.einsum("sij,js->is", Jg, x))
 
-    return cond, inv, times_jacobian
+    return cond, regular_steps
 
 
 def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,

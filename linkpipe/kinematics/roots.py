@@ -10,9 +10,6 @@ from .linalg import lin_solve
 from .step import _step_kernels
 
 
-
-
-
 def newton(model: Model, q: np.ndarray, s: np.ndarray, tol_abs: float, max_iter: int,
            jacobian: str = "analytic"):
     """Refine ``q`` (S, n_q) at driver values ``s`` (S, nd) by Newton-Raphson, step by step.
