@@ -27,12 +27,13 @@ import dataclasses as dc
 import math
 import pathlib
 import sys
-import time
 
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_sweep import best_of  # noqa: E402  (same process, same timing rule)
 
 RATE = 0.1  # m/s, the config's own
 
@@ -88,20 +89,6 @@ def linkpipe_run(model, s, method):
         return out.position, out.velocity, out.acceleration
     der = kin.derivatives(model, out.position, sv, sd, sdd, out.status, True)
     return out.position, der["velocity"], der["acceleration"]
-
-
-def best_of(fn, repeats):
-    fn()
-    best, got = math.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        got = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, got
-
-
-def rel_err(got, ref):
-    return [float(np.abs(g - r).max() / max(np.abs(r).max(), 1e-300)) for g, r in zip(got, ref)]
 
 
 def arm_rows(S, repeats):
