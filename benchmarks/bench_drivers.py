@@ -91,6 +91,10 @@ def linkpipe_run(model, s, method):
     return out.position, der["velocity"], der["acceleration"]
 
 
+def rel_err(got, ref):
+    return [float(np.abs(g - r).max() / max(np.abs(r).max(), 1e-300)) for g, r in zip(got, ref)]
+
+
 def arm_rows(S, repeats):
     from linkpipe import kinematics as kin
     from linkpipe.model import build_model
