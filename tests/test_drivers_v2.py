@@ -348,3 +348,16 @@ def test_bad_cylinder_on_the_command_line_is_one_message_exit_2_nothing_written(
     assert err.count("error:") == 1 and "Traceback" not in err
     assert str(path) in err and key in err and words in err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_relative_angle_of_a_link_against_itself_on_the_command_line(tmp_path, capsys):
+    from linkpipe.__main__ import main
+
+    path = tmp_path / "arm.toml"
+    path.write_text(two_link_arm().text.replace('relative_to = ["A", "O"]', 'relative_to = ["B", "A"]'))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert str(path) in err and "relative_to" in err and "against itself" in err
+    assert not out.exists() or not any(out.iterdir())
