@@ -25,6 +25,10 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="ADDR", help="also stream to a running viewer (rerun+http://...)")
     run.add_argument("--quiet", action="store_true", help="print only errors")
+    run.add_argument("--threads", type=_threads, default=1, metavar="N",
+                     help="BLAS threads while solving (default 1: the solves are many small "
+                          "systems, where more threads only add overhead; 0: the BLAS "
+                          "library's own default)")
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")
     acc = sub.add_parser("accuracy", help="measure what accuracy costs in time for a scene")
@@ -33,6 +37,14 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     acc.add_argument("--quick", action="store_true", help="a short ladder (seconds)")
     acc.add_argument("--repeats", type=int, default=5)
     return p
+
+
+def _threads(text: str) -> int:
+    """``--threads``: a whole number >= 0 (argparse turns the ValueError into exit 2)."""
+    value = int(text)
+    if value < 0:
+        raise ValueError(text)
+    return value
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
@@ -144,7 +156,8 @@ def _run(args) -> int:
             t0 = time.perf_counter()
             check_memory(scene)  # before the progress bar: a sweep too big for memory is a scene error
             bar = _progress_bar(scene, args)
-            result = solve(scene, progress=bar.stage if bar else None)
+            result = solve(scene, progress=bar.stage if bar else None,
+                           threads=args.threads or None)
             written, writer_seconds = _write(result, out, args, bar)
             if bar:
                 bar.close()

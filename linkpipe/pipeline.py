@@ -5,6 +5,7 @@ import time as _time
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from . import kinematics as kin
 from .model import build_model, check_mobility
@@ -87,16 +88,25 @@ def preflight(scene: Scene):
     return model, mob
 
 
-def solve(scene: Scene | str, progress=None) -> Result:
+#: BLAS threads while a scene is solved: its solves are many small systems (stacks of 2x2 to
+#: few-hundred-square blocks), where a multi-threaded BLAS only adds overhead (measured:
+#: benchmarks/bench_threads.py; docs/performance.md)
+DEFAULT_THREADS = 1
+
+
+def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREADS) -> Result:
     """Run every stage the scene calls for and return the result (failed steps are data).
 
     ``progress``: an optional callable ``progress(stage_name)`` told as each stage starts
-    (the CLI drives a tqdm bar with it on long sweeps). The Result is built once, here.
+    (the CLI drives a tqdm bar with it on long sweeps). ``threads``: the BLAS thread pool's
+    size while solving (threadpoolctl; None leaves the library's own). The Result is built
+    once, here.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     # overflow and 0/0 are data here, not warnings: such steps are marked (status.assign)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
+            threadpool_limits(limits=threads, user_api="blas"):
         return _solve(scene, progress)
 
 

@@ -150,3 +150,32 @@ def test_python_dash_m_runs_as_a_process(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "linkpipe", "check", str(tmp_path / "missing.toml")],
                           capture_output=True, text=True)
     assert proc.returncode == 2 and "missing.toml" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_blas_threads_are_limited_while_solving_and_restored_after():
+    """threadpoolctl sets the BLAS pool while a scene is solved (default 1, ``threads``), and
+    gives the library its own size back afterwards."""
+    from threadpoolctl import threadpool_info
+
+    import linkpipe
+
+    def blas_threads():
+        return sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"})
+
+    before = blas_threads()
+    assert before, "numpy's BLAS is not visible to threadpoolctl"
+    seen = {}
+    for threads in (1, 2, None):
+        linkpipe.solve(str(CONFIGS / "fourbar_crank_rocker.toml"), threads=threads,
+                       progress=lambda stage, t=threads: seen.setdefault(t, blas_threads()))
+    assert seen[1] == [1] and seen[2] == [2] and seen[None] == before
+    assert blas_threads() == before
+
+
+def test_threads_option_is_checked(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:  # argparse's own usage error
+        main(["run", str(CONFIGS / "fourbar_crank_rocker.toml"), "--threads", "-1",
+              "--out", str(tmp_path)])
+    assert stop.value.code == 2
+    assert "--threads" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
