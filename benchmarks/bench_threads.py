@@ -25,12 +25,15 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 
-def chain_text(loops: int, steps: int) -> str:
-    a, b, c, d = 1.0, 3.5, 3.0, 4.0
+def chain_text(loops: int, steps: int, first=(1.0, 3.5, 3.0, 4.0), start_deg=17.188733853924695,
+               to_deg=None, method="newton") -> str:
+    """The chain as scene text; ``first``: the first loop's (crank, coupler, rocker, ground)."""
     pts, links = [], []
-    t = 0.3  # the first crank's angle as drawn
+    t = math.radians(start_deg)  # the first crank's angle as drawn
+    to_deg = start_deg + 360.0 if to_deg is None else to_deg
     for k in range(loops):
-        O = np.array([d * k, 0.0])
+        a, b, c, d = first if k == 0 else (1.0, 3.5, 3.0, 4.0)
+        O = np.array([4.0 * k, 0.0]) + ([0.0, 0.0] if k == 0 else [first[3] - 4.0, 0.0])
         O_next = O + [d, 0.0]
         A = O + a * np.array([math.cos(t), math.sin(t)])
         v = O_next - A
@@ -45,11 +48,11 @@ def chain_text(loops: int, steps: int) -> str:
         links.append(f'[[links]]\nname = "crank{k}"\npoints = {crank!r}'.replace("'", '"'))
         links.append(f'[[links]]\nname = "coupler{k}"\npoints = ["A{k}", "B{k}"]')
         t = math.atan2(B[1] - O_next[1], B[0] - O_next[0]) + math.pi  # the next crank's arm
-    pts.append(f'O{loops} = {{ x = {d * loops!r}, y = 0.0, fixed = true }}')
+    pts.append(f'O{loops} = {{ x = {float(O_next[0])!r}, y = 0.0, fixed = true }}')
     links.append(f'[[links]]\nname = "rocker_last"\npoints = ["O{loops}", "B{loops - 1}"]')
     return ("[scene]\nname = \"chain\"\n[points]\n" + "\n".join(pts) + "\n" + "\n".join(links)
-            + f'\n[[drivers]]\nname = "crank"\nangle = ["O0", "A0"]\nfrom = 17.188733853924695\n'
-            f'to = 377.1887338539247\nsteps = {steps}\nrate = 60.0\n[solver]\nmethod = "newton"\n')
+            + f'\n[[drivers]]\nname = "crank"\nangle = ["O0", "A0"]\nfrom = {start_deg!r}\n'
+            f'to = {to_deg!r}\nsteps = {steps}\nrate = 60.0\n[solver]\nmethod = "{method}"\n')
 
 
 def main(argv=None) -> int:

@@ -80,3 +80,39 @@ def pseudo_inverse(J):
     inv_sv = np.where(cut, 1.0 / np.where(cut, sv, 1.0), 0.0)
     inv = np.einsum("sji,sj,skj->sik", Vt, inv_sv, U)
     return inv, cond
+
+
+#: a Jacobian with more unknowns than this gets its condition estimated from a few solves
+#: (:func:`estimate_inverse_norm1`) instead of forming the inverse, when nothing else needs
+#: the inverse (no force stage): n block solves per step cost more than ~7 from about here
+ESTIMATE_FROM = 16
+
+
+def estimate_inverse_norm1(solve, solve_transpose, n: int, S: int, iterations: int = 3):
+    """Return a lower bound (S,) of ``|J^-1|_1`` at every step, from a few solves: Hager's
+    method as refined by Higham (LAPACK's ``xLACON``, Higham 1988), vectorised over steps, run
+    from two starting vectors (the uniform one and Higham's alternating one), the larger kept.
+
+    ``solve(x)`` and ``solve_transpose(x)`` solve ``J y = x`` and ``J^T y = x`` for a list of n
+    arrays (S,) and return such a list. Each iterate ``|J^-1 x|_1`` with ``|x|_1 = 1`` is a
+    lower bound; the largest is kept. One start alone can stop at a vertex several times below
+    the norm (measured: 5.7x on a 36-unknown chain); with two starts the worst measured was
+    3.1x there, and 3x on the random families of tests/test_condition.py. ``derivatives`` takes
+    the exact value wherever the estimate comes within 1e-3 of the singular threshold, so a
+    step's status would need an estimate 1000x low to change."""
+    alt = np.array([(-1.0) ** i * (1.0 + i / max(n - 1, 1)) for i in range(n)])
+    starts = (np.full(n, 1.0 / n), alt / np.abs(alt).sum())
+    best = np.zeros(S)
+    finite = np.ones(S, dtype=bool)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for start in starts:
+            x = [np.full(S, v) for v in start]
+            for _ in range(iterations):
+                y = np.stack(solve(x))  # (n, S)
+                finite &= np.isfinite(y).all(axis=0)
+                best = np.fmax(best, np.abs(y).sum(axis=0))
+                sign = np.where(y >= 0, 1.0, -1.0)
+                z = np.abs(np.stack(solve_transpose(list(sign))))
+                j = np.argmax(z, axis=0)  # the next unit vector: the steepest direction
+                x = [(j == k).astype(float) for k in range(n)]
+    return np.where(finite, best, np.inf)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model, driver_scale, driver_values
-from .linalg import condition_and_inverse, is_singular
+from .linalg import ESTIMATE_FROM, POLISH_FROM, condition_and_inverse, estimate_inverse_norm1, is_singular
 from .sparse import engine
 from .linalg import CHUNK
 from ..status import OK, SINGULAR
@@ -29,8 +29,10 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
     acceleration_residual, status, jacobian_inverse (S, n_q, n_rows) or None.
     """
+    rcond = model.scene.solver.singular_rcond
     eng = None if dense else engine(model)
-    factorise = _dense_factors if eng is None else _engine_factors(eng)
+    factorise = (_dense_factors if eng is None else
+                 _engine_factors(eng, need_inverse or model.n_q <= ESTIMATE_FROM, rcond))
     S = X.shape[0]
     status = status.copy()
     condition = np.full(S, np.nan)
@@ -39,7 +41,6 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     A = np.full((S, model.n_points, 2), np.nan) if need_acceleration else None
     vres = np.full(S, np.nan)
     ares = np.full(S, np.nan) if need_acceleration else None
-    rcond = model.scene.solver.singular_rcond
     for lo in range(0, S, chunk):
         idx = lo + np.flatnonzero(status[lo:min(S, lo + chunk)] == OK)
         if not len(idx):
@@ -80,17 +81,37 @@ def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, nee
     return derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration, dense=True)
 
 
-def _engine_factors(eng):
+def _engine_factors(eng, with_inverse: bool, rcond: float):
     """The sparse engine's factorisation of a chunk of k steps: (condition (k,),
     ``regular_steps(rows (k,) bool)`` -> the g picked steps' ``solve(b (g, m)) -> J^-1 b``
-    (n, g), ``inverse()`` (g, n, m) and ``times_jacobian(x (n, g)) -> J x`` (m, g))."""
+    (n, g), ``inverse()`` (g, n, m) and ``times_jacobian(x (n, g)) -> J x`` (m, g)).
+
+    ``with_inverse``: the inverse by one block solve per unit right-hand side (the force stage
+    needs it; small Jacobians: the cheaper way to their exact condition). Otherwise no inverse:
+    the condition is estimated from a few solves (:func:`.linalg.estimate_inverse_norm1`), and
+    taken exactly where the estimate comes within POLISH_FROM of the singular threshold, so a
+    step's status never rests on an estimate; ``inverse`` is then None."""
     def factorise(model: Model, X, s):
         E = eng.entries(model.q_of(X), s)
-        inv = eng.inverse(E)  # (n, m, k): one block solve per unit right-hand side
-        cond = eng.condition(E, inv)
+        if with_inverse:
+            inv = eng.inverse(E)  # (n, m, k)
+            cond = eng.condition(E, inv)
+        else:
+            inv = None
+            k = E.shape[1]
+            est = estimate_inverse_norm1(lambda b: eng.solve(E, b),
+                                         lambda b: eng.solve_transpose(E, b), model.n_q, k)
+            cond = np.where(np.isfinite(est), eng.norm1(E) * est, np.inf)
+            near = is_singular(cond, rcond, POLISH_FROM)
+            if near.any():
+                cond[near] = eng.condition(E[:, near])
 
         def regular_steps(rows):
-            invg, Eg = (inv, E) if rows.all() else (inv[:, :, rows], E[:, rows])
+            Eg = E if rows.all() else E[:, rows]
+            if inv is None:
+                return (lambda b: np.stack(eng.solve(Eg, list(b.T))), None,
+                        lambda x: np.stack(eng.matvec(Eg, list(x))))
+            invg = inv if rows.all() else inv[:, :, rows]
             return (lambda b: np.einsum("imk,km->ik", invg, b),
                     lambda: np.moveaxis(invg, 2, 0),
                     lambda x: np.stack(eng.matvec(Eg, list(x))))
