@@ -163,14 +163,22 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
 
 
 def link_angles_unwrapped(model: Model, X: np.ndarray) -> np.ndarray:
-    """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps."""
+    """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
+
+    One vectorised pass: each gap is filled with the link's last angle before it (the first
+    one, before its first), so the jump across the gap is unwrapped as between neighbours and
+    the filled steps add zero corrections; the gaps are NaN again afterwards."""
     ang = model.link_angles(X)
-    out = np.full_like(ang, np.nan)
-    for j in range(ang.shape[1]):
-        col = ang[:, j]
-        fin = np.isfinite(col)
-        if fin.any():
-            out[fin, j] = np.unwrap(col[fin])
+    fin = np.isfinite(ang)
+    if fin.all():
+        return np.unwrap(ang, axis=0)
+    S = ang.shape[0]
+    rows = np.where(fin, np.arange(S)[:, None], -1)
+    np.maximum.accumulate(rows, axis=0, out=rows)  # the last finite step at or before each
+    first = np.argmax(fin, axis=0)  # the first finite step (0 where there is none)
+    rows = np.where(rows < 0, first, rows)
+    out = np.unwrap(np.take_along_axis(ang, rows, axis=0), axis=0)
+    out[~fin] = np.nan
     return out
 
 
