@@ -136,7 +136,7 @@ def _solve(scene: Scene, progress) -> Result:
     Xz = np.where(np.isfinite(X), X, 0.0)
     der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                           velocity=sweep.velocity, acceleration=sweep.acceleration,
-                          need_inverse=stages.forces)
+                          need_influence=stages.forces)
     kinematic_status = der["status"]
     seconds["jacobian"] = _time.perf_counter() - t0
     if scene.solver.derivatives == "finite_difference" and stages.velocity:
@@ -156,7 +156,7 @@ def _solve(scene: Scene, progress) -> Result:
         t0 = _time.perf_counter()
         motion = Motion(s=s, s_dot=s_dot, s_ddot=s_ddot, position=X, velocity=velocity,
                         acceleration=acceleration, status=kinematic_status,
-                        jacobian_inverse=der["jacobian_inverse"],
+                        influence=der["influence"],
                         link_angular_acceleration=link_rates[1])
         forces = compute_forces(model, motion, units_of(scene))
         seconds["forces"] = _time.perf_counter() - t0

@@ -41,7 +41,8 @@ class Motion:
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) driver values and rates in internal units
     (rad, length); ``position`` (S, n_points, 2) with NaN at failed steps; ``velocity`` and
     ``acceleration`` (S, n_points, 2) or None where the scene needs none; ``status`` (S,) the
-    kinematic status; ``jacobian_inverse`` (S, n_q, n_rows), NaN where the step is not ok;
+    kinematic status; ``influence`` (S, n_q, n_drivers) the influence coefficients dq/ds, NaN
+    where the step is not ok;
     ``link_angular_acceleration`` (S, n_links) rad/s^2 or None.
     """
 
@@ -52,7 +53,7 @@ class Motion:
     velocity: np.ndarray | None
     acceleration: np.ndarray | None
     status: np.ndarray
-    jacobian_inverse: np.ndarray
+    influence: np.ndarray
     link_angular_acceleration: np.ndarray | None
 
 

@@ -2,9 +2,10 @@
 
 ``linalg.estimate_inverse_norm1`` (Hager/Higham, LAPACK's xLACON) is checked against the exact
 ``|J^-1|_1`` of numpy's inverse: it is a lower bound by construction and, for these families,
-within the factor of 3 the literature gives. ``derivatives`` uses it only where the inverse is
-not needed and the Jacobian is larger than ESTIMATE_FROM unknowns, and takes the exact value
-wherever the estimate comes near the singular threshold, so statuses never rest on it.
+within the factor of 3 the literature gives. ``derivatives`` uses it for Jacobians larger than
+ESTIMATE_FROM unknowns (which it then never inverts: block solves give the velocities and the
+influence coefficients), and takes the exact value wherever the estimate comes near the
+singular threshold, so statuses never rest on it.
 """
 import sys
 import pathlib
@@ -88,9 +89,8 @@ def test_statuses_and_conditions_near_the_threshold_are_exact(chain_with_change_
     r = chain_with_change_points
     m = r.model
     _, s, sd, sdd = kin.driver_motion(m)
-    est = kin.derivatives(m, r.position, s, sd, sdd, r.status, True, need_inverse=False)
-    exact = kin.derivatives(m, r.position, s, sd, sdd, r.status, True, need_inverse=True)
-    assert est["jacobian_inverse"] is None
+    est = kin.derivatives(m, r.position, s, sd, sdd, r.status, True)
+    exact = kin.derivatives(m, r.position, s, sd, sdd, r.status, True, dense=True)  # inverse
     np.testing.assert_array_equal(est["status"], exact["status"])
     assert (exact["status"] == 2).sum() == 3  # the two change points and the closing step
     ok = np.isfinite(exact["condition"])
@@ -99,7 +99,13 @@ def test_statuses_and_conditions_near_the_threshold_are_exact(chain_with_change_
     assert (ratio <= 1 + 1e-12).all() and (ratio >= 1 / 4).all(), ratio.min()
     near = exact["condition"] * m.scene.solver.singular_rcond >= 1e-3
     assert near.sum() >= 4  # the steps next to the change points
-    np.testing.assert_array_equal(est["condition"][near], exact["condition"][near])
-    # the velocities and accelerations do not depend on how the condition was found
-    for key in ("velocity", "acceleration"):
-        np.testing.assert_allclose(est[key], exact[key], rtol=0, atol=1e-12)
+    # exact there: the engine's block inverse against numpy's dense one, to rounding
+    np.testing.assert_allclose(est["condition"][near], exact["condition"][near], rtol=1e-9)
+    # velocities, accelerations and influence coefficients by block solves equal the dense
+    # inverse's to rounding amplified by the step's condition: |error| <= 1e-13 cond |x|max
+    cond = exact["condition"][ok]
+    for key in ("velocity", "acceleration", "influence"):
+        a, b = est[key][ok], exact[key][ok]
+        scale = np.abs(b).reshape(len(b), -1).max(axis=1)
+        err = np.abs(a - b).reshape(len(b), -1).max(axis=1)
+        assert (err <= 1e-13 * cond * scale + 1e-15).all(), (key, (err / (cond * scale)).max())

@@ -86,9 +86,14 @@ def test_engine_derivatives_match_the_dense_ones(pair):
     a = kin.derivatives(model, X, s, sd, sdd, status, True)
     b = kin.dense_derivatives(model, X, s, sd, sdd, status, True)
     np.testing.assert_array_equal(a["status"], b["status"])
-    for key in ("velocity", "acceleration", "jacobian_inverse"):
+    for key in ("velocity", "acceleration", "influence"):
         assert rel_err(a[key], b[key]) <= REL, key
-    np.testing.assert_allclose(a["condition"], b["condition"], rtol=1e-9)
+    if model.n_q <= kin.linalg.ESTIMATE_FROM:
+        np.testing.assert_allclose(a["condition"], b["condition"], rtol=1e-9)
+    else:  # estimated without an inverse: a lower bound within 3x (tests/test_condition.py)
+        ratio = a["condition"] / b["condition"]
+        ok = np.isfinite(ratio)
+        assert (ratio[ok] <= 1 + 1e-9).all() and (ratio[ok] >= 1 / 3).all()
 
 
 @pytest.mark.parametrize("path", CONFIGS + sorted((CONFIG_DIR / "hard").glob("*.toml")),

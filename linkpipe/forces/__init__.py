@@ -39,7 +39,7 @@ def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
     ctx = Context.of(model, motion, units)
     n_steps = ctx.n_steps
     Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)
-    influence = Influence.of(model, motion.position, Xz, motion.s, motion.jacobian_inverse)
+    influence = Influence.of(model, motion.position, Xz, motion.s, motion.influence)
     variables: dict = {}
     coords: dict = {}
 

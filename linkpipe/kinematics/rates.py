@@ -14,29 +14,31 @@ from ..status import OK, SINGULAR
 
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
-                need_inverse: bool = True, chunk: int = CHUNK, dense: bool = False):
-    """Velocities, accelerations, condition and Jacobian inverse of a solved sweep: the one
-    place they are solved, from one factorisation of each ok step's Jacobian.
+                need_influence: bool = True, chunk: int = CHUNK, dense: bool = False):
+    """Velocities, accelerations, condition and influence coefficients of a solved sweep: the
+    one place they are solved, from one factorisation of each ok step's Jacobian.
 
-    The factorisation is the sparse engine's block-triangular inverse (:class:`.sparse.Engine`)
-    or, for a model without an engine (or ``dense=True``, the accuracy ladder's independent
-    check), the dense inverse (pseudo-inverse under redundant constraints). Per step: the
-    condition ``|J|_1 |J^-1|_1`` (sigma_1/sigma_n when redundant) flags SINGULAR steps (their
-    derivatives NaN); ``qd = J^-1 (-Phi_t)``, ``qdd = J^-1 gamma`` (or the given ``velocity``
-    / ``acceleration``, e.g. the dyads', checked by their residuals); the inverse is kept for
-    the force stage's influence coefficients unless ``need_inverse=False``.
+    The factorisation is the sparse engine's (:class:`.sparse.Engine`: its block-triangular
+    inverse up to ESTIMATE_FROM unknowns, its block solves beyond) or, for a model without an
+    engine (or ``dense=True``, the accuracy ladder's independent check), the dense inverse
+    (pseudo-inverse under redundant constraints). Per step: the condition ``|J|_1 |J^-1|_1``
+    (sigma_1/sigma_n when redundant; estimated beyond ESTIMATE_FROM unknowns, exact near the
+    threshold) flags SINGULAR steps (their derivatives NaN); ``qd = J^-1 (-Phi_t)``,
+    ``qdd = J^-1 gamma`` (or the given ``velocity`` / ``acceleration``, e.g. the dyads', checked
+    by their residuals); with ``need_influence`` the influence coefficients
+    ``dq/ds = -J^-1 Phi_s`` over the driver rows (what the force stage needs of the inverse).
 
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
-    acceleration_residual, status, jacobian_inverse (S, n_q, n_rows) or None.
+    acceleration_residual, status, influence (S, n_q, n_drivers) NaN where not ok, or None.
     """
     rcond = model.scene.solver.singular_rcond
     eng = None if dense else engine(model)
     factorise = (_dense_factors if eng is None else
-                 _engine_factors(eng, need_inverse or model.n_q <= ESTIMATE_FROM, rcond))
+                 _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond))
     S = X.shape[0]
     status = status.copy()
     condition = np.full(S, np.nan)
-    Jinv = np.full((S, model.n_q, model.n_rows), np.nan) if need_inverse else None
+    influence = np.full((S, model.n_q, model.n_drivers), np.nan) if need_influence else None
     V = np.full((S, model.n_points, 2), np.nan)
     A = np.full((S, model.n_points, 2), np.nan) if need_acceleration else None
     vres = np.full(S, np.nan)
@@ -54,10 +56,10 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         gi = idx[good]
         if not len(gi):
             continue
-        solve, inverse, times_jacobian = regular_steps(good)
-        if Jinv is not None:
-            Jinv[gi] = inverse()
+        solve, driver_columns, times_jacobian = regular_steps(good)
         Xg, sg = Xc[good], sc_[good]
+        if influence is not None:
+            influence[gi] = driver_columns(model.phi_s(Xg, sg))
         phit = -model.phi_t(Xg, sg, s_dot[gi])  # (g, m)
         # coordinates first, steps last (n, g): the engine's contiguous layout
         qd = solve(phit) if velocity is None else model.q_of(velocity[gi]).T
@@ -73,7 +75,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     if A is not None:
         A[:, model.fixed] = 0.0
     return dict(velocity=V, acceleration=A, condition=condition, velocity_residual=vres,
-                acceleration_residual=ares, status=status, jacobian_inverse=Jinv)
+                acceleration_residual=ares, status=status, influence=influence)
 
 
 def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool):
@@ -84,13 +86,16 @@ def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, nee
 def _engine_factors(eng, with_inverse: bool, rcond: float):
     """The sparse engine's factorisation of a chunk of k steps: (condition (k,),
     ``regular_steps(rows (k,) bool)`` -> the g picked steps' ``solve(b (g, m)) -> J^-1 b``
-    (n, g), ``inverse()`` (g, n, m) and ``times_jacobian(x (n, g)) -> J x`` (m, g)).
+    (n, g), ``driver_columns(phi_s (g, nd)) -> -J^-1 Phi_s`` over the driver rows (g, n, nd)
+    and ``times_jacobian(x (n, g)) -> J x`` (m, g)).
 
-    ``with_inverse``: the inverse by one block solve per unit right-hand side (the force stage
-    needs it; small Jacobians: the cheaper way to their exact condition). Otherwise no inverse:
-    the condition is estimated from a few solves (:func:`.linalg.estimate_inverse_norm1`), and
-    taken exactly where the estimate comes within POLISH_FROM of the singular threshold, so a
-    step's status never rests on an estimate; ``inverse`` is then None."""
+    ``with_inverse`` (small Jacobians): the inverse by one block solve per unit right-hand side,
+    the cheaper way to their exact condition. Otherwise no inverse: block solves, and the
+    condition estimated from a few of them (:func:`.linalg.estimate_inverse_norm1`), taken
+    exactly where the estimate comes within POLISH_FROM of the singular threshold, so a step's
+    status never rests on an estimate."""
+    rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
+
     def factorise(model: Model, X, s):
         E = eng.entries(model.q_of(X), s)
         if with_inverse:
@@ -98,9 +103,8 @@ def _engine_factors(eng, with_inverse: bool, rcond: float):
             cond = eng.condition(E, inv)
         else:
             inv = None
-            k = E.shape[1]
             est = estimate_inverse_norm1(lambda b: eng.solve(E, b),
-                                         lambda b: eng.solve_transpose(E, b), model.n_q, k)
+                                         lambda b: eng.solve_transpose(E, b), model.n_q, E.shape[1])
             cond = np.where(np.isfinite(est), eng.norm1(E) * est, np.inf)
             near = is_singular(cond, rcond, POLISH_FROM)
             if near.any():
@@ -108,13 +112,25 @@ def _engine_factors(eng, with_inverse: bool, rcond: float):
 
         def regular_steps(rows):
             Eg = E if rows.all() else E[:, rows]
-            if inv is None:
-                return (lambda b: np.stack(eng.solve(Eg, list(b.T))), None,
-                        lambda x: np.stack(eng.matvec(Eg, list(x))))
-            invg = inv if rows.all() else inv[:, :, rows]
-            return (lambda b: np.einsum("imk,km->ik", invg, b),
-                    lambda: np.moveaxis(invg, 2, 0),
-                    lambda x: np.stack(eng.matvec(Eg, list(x))))
+
+            def times_jacobian(x):
+                return np.stack(eng.matvec(Eg, list(x)))
+
+            if inv is not None:
+                invg = inv if rows.all() else inv[:, :, rows]
+                return (lambda b: np.einsum("imk,km->ik", invg, b),
+                        lambda phi_s: -np.moveaxis(invg[:, rows_d, :], 2, 0) * phi_s[:, None, :],
+                        times_jacobian)
+
+            def driver_columns(phi_s):
+                cols = []
+                for j in range(phi_s.shape[1]):
+                    b = [0.0] * model.n_rows
+                    b[rows_d.start + j] = -phi_s[:, j]
+                    cols.append(np.stack(eng.solve(Eg, b), axis=1))
+                return np.stack(cols, axis=2)
+
+            return lambda b: np.stack(eng.solve(Eg, list(b.T))), driver_columns, times_jacobian
 
         return cond, regular_steps
 
@@ -128,7 +144,8 @@ def _dense_factors(model: Model, X, s):
 
     def regular_steps(rows):
         invg, Jg = inv[rows], J[rows]
-        return (lambda b: np.einsum("sij,sj->is", invg, b), lambda: invg,
+        return (lambda b: np.einsum("sij,sj->is", invg, b),
+                lambda phi_s: -invg[:, :, model.driver_rows] * phi_s[:, None, :],
                 lambda x: np.einsum("sij,js->is", Jg, x))
 
     return cond, regular_steps
