@@ -40,8 +40,9 @@ class Stages:
 
 #: memory a sweep may need per step and point: 2 coordinates x 8 bytes x 40 arrays, an upper
 #: bound of the measured peaks (about 31 such arrays for the 100k-step crank-rocker with every
-#: effect, 9 for the Jansen linkage's kinematics); the force stage adds the constraint
-#: Jacobian's inverse, (2 P)^2 numbers per step, counted twice for its temporaries
+#: effect, 9 for the Jansen linkage's kinematics); the force stage stores as much again (the
+#: multipliers, pin and ground forces, per-effect loads) and never a dense Jacobian or inverse
+#: (its work on Phi_X goes term by term in chunks of steps: measured in tests/test_condition.py)
 BYTES_PER_POINT_STEP = 2 * 8 * 40
 
 
@@ -61,7 +62,7 @@ def check_memory(scene: Scene) -> None:
     """SceneError when the sweep would need more memory than is available (before any work:
     a run that the kernel kills half-way writes nothing)."""
     P = max(1, len(scene.points))
-    per_step = P * BYTES_PER_POINT_STEP + (2 * 8 * (2 * P) ** 2 if scene.effects else 0)
+    per_step = P * BYTES_PER_POINT_STEP * (2 if scene.effects else 1)
     need = scene.n_steps * per_step
     avail = available_memory()
     if avail is not None and need > avail:

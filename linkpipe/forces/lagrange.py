@@ -108,28 +108,37 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
     for the pairs of :func:`joints`. NaN at steps that are not ok.
     """
     fixed = np.flatnonzero(model.fixed)
+    fixed_slot = {int(p): k for k, p in enumerate(fixed)}
     pairs = joints(model)
-    row_link = body_rows(model)
+    pair_slot = {(li, p): k for k, (li, p) in enumerate(pairs)}
+    row_link = body_rows(model).tolist()
     S = X.shape[0]
     R = np.full((S, len(fixed), 2), np.nan)
     F = np.full((S, len(pairs), 2), np.nan)
     idx = np.flatnonzero(ok)
-    rows_of = {li: np.flatnonzero(row_link == li) for li in sorted({li for li, _ in pairs})}
-    for lo in range(0, len(idx), CHUNK):
+    for lo in range(0, len(idx), CHUNK):  # Phi_X term by term: never formed densely
         ii = idx[lo:lo + CHUNK]
-        Jp = model.jacobian_points(X[ii], s[ii])  # (s, rows, P, 2)
-        if len(fixed):
-            R[ii] = np.einsum("sr,srfj->sfj", lam[ii], Jp[:, :, fixed]) - point_forces[ii][:, fixed]
-        motors = motor_terms(model, X[ii], s[ii], lam[ii])
-        for li, rs in rows_of.items():
-            own = np.einsum("sr,srpj->spj", lam[ii][:, rs], Jp[:, rs])
-            if li in bodies:
-                own = own + bodies[li][ii]
-            if li in motors:
-                own = own + motors[li]
-            for k, (lj, p) in enumerate(pairs):
-                if lj == li:
-                    F[ii, k] = own[:, p]
+        lam_c = lam[ii]
+        Rc = -point_forces[ii][:, fixed]
+        Fc = np.zeros((len(ii), len(pairs), 2))
+        extra = motor_terms(model, X[ii], s[ii], lam_c)
+        for li, body in bodies.items():
+            extra[li] = extra[li] + body[ii] if li in extra else body[ii]
+        for (li, p), k in pair_slot.items():
+            if li in extra:
+                Fc[:, k] = extra[li][:, p]
+        for r, p, gx, gy in model.jacobian_terms(X[ii], s[ii]):
+            lr = lam_c[:, r]
+            k = fixed_slot.get(p)
+            if k is not None:
+                Rc[:, k, 0] += lr * gx
+                Rc[:, k, 1] += lr * gy
+            k = pair_slot.get((row_link[r], p))
+            if k is not None:
+                Fc[:, k, 0] += lr * gx
+                Fc[:, k, 1] += lr * gy
+        R[ii] = Rc
+        F[ii] = Fc
     return R, F
 
 

@@ -147,6 +147,13 @@ class Model:
             J[:, r, p, 1] += gy
         return J
 
+    def jacobian_terms(self, X: np.ndarray, s: np.ndarray):
+        """Yield Phi_X's non-zero terms ``(row, point, dphi/dx (S,), dphi/dy (S,))`` (floats where
+        constant; a point may recur in a row: add them) at positions X (S, P, 2): the sparse
+        form of :meth:`jacobian_points`, for work that must not form it densely."""
+        xy, cos_s, sin_s = _stacked(X, s)
+        return eq.jacobian_terms(self.rows, xy, cos_s, sin_s)
+
     def jacobian(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Return Phi_q ``(S, n_rows, n_q)``: the Jacobian with respect to the unknowns."""
         J = self.jacobian_points(X, s).reshape(X.shape[0], self.n_rows, -1)
