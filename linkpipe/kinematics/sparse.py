@@ -39,19 +39,7 @@ class Engine:
         self.relative = np.flatnonzero(model.drv_kind == eq.RELATIVE)
         na = len(self.angle)
         self.n_features = 1 + n + 2 * na
-        C = self._coefficients()  # (n_features, m, n)
-        nz = np.abs(C).max(axis=0) > 0
-        for j in self.relative:
-            r = model.n_constraints + j
-            C[:, r] = 0.0
-            nz[r] = False
-            kind, a, b, axis, c, d, L = model.rows.drivers[j]
-            for p in (a, b, c, d):
-                if not model.fixed[p]:
-                    k = int(np.searchsorted(model.moving, p))
-                    nz[r, 2 * k:2 * k + 2] = True
-        self.rows, self.cols = np.nonzero(nz)  # entries, row-major
-        self.C = np.ascontiguousarray(C[:, self.rows, self.cols])  # (n_features, nnz)
+        self.rows, self.cols, self.C = self._coefficients()  # entries row-major; (n_features, nnz)
         self.CT = np.ascontiguousarray(self.C.T)
         self._terms = [(float(col[0]), [(int(f), float(col[f])) for f in np.flatnonzero(col) if f > 0])
                        for col in self.C.T]  # per entry: constant, [(feature, coefficient)]
@@ -60,35 +48,58 @@ class Engine:
         self._check()
 
     # ------------------------------------------------------------------ the affine map
-    def _jac(self, q, s):
-        model = self.model
-        return model.jacobian(model.positions(q[None]), s[None])[0]
-
     def _coefficients(self):
+        """Return (rows, cols, C (n_features, nnz)): each non-zero entry's affine coefficients,
+        read off the model's own Jacobian terms at 1 + n + 2 na probe configurations at once
+        (q = 0; q = e_k; an angle driver at pi and pi/2), entry by entry: never a dense
+        (n_features, m, n) array. Relative angle rows get their structural pattern only (their
+        entries come from the equations at every step)."""
         model = self.model
-        n, nd = model.n_q, model.n_drivers
-        q0, s0 = np.zeros(n), np.zeros(nd)
-        J0 = self._jac(q0, s0)
-        C = np.zeros((self.n_features,) + J0.shape)
-        base = J0.copy()
+        n, nd, na = model.n_q, model.n_drivers, len(self.angle)
+        n_probes = 1 + n + 2 * na
+        probe_q = np.zeros((n_probes, n))
+        probe_q[1:1 + n] = np.eye(n)
+        probe_s = np.zeros((n_probes, nd))
         for k, j in enumerate(self.angle):
-            sp = s0.copy()
-            sp[j] = np.pi
-            Jpi = self._jac(q0, sp)
-            sp[j] = np.pi / 2
-            Jh = self._jac(q0, sp)
-            bc = 0.5 * (J0 - Jpi)
+            probe_s[1 + n + k, j] = np.pi
+            probe_s[1 + n + na + k, j] = np.pi / 2
+        slot = {int(p): k for k, p in enumerate(model.moving)}
+        relative_rows = {model.n_constraints + int(j) for j in self.relative}
+        values: dict = {}  # (row, col) -> (n_probes,), terms added in the model's order
+        for r, p, gx, gy in model.jacobian_terms(model.positions(probe_q), probe_s):
+            if p not in slot:
+                continue
+            for col, g in ((2 * slot[p], gx), (2 * slot[p] + 1, gy)):
+                values[(r, col)] = values[(r, col)] + g if (r, col) in values else (
+                    np.zeros(n_probes) + g)
+        keys = sorted(k for k in values if k[0] not in relative_rows)
+        V = np.array([values[k] for k in keys]).reshape(len(keys), n_probes).T  # (n_probes, e)
+        J0 = V[0]
+        C = np.zeros((self.n_features, len(keys)))
+        base = J0.copy()
+        for k in range(na):
+            bc = 0.5 * (J0 - V[1 + n + k])
             C[1 + n + k] = bc
-            C[1 + n + len(self.angle) + k] = Jh - J0 + bc
+            C[1 + n + na + k] = V[1 + n + na + k] - J0 + bc
             base = base - bc
         C[0] = base
-        for k in range(n):
-            e = np.zeros(n)
-            e[k] = 1.0
-            C[1 + k] = self._jac(e, s0) - J0
+        C[1:1 + n] = V[1:1 + n] - J0
         # clean rounding noise: entries are exact small rationals of the lengths
-        C[np.abs(C) < 1e-14 * max(1.0, np.abs(C).max())] = 0.0
-        return C
+        C[np.abs(C) < 1e-14 * max(1.0, np.abs(C).max() if C.size else 0.0)] = 0.0
+        keep = np.abs(C).max(axis=0) > 0 if C.size else np.zeros(0, dtype=bool)
+        entries = {k: C[:, e] for e, k in enumerate(keys) if keep[e]}
+        for j in self.relative:  # structural pattern: the driver's moving points
+            r = model.n_constraints + int(j)
+            _, a, b, _, c, d, _ = model.rows.drivers[j]
+            for p in (a, b, c, d):
+                if p in slot:
+                    for col in (2 * slot[p], 2 * slot[p] + 1):
+                        entries[(r, col)] = np.zeros(self.n_features)
+        order = sorted(entries)
+        rows = np.array([r for r, _ in order], dtype=np.intp)
+        cols = np.array([c for _, c in order], dtype=np.intp)
+        Cs = np.array([entries[k] for k in order]).reshape(len(order), self.n_features).T
+        return rows, cols, np.ascontiguousarray(Cs)
 
     def features(self, q: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Return the features (n_features, S) of positions q (S, n_q) and driver values s (S, nd)."""
