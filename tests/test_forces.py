@@ -353,3 +353,30 @@ def test_pins_between_two_bodies_transmit_equal_and_opposite_forces():
     np.testing.assert_allclose(F[J.index("O4@rocker")], R[1], atol=1e-9)
     fp = 80 * np.array([np.cos(np.deg2rad(330)), np.sin(np.deg2rad(330))])
     np.testing.assert_allclose(F[J.index("P@coupler")], fp, atol=1e-9)
+
+
+def test_a_load_at_a_shared_pin_is_what_its_pin_forces_sum_to():
+    """A four-bar (crank-rocker config) with a load W at the coupler-rocker pin B and no other
+    effect: coupler and rocker are massless two-force members, so by statics at the pin
+    W = f_c u_AB + f_r u_O4B (two unknowns, two equations), and the pin exerts f_c u_AB on the
+    coupler and f_r u_O4B on the rocker (directions: from their other end towards B). The
+    forces the pin exerts on its bodies sum to the load; at A, with no load, they sum to zero."""
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+    text += '\n[analysis]\neffects = ["loads"]\n\n[[loads]]\nname = "w"\npoint = "B"\nforce = [30.0, -120.0]\n'
+    scene = linkpipe.scene.parse_scene(text, "loaded.toml")
+    r = linkpipe.solve(scene)
+    W = np.array([30.0, -120.0])
+    J = _joint_names(r)
+    F = r.forces["joint_force"][1]
+    X = r.position
+    A, B, O4 = (X[:, r.point_names.index(n)] for n in ("A", "B", "O4"))
+    u_c = (B - A) / np.linalg.norm(B - A, axis=1)[:, None]
+    u_r = (B - O4) / np.linalg.norm(B - O4, axis=1)[:, None]
+    M = np.stack([u_c, u_r], axis=2)  # (S, 2, 2): columns u_c, u_r
+    f = np.linalg.solve(M, np.broadcast_to(W, (len(X), 2))[..., None])[..., 0]
+    on_coupler, on_rocker = F[:, J.index("B@coupler")], F[:, J.index("B@rocker")]
+    # ~100 N loads, positions to 1e-12 m: 1e-9 N is rounding with margin
+    np.testing.assert_allclose(on_coupler, f[:, :1] * u_c, atol=1e-9)
+    np.testing.assert_allclose(on_rocker, f[:, 1:] * u_r, atol=1e-9)
+    np.testing.assert_allclose(on_coupler + on_rocker, np.broadcast_to(W, on_coupler.shape), atol=1e-9)
+    np.testing.assert_allclose(F[:, J.index("A@crank")] + F[:, J.index("A@coupler")], 0.0, atol=1e-9)
