@@ -241,6 +241,7 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
     sc = result.scene
     lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
              f"{result.n_steps - result.n_ok} failed)"]
+    lines += [f"  warning: {w}" for w in sc.warnings]
     solved = np.isfinite(result.position).all(axis=(1, 2))  # not no_assembly / not_converged
     if np.isfinite(result.residual[solved]).any():
         how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else

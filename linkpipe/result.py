@@ -267,6 +267,7 @@ class Result:
             attrs["max_acceleration_residual"] = float(np.nanmax(self.acceleration_residual))
         if self.time_note:
             attrs["time_note"] = self.time_note
+        attrs["warnings"] = list(self.scene.warnings)  # legal but probably not meant
         for key, val in self.units().items():
             attrs[f"units_{key}"] = val
         for stage, sec in self.seconds.items():

@@ -46,8 +46,9 @@ KEYS: dict[str, dict[str, str]] = {
     "sliders.along": {"through": "[0.0, 0.0]", "direction": "[0.0, 1.0]"},
     "drivers": {"name": '"crank"', "angle": '["O2", "A"]', "coordinate": '"P.y"',
                 "distance": '["C1", "C2"]', "relative_to": '["B", "A"]',
-                "from": "0.0", "to": "360.0", "steps": "361", "step": "1.0", "rate": "0.0",
-                "acceleration": "0.0", "input": '{ point = "H", direction = [0.0, 1.0] }'},
+                "from": "0.0", "to": "360.0", "steps": "361", "step": "1.0",
+                "rate": '0.0 (driver units per second, or with a unit: "120 rpm", "50 mm/s")',
+                "acceleration": '0.0 (or with a unit: "30 deg/s^2")', "input": '{ point = "H", direction = [0.0, 1.0] }'},
     "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]", "link": '"handle"'},
     "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
                "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
@@ -106,6 +107,11 @@ def _show(value) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+#: words users write for a key, and the key they mean (a closest-spelling hint would miss them)
+SYNONYMS = {"rpm": "rate", "speed": "rate", "omega": "rate", "velocity": "rate",
+            "angular_velocity": "rate", "angular_speed": "rate", "alpha": "acceleration",
+            "angular_acceleration": "acceleration", "accel": "acceleration"}
+
 #: the keys of ``[scene].units`` (their values are free text, recorded in the outputs)
 UNIT_KEYS = ("length", "mass", "time", "force")
 
@@ -142,8 +148,10 @@ class _Table:
         """Raise on the first key that is not in the vocabulary, with a "did you mean"."""
         for key in self.data:
             if key not in self.examples:
-                raise self.error(key, "unknown key",
-                                 _suggest(key, self.examples))
+                meant = SYNONYMS.get(str(key).lower())
+                hint = (f'did you mean "{meant}"? ({self.example(meant)})'
+                        if meant in self.examples else _suggest(key, self.examples))
+                raise self.error(key, "unknown key", hint)
 
     def error(self, key: str | None, message: str, hint: str = "") -> SceneError:
         return SceneError(self.path, self.label, key, message, hint)

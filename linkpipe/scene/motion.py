@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from . import units
 from .keys import EFFECT_NEEDS, _Table, _show, _suggest, _table_ref
 from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver
 
@@ -59,9 +60,23 @@ class MotionTables:
             self.check_distance_driver(table, points, start, stop)
         steps, step = self.driver_steps(table, start, stop)
         return Driver(table.data["name"], kind, tuple(points), axis, start, stop, steps, step,
-                      rate=table.number("rate", 0.0),
-                      acceleration=table.number("acceleration", 0.0),
+                      rate=self.rate(table, "rate", kind, 1),
+                      acceleration=self.rate(table, "acceleration", kind, 2),
                       input=self.driver_input(table), relative_to=relative_to, bodies=bodies)
+
+    def rate(self, table: _Table, key: str, kind: str, order: int) -> float:
+        """A driver's rate (order 1) or acceleration (order 2): a number in driver units per
+        second (squared), or a string with a unit (:mod:`.units`), converted here."""
+        if not isinstance(table.data.get(key), str):
+            return table.number(key, 0.0)
+        try:
+            return units.convert(table.data[key], kind, order, self.units.get("length"))
+        except ValueError as exc:
+            listed = ", ".join(f'"{u}"' for u in units.accepted(kind, order))
+            raise table.error(key, str(exc), f"write a number ({'degrees' if kind == 'angle' else 'length units'} "
+                              f"per second{'' if order == 1 else ' squared'}) or one of the units "
+                              f'{listed}, e.g. {key} = "{120 if kind == "angle" else 50} '
+                              f'{units.accepted(kind, order)[2 if kind == "angle" else 1]}"') from None
 
     def driven_coordinate(self, table: _Table) -> tuple[tuple[str], int]:
         text = table.string("coordinate")

@@ -16,6 +16,7 @@ from .tables import Link, Point, Scene
 from .geometry import GeometryTables
 from .motion import EffectTables, MotionTables
 from .springs import SpringTables
+from . import units
 
 
 class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
@@ -98,6 +99,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
             if name not in TABLES:
                 raise self.error(name, None, "unknown table", _suggest(name, TABLES))
         scene = self.scene_table()
+        self.units = scene["units"]
         self.point_table()
         self.link_tables()
         sliders = self.slider_tables()
@@ -114,8 +116,18 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
                      points=tuple(self.points.values()), links=tuple(self.links.values()),
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
-                     outputs=outputs, torsion_springs=torsion_springs)
+                     outputs=outputs, torsion_springs=torsion_springs,
+                     warnings=self.warnings(gravity, effects))
 
+
+    def warnings(self, gravity, effects) -> tuple[str, ...]:
+        """What is legal but probably not meant (printed in the summary, stored in the .h5)."""
+        out = []
+        if gravity is not None and "gravity" in effects:
+            note = units.gravity_warning(gravity, self.units.get("length"))
+            if note:
+                out.append(f"{self.path}: {note}")
+        return tuple(out)
 
     def scene_table(self) -> dict:
         table = self.table("scene")

@@ -210,6 +210,7 @@ class Scene:
     masses: tuple[Mass, ...] = ()
     loads: tuple[Load, ...] = ()
     outputs: Outputs = Outputs()
+    warnings: tuple[str, ...] = ()  # legal but probably not meant (the summary prints them)
     torsion_springs: tuple[TorsionSpring, ...] = ()
 
     @property

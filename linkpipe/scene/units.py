@@ -1,0 +1,82 @@
+"""Driver rates written with a unit, and gravity checked against the scene's length unit.
+
+linkpipe does no unit conversion of the scene as a whole (``[scene].units`` is metadata); a
+driver's ``rate`` and ``acceleration`` alone may carry a unit, because a speed is so often
+quoted in one (``"120 rpm"``, ``"12.57 rad/s"``, ``"720 deg/s"``, ``"50 mm/s"``): the string is
+turned here into the number v1 means (degrees per second for an angle; the scene's length unit
+per second for a length), once, at load. A small table of factors, no units library.
+"""
+from __future__ import annotations
+
+import math
+import re
+
+#: an angle rate's units in degrees per second (rate) or per second squared (acceleration)
+ANGLE_RATE = {"deg/s": 1.0, "rad/s": 180.0 / math.pi, "rpm": 6.0, "rev/min": 6.0, "rev/s": 360.0}
+ANGLE_ACCELERATION = {"deg/s^2": 1.0, "rad/s^2": 180.0 / math.pi, "rev/s^2": 360.0}
+#: lengths in metres, for a length rate's unit against the scene's ``units.length``
+LENGTH_M = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "km": 1e3, "in": 0.0254, "ft": 0.3048}
+#: standard gravity in each length unit per s^2
+STANDARD_GRAVITY_M = 9.80665
+
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z/^²2\s]+?)\s*$")
+
+
+def _normal(unit: str) -> str:
+    """'deg / s²' -> 'deg/s^2'; 'mm/s2' -> 'mm/s^2'."""
+    unit = unit.replace(" ", "").replace("²", "^2")
+    return unit[:-1] + "^2" if unit.endswith("/s2") else unit
+
+
+def accepted(kind: str, order: int) -> list[str]:
+    """The units a driver of ``kind`` ("angle" or a length kind) accepts for its rate (order 1)
+    or acceleration (order 2)."""
+    if kind == "angle":
+        return list(ANGLE_RATE if order == 1 else ANGLE_ACCELERATION)
+    suffix = "/s" if order == 1 else "/s^2"
+    return [u + suffix for u in LENGTH_M]
+
+
+def convert(text: str, kind: str, order: int, length_unit: str | None) -> float:
+    """Return the value of ``text`` ("<number> <unit>") in the driver's own units per second
+    (order 1) or per second squared (order 2). Raises ValueError with the reason (the caller
+    names the file, table and key)."""
+    match = _QUANTITY.match(text)
+    if not match:
+        raise ValueError(f'"{text}" is not a number with a unit')
+    value, unit = float(match.group(1)), _normal(match.group(2))
+    if kind == "angle":
+        table = ANGLE_RATE if order == 1 else ANGLE_ACCELERATION
+        if unit not in table:
+            raise ValueError(f'unit "{match.group(2).strip()}" does not fit an angle driver')
+        return value * table[unit]
+    suffix = "/s" if order == 1 else "/s^2"
+    if not unit.endswith(suffix) or unit[:-len(suffix)] not in LENGTH_M:
+        raise ValueError(f'unit "{match.group(2).strip()}" does not fit a {kind} driver '
+                         f"(a length per second{'' if order == 1 else ' squared'})")
+    if length_unit not in LENGTH_M:
+        raise ValueError(f"[scene].units.length is {_quote(length_unit)}, not a length unit "
+                         "linkpipe can convert to")
+    return value * LENGTH_M[unit[:-len(suffix)]] / LENGTH_M[length_unit]
+
+
+def _quote(unit) -> str:
+    return "not given" if unit is None else f'"{unit}"'
+
+
+def gravity_warning(g: tuple[float, float], length_unit: str | None) -> str:
+    """A warning when |g| is standard gravity in another length unit than the scene's (9.81 in
+    a millimetre scene is 1000x too weak), else ""."""
+    magnitude = math.hypot(*g)
+    if length_unit not in LENGTH_M or magnitude == 0:
+        return ""
+    expected = STANDARD_GRAVITY_M / LENGTH_M[length_unit]
+    if abs(magnitude / expected - 1) <= 0.05:
+        return ""
+    for unit, metres in LENGTH_M.items():
+        if abs(magnitude / (STANDARD_GRAVITY_M / metres) - 1) <= 0.05:
+            return (f"[gravity] g has magnitude {magnitude:g}, standard gravity in {unit}/s^2, but "
+                    f'[scene].units.length is "{length_unit}": in {length_unit}/s^2 it is '
+                    f"{expected:.6g} (the weights come out {magnitude / expected:.3g} times "
+                    f"Earth's)")
+    return ""

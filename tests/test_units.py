@@ -1,0 +1,107 @@
+"""Rates written with a unit, gravity against the scene's length unit, and the words users
+write for ``rate``: each with its exact conversion factor or message."""
+import math
+import re
+
+import h5py
+import numpy as np
+import pytest
+
+import linkpipe
+from linkpipe.__main__ import main
+from linkpipe.scene import parse_scene
+
+import pathlib
+
+CONFIGS = pathlib.Path(__file__).resolve().parents[1] / "configs"
+CRANK = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+DUMP = (CONFIGS / "dump_truck.toml").read_text()
+
+
+def _with(text, key, value):
+    new, n = re.subn(rf"^{key} = .*$", f"{key} = {value}", text, count=1, flags=re.M)
+    if n == 0:  # the key is not written yet: add it after the driver's steps
+        new = re.sub(r"^(steps = .*)$", rf"\1\n{key} = {value}", text, count=1, flags=re.M)
+    return new
+
+
+@pytest.mark.parametrize("written, deg_per_s", [
+    ('"120 rpm"', 720.0), ('"12.57 rad/s"', 12.57 * 180 / math.pi), ('"720 deg/s"', 720.0),
+    ('"2 rev/s"', 720.0), ('"60 rev/min"', 360.0), ("572.9578", 572.9578), ('"-30deg/s"', -30.0)])
+def test_angle_rates_with_units(written, deg_per_s):
+    scene = parse_scene(_with(CRANK, "rate", written), "crank.toml")
+    assert scene.drivers[0].rate == pytest.approx(deg_per_s, rel=1e-15)
+
+
+@pytest.mark.parametrize("written, per_s2", [
+    ('"30 deg/s^2"', 30.0), ('"1 rad/s^2"', 180 / math.pi), ('"0.5 rev/s^2"', 180.0),
+    ('"10 deg/s²"', 10.0)])
+def test_angle_accelerations_with_units(written, per_s2):
+    scene = parse_scene(_with(CRANK, "acceleration", written), "crank.toml")
+    assert scene.drivers[0].acceleration == pytest.approx(per_s2, rel=1e-15)
+
+
+@pytest.mark.parametrize("written, m_per_s", [
+    ('"100 mm/s"', 0.1), ('"0.1 m/s"', 0.1), ('"10 cm/s"', 0.1), ('"4 in/s"', 0.1016),
+    ('"1 ft/s"', 0.3048)])
+def test_cylinder_rates_in_the_scenes_length_unit(written, m_per_s):
+    scene = parse_scene(_with(DUMP, "rate", written), "dump.toml")  # units.length = "m"
+    assert scene.drivers[0].rate == pytest.approx(m_per_s, rel=1e-15)
+    mm = parse_scene(_with(DUMP, "rate", written).replace('length = "m"', 'length = "mm"'), "dump.toml")
+    assert mm.drivers[0].rate == pytest.approx(m_per_s * 1000, rel=1e-15)
+
+
+def test_a_rate_with_a_unit_moves_the_mechanism_as_the_number_does():
+    a = linkpipe.solve(parse_scene(_with(CRANK, "rate", '"10 rad/s"'), "a.toml"))
+    b = linkpipe.solve(parse_scene(_with(CRANK, "rate", repr(10 * 180 / math.pi)), "b.toml"))
+    np.testing.assert_array_equal(a.velocity, b.velocity)
+
+
+BAD = [
+    (CRANK, "rate", '"5 mm/s"', "does not fit an angle driver"),
+    (CRANK, "rate", '"fast"', "is not a number with a unit"),
+    (CRANK, "acceleration", '"3 rad/s"', "does not fit an angle driver"),
+    (DUMP, "rate", '"3 rpm"', "does not fit a distance driver"),
+    (DUMP, "rate", '"3 mm/s^2"', "does not fit a distance driver"),
+    (DUMP.replace('length = "m"', 'length = "furlong"'), "rate", '"3 mm/s"', "not a length unit"),
+]
+
+
+@pytest.mark.parametrize("text, key, value, words", BAD, ids=[f"{b[1]}={b[2]}" for b in BAD])
+def test_a_unit_that_does_not_fit_is_one_message_exit_2_nothing_written(tmp_path, capsys, text,
+                                                                     key, value, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(_with(text, key, value))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert str(path) in err and f"] {key}:" in err and words in err
+    assert "write a number" in err  # the accepted forms are listed
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize("word", ["rpm", "speed", "omega", "velocity", "angular_velocity"])
+def test_the_words_users_write_for_rate_point_to_rate(word):
+    with pytest.raises(linkpipe.SceneError) as err:
+        parse_scene(CRANK.replace("rate = ", f"{word} = ", 1), "crank.toml")
+    assert f'did you mean "rate"?' in str(err.value)
+
+
+def test_gravity_in_the_wrong_unit_is_a_warning_in_the_summary_and_the_h5(tmp_path, capsys):
+    """9.81 in a millimetre scene: standard gravity in m/s^2, 1000x too weak in mm/s^2."""
+    text = (CONFIGS / "basketball_goal.toml").read_text()
+    assert 'length = "ft"' in text
+    path = tmp_path / "goal_mm.toml"
+    path.write_text(text.replace('length = "ft"', 'length = "mm"'))  # g stays 32.174 ft/s^2
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-rrd"]) == 0
+    out = capsys.readouterr().out
+    assert "warning:" in out and "standard gravity in ft/s^2" in out and '"mm"' in out
+    with h5py.File(tmp_path / "out" / "basketball_goal.h5") as f:
+        warnings = [w.decode() if isinstance(w, bytes) else w for w in f.attrs["warnings"]]
+    assert len(warnings) == 1 and "9806.65" in warnings[0]
+
+
+def test_gravity_in_the_scenes_unit_gives_no_warning():
+    for name in ("basketball_goal", "excavator_arm", "dump_truck", "hatch_gas_spring"):
+        assert linkpipe.load_scene(str(CONFIGS / f"{name}.toml")).warnings == ()
