@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+from . import sides
 from .keys import _Table, _show, _suggest, _type_name
 from .tables import Link, Point, Slider
 
@@ -57,50 +58,74 @@ class GeometryTables:
             for name in names:
                 self.point(table, "points", name)
             self._check_frame(table, names)
-            for i, a in enumerate(names):
-                for b in names[i + 1:]:
-                    pa, pb = self.points[a], self.points[b]
-                    if (pa.x, pa.y) == (pb.x, pb.y):
-                        raise table.error("points", f'points "{a}" and "{b}" are at the same '
-                                          f"place ({pa.x:g}, {pa.y:g}) on one link",
-                                          "move one of them in [points] (x, y are the start "
-                                          "configuration)")
-            link = Link(table.data["name"], names, self.link_length(table, names),
-                        self.link_local(table, names))
+            pa, pb = self.points[names[0]], self.points[names[1]]
+            if (pa.x, pa.y) == (pb.x, pb.y):  # further points may coincide (a tracer on a pin)
+                raise table.error("points", f'points "{names[0]}" and "{names[1]}" are at the '
+                                  f"same place ({pa.x:g}, {pa.y:g}): the first two points of a "
+                                  "link span its frame", "move one of them in [points] (x, y "
+                                  "are the start configuration), or list another point second")
+            length, distances = self.link_lengths(table, names)
+            local = self.link_local(table, names)
+            local.update(self.local_from_distances(table, names, length, distances, local))
+            link = Link(table.data["name"], names, length, local)
             self.links[link.name] = link
         if not self.links:
             raise self.error("links", None, "no links: the scene needs at least one [[links]]",
                              'add [[links]] with name = "..." and points = ["A", "B"]')
 
-
-    def link_length(self, table: _Table, names) -> float | None:
-        """``lengths = { "A-B" = d }``: only the first two points' distance may be given."""
+    def link_lengths(self, table: _Table, names):
+        """``lengths``: the first two points' distance (or None) and the further points'
+        distances ``{(earlier point, later point): d}`` (a pair given once, either way round)."""
         if not table.has("lengths"):
-            return None
-        a, b = names[0], names[1]
+            return None, {}
         if not isinstance(table.data["lengths"], dict):
             raise table.wrong_type("lengths", "a table")
         sub = _Table(self.path, f"{table.label}.lengths", table.data["lengths"], "links",
                      examples={key: "3.5" for key in table.data["lengths"]})
-        length = None
+        order = {n: i for i, n in enumerate(names)}
+        length, distances = None, {}
         for key in sub.data:
-            if key not in (f"{a}-{b}", f"{b}-{a}"):
-                raise sub.error(key, f'only the distance of the first two points, "{a}-{b}", '
-                                "may be given",
-                                "further points are held by `local`: write "
-                                f'local = {{ P = [u, v] }} for a point P after "{a}", "{b}"')
-            length = sub.number(key, geometric=True)
-            if length <= MIN_LENGTH:
-                raise sub.error(key, f"must be positive (above {MIN_LENGTH:g}), got {length:g}",
-                                f'write the distance of "{a}" and "{b}"')
-            pa, pb = self.points[a], self.points[b]
-            if pa.fixed and pb.fixed:  # nothing moves to meet this length: it must hold as drawn
-                drawn = math.hypot(pb.x - pa.x, pb.y - pa.y)
-                if abs(drawn - length) > 1e-9 * max(drawn, length):
-                    raise sub.error(key, f'"{a}" and "{b}" are both fixed, {drawn:g} apart, but '
-                                    f"the length says {length:g}",
-                                    "move the fixed points, or correct (or drop) the length")
-        return length
+            pair = self._pair_of(sub, key, names)
+            pair = tuple(sorted(pair, key=order.get))
+            if pair in distances or (pair == tuple(names[:2]) and length is not None):
+                raise sub.error(key, f'the distance of "{pair[0]}" and "{pair[1]}" is given '
+                                "twice", f'keep one of "{pair[0]}-{pair[1]}" and '
+                                f'"{pair[1]}-{pair[0]}"')
+            d = sub.number(key, geometric=True)
+            if d <= MIN_LENGTH:
+                raise sub.error(key, f"must be positive (above {MIN_LENGTH:g}), got {d:g}",
+                                f'write the distance of "{pair[0]}" and "{pair[1]}"')
+            if pair == tuple(names[:2]):
+                length = d
+                self._check_fixed_length(sub, key, pair, d)
+            else:
+                distances[pair] = (key, d)
+        return length, distances
+
+    def _pair_of(self, sub: _Table, key: str, names) -> tuple[str, str]:
+        """The two points a ``lengths`` key "X-Y" names, both on the link."""
+        for cut in range(1, len(key)):  # point names may hold "-": find the split that fits
+            if key[cut] == "-" and key[:cut] in names and key[cut + 1:] in names:
+                if key[:cut] == key[cut + 1:]:
+                    break
+                return key[:cut], key[cut + 1:]
+        raise sub.error(key, f'"{key}" is not two points of this link joined by "-"',
+                        f'write "<point>-<point>" with points of {list(names)}, e.g. '
+                        f'"{names[0]}-{names[1]}"')
+
+    def _check_fixed_length(self, sub, key, pair, length) -> None:
+        pa, pb = self.points[pair[0]], self.points[pair[1]]
+        if pa.fixed and pb.fixed:  # nothing moves to meet this length: it must hold as drawn
+            drawn = math.hypot(pb.x - pa.x, pb.y - pa.y)
+            if abs(drawn - length) > 1e-9 * max(drawn, length):
+                raise sub.error(key, f'"{pair[0]}" and "{pair[1]}" are both fixed, {drawn:g} '
+                                f"apart, but the length says {length:g}",
+                                "move the fixed points, or correct (or drop) the length")
+
+    def local_from_distances(self, table: _Table, names, length, distances, local) -> dict:
+        """Local coordinates of the further points given by two distances to points placed
+        before them (:mod:`.sides`), once, at load."""
+        return sides.place(self, table, names, length, distances, local)
 
 
     def link_local(self, table: _Table, names) -> dict[str, tuple[float, float]]:
@@ -126,7 +151,6 @@ class GeometryTables:
                                 f'add "{name}" to its points')
             local[name] = sub.pair(name)
         return local
-
 
     def slider_tables(self) -> tuple[Slider, ...]:
         sliders = []
