@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import Model, driver_scale, driver_values
+from ..model import Model, driver_scale
+from ..model.drive import driver_motion as drive_motion
 from .linalg import ESTIMATE_FROM, POLISH_FROM, condition_and_inverse, estimate_inverse_norm1, is_singular
 from .sparse import engine
 from .linalg import CHUNK
@@ -213,11 +214,9 @@ def link_rates(model: Model, X, V, A=None):
 
 
 def driver_motion(model: Model):
-    """Return driver values in scene units and (s, s_dot, s_ddot) in internal units, each (S, nd)."""
-    scene = model.scene
-    value = driver_values(scene)
-    scale = driver_scale(scene)
-    rate = np.array([d.rate for d in scene.drivers], dtype=float) * scale
-    acc = np.array([d.acceleration for d in scene.drivers], dtype=float) * scale
-    S = value.shape[0]
-    return value, value * scale, np.broadcast_to(rate, (S, len(rate))).copy(), np.broadcast_to(acc, (S, len(acc))).copy()
+    """Return driver values in scene units and (s, s_dot, s_ddot) in internal units, each
+    (S, nd): a v1 sweep's constant rates, or a [time] sweep's per-step rates
+    (:func:`linkpipe.model.drive.driver_motion`; NaN at steps without a logged value)."""
+    motion = drive_motion(model.scene)
+    scale = driver_scale(model.scene)
+    return motion.value, motion.value * scale, motion.rate * scale, motion.acceleration * scale
