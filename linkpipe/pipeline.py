@@ -151,7 +151,8 @@ def _solve(scene: Scene, progress) -> Result:
     seconds["jacobian"] = _time.perf_counter() - t0
     if scene.solver.derivatives == "finite_difference" and stages.velocity:
         t0 = _time.perf_counter()
-        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, kinematic_status, stages.acceleration))
+        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, kinematic_status,
+                                   stages.acceleration, drive.time))
         seconds["fd_derivatives"] = _time.perf_counter() - t0
     velocity = der["velocity"] if stages.velocity else None
     acceleration = der["acceleration"] if stages.acceleration else None
@@ -215,10 +216,10 @@ def _sweep_where_present(model, s, s_dot, s_ddot, order, present) -> kin.Sweep:
     return kin.Sweep(**full, method=sub.method, note=sub.note)
 
 
-def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration) -> dict:
+def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration, time) -> dict:
     """Velocities (and accelerations) by finite differences of the positions along the sweep,
     NaN where a step is not ok, with the residuals of the stored (finite-difference) values."""
-    fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, need_acceleration)
+    fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, need_acceleration, time)
     ok = (status == OK)[:, None, None]
     out = {"velocity": np.where(ok, fdV, np.nan)}
     if need_acceleration:

@@ -153,14 +153,18 @@ def _dense_factors(model: Model, X, s):
 
 
 def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,
-                   status: np.ndarray, need_acceleration: bool):
+                   status: np.ndarray, need_acceleration: bool, time: np.ndarray | None = None):
     """Return velocities and accelerations (S, n_points, 2) by finite differences along the sweep.
 
     The shortcut many scripts take (the accuracy ladder compares it with the linear solves):
     dX/ds by second-order differences over the first driver's values (``np.gradient``),
-    then V = dX/ds * s_dot and A = d2X/ds2 * s_dot^2 + dX/ds * s_ddot. Steps next to a failed
-    step are NaN.
+    then V = dX/ds * s_dot and A = d2X/ds2 * s_dot^2 + dX/ds * s_ddot; with ``time`` (a
+    [time] sweep, whose drivers may turn back or move on other laws) by differences in time:
+    V = dX/dt, A = d2X/dt2. Steps next to a failed step are NaN.
     """
+    if time is not None:
+        ones = np.ones((len(time), 1))
+        return fd_derivatives(X, time[:, None], ones, 0 * ones, status, need_acceleration)
     S = X.shape[0]
     V = np.full_like(X, np.nan)
     A = np.full_like(X, np.nan) if need_acceleration else None

@@ -107,9 +107,9 @@ def time_column(frame, column: str, path: Path, table: _Table) -> np.ndarray:
     bad = np.flatnonzero(~(step > 0))
     if len(bad):
         i = int(bad[0]) + 1
-        raise table.error("time", f'"{path}" {row_label(path, i)}: time {t[i]!r} does not '
-                          f"increase (the row before has {t[i - 1]!r}); the time column must be "
-                          "strictly increasing", "sort the log by time and remove repeated "
+        raise table.error("time", f'"{path}" {row_label(path, i)}: time {float(t[i])!r} does '
+                          f"not increase (the row before has {float(t[i - 1])!r}); the time "
+                          "column must be strictly increasing", "sort the log by time and remove repeated "
                           "time stamps")
     return t
 
