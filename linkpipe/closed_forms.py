@@ -52,7 +52,8 @@ def fourbar(a, b, c, d, theta2, omega2, alpha2, branch=+1, coupler_uv=(0.0, 0.0)
     B = A + along[:, None] * e + branch * h[:, None] * ep
     t3 = np.arctan2(B[:, 1] - A[:, 1], B[:, 0] - A[:, 0])
     t4 = np.arctan2(B[:, 1] - O4[1], B[:, 0] - O4[0])
-    w2, al2 = omega2, alpha2
+    w2 = np.asarray(omega2, float)  # a constant rate, or one per step (S,)
+    al2 = np.asarray(alpha2, float)
     w3 = a * w2 / b * np.sin(t4 - t2) / np.sin(t3 - t4)
     w4 = a * w2 / c * np.sin(t2 - t3) / np.sin(t4 - t3)
     # acceleration (Norton 7.12 with R4 from O4 to B)
@@ -69,8 +70,9 @@ def fourbar(a, b, c, d, theta2, omega2, alpha2, branch=+1, coupler_uv=(0.0, 0.0)
     e2 = np.stack([np.cos(t2), np.sin(t2)], -1)
     e3 = np.stack([np.cos(t3), np.sin(t3)], -1)
     e4 = np.stack([np.cos(t4), np.sin(t4)], -1)
-    VA = a * w2 * perp(e2)
-    AA = a * al2 * perp(e2) - a * w2**2 * e2
+    w2c, al2c = w2[..., None], al2[..., None]  # against (S, 2) vectors
+    VA = a * w2c * perp(e2)
+    AA = a * al2c * perp(e2) - a * w2c**2 * e2
     VB = c * w4[:, None] * perp(e4)
     AB = c * al4[:, None] * perp(e4) - c * (w4**2)[:, None] * e4
     u, vv = coupler_uv
@@ -308,11 +310,12 @@ def evaluate(form: ClosedForm, scene, s, s_dot, s_ddot):
     """Return positions, velocities, accelerations (S, n_points, 2) of every point.
 
     ``s``, ``s_dot``, ``s_ddot`` (S,) or (S, 1): the driver's angle (rad, direction of its vector
-    from +x), rate and acceleration. Steps outside the assembly range are NaN.
+    from +x), rate and acceleration at each step (a time-driven sweep's vary; a scalar or a
+    single value is taken for every step). Steps outside the assembly range are NaN.
     """
     s = np.asarray(s, dtype=float).reshape(-1)
-    w = float(np.asarray(s_dot, dtype=float).reshape(-1)[0]) if np.size(s_dot) else 0.0
-    al = float(np.asarray(s_ddot, dtype=float).reshape(-1)[0]) if np.size(s_ddot) else 0.0
+    w, al = (np.broadcast_to(np.asarray(x, dtype=float).reshape(-1) if np.size(x) else 0.0,
+                             s.shape).copy() for x in (s_dot, s_ddot))
     X0 = np.array([[p.x, p.y] for p in scene.points], dtype=float)
     if form.kind == "cylinder_rocker":
         return _evaluate_cylinder_rocker(form, X0, s, w, al)

@@ -9,8 +9,10 @@ from threadpoolctl import threadpool_limits
 
 from . import kinematics as kin
 from .model import build_model, check_mobility
+from .model import driver_scale as model_driver_scale
+from .model.drive import driver_motion as drive_motion
 from .result import Motion, Result, units_of
-from .status import OK, assign, counts
+from .status import NO_INPUT, OK, assign, counts
 from .errors import SceneError
 from .scene import Scene, load_scene
 
@@ -85,7 +87,10 @@ def preflight(scene: Scene):
     model = build_model(scene)
     mob = check_mobility(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
-    kin.start_state(model, s[0], scene.solver.tol * model.size, scene.solver.max_iter)
+    present = np.flatnonzero(np.isfinite(s).all(axis=1))  # not every logged value is missing
+    if len(present):
+        kin.start_state(model, s[present[0]], scene.solver.tol * model.size,
+                        scene.solver.max_iter)
     return model, mob
 
 
@@ -123,11 +128,16 @@ def _solve(scene: Scene, progress) -> Result:
 
     tell("positions")
     t0 = _time.perf_counter()
-    value, s, s_dot, s_ddot = kin.driver_motion(model)
+    drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
+    scale = model_driver_scale(scene)
+    value, s, s_dot, s_ddot = (drive.value, drive.value * scale, drive.rate * scale,
+                               drive.acceleration * scale)
     # closed-form dyads or the general Newton path, as [solver] method says (see kinematics.solve_sweep);
     # the dyad path also gives velocities and accelerations here
     order = 2 if stages.acceleration else 1 if stages.velocity else 0
-    sweep = kin.solve_sweep(model, s, s_dot, s_ddot, order)
+    present = np.isfinite(s).all(axis=1)  # False where a logged driver value is missing
+    sweep = (kin.solve_sweep(model, s, s_dot, s_ddot, order) if present.all()
+             else _sweep_where_present(model, s, s_dot, s_ddot, order, present))
     X = sweep.position
     link_angle = kin.link_angles_unwrapped(model, X)
     seconds["positions"] = _time.perf_counter() - t0
@@ -142,7 +152,8 @@ def _solve(scene: Scene, progress) -> Result:
     seconds["jacobian"] = _time.perf_counter() - t0
     if scene.solver.derivatives == "finite_difference" and stages.velocity:
         t0 = _time.perf_counter()
-        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, kinematic_status, stages.acceleration))
+        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, kinematic_status,
+                                   stages.acceleration, drive.time))
         seconds["fd_derivatives"] = _time.perf_counter() - t0
     velocity = der["velocity"] if stages.velocity else None
     acceleration = der["acceleration"] if stages.acceleration else None
@@ -171,6 +182,8 @@ def _solve(scene: Scene, progress) -> Result:
     time, time_note = _time_axis(scene, value)
     return Result(
         scene=scene, model=model, mobility=mobility, driver_value=value, time=time,
+        driver_velocity=drive.rate if scene.time is not None else None,
+        driver_acceleration=drive.acceleration if scene.time is not None else None,
         time_note=time_note, position=X, link_angle=link_angle, status=status,
         residual=sweep.residual, iterations=sweep.iterations, condition=der["condition"],
         velocity=velocity, acceleration=acceleration,
@@ -183,10 +196,31 @@ def _solve(scene: Scene, progress) -> Result:
         solver_method_used=sweep.method, solver_note=sweep.note)
 
 
-def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration) -> dict:
+def _sweep_where_present(model, s, s_dot, s_ddot, order, present) -> kin.Sweep:
+    """Stage 1 on the steps that have every driver value (the others: status no_input, every
+    moving quantity NaN). The continuation runs from one present step to the next, so a
+    missing sample leaves its neighbours' solutions as they would be without it."""
+    S, idx = s.shape[0], np.flatnonzero(present)
+    X = np.full((S, model.n_points, 2), np.nan)
+    X[:, model.fixed] = model.start_position[model.fixed]
+    full = dict(position=X, residual=np.full(S, np.nan), iterations=np.zeros(S, np.int32),
+                status=np.full(S, NO_INPUT, np.int8))
+    if not len(idx):
+        return kin.Sweep(**full, method="none", note="no step has every driver value")
+    sub = kin.solve_sweep(model, s[idx], s_dot[idx], s_ddot[idx], order)
+    for key in ("position", "residual", "iterations", "status"):
+        full[key][idx] = getattr(sub, key)
+    for key in ("velocity", "acceleration"):
+        if getattr(sub, key) is not None:
+            full[key] = np.full((S, model.n_points, 2), np.nan)
+            full[key][idx] = getattr(sub, key)
+    return kin.Sweep(**full, method=sub.method, note=sub.note)
+
+
+def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration, time) -> dict:
     """Velocities (and accelerations) by finite differences of the positions along the sweep,
     NaN where a step is not ok, with the residuals of the stored (finite-difference) values."""
-    fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, need_acceleration)
+    fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, need_acceleration, time)
     ok = (status == OK)[:, None, None]
     out = {"velocity": np.where(ok, fdV, np.nan)}
     if need_acceleration:
@@ -219,6 +253,8 @@ def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]
     """Return (seconds per step, note): the time when every driver has a rate and no
     acceleration, ``|value - from| / |rate|``, and all drivers agree on it (to 1e-9 of the
     sweep's duration); else None, with a note saying why when the rates alone would give one."""
+    if scene.time is not None:
+        return np.asarray(scene.time.instants, dtype=float), ""
     rates = np.array([d.rate for d in scene.drivers], dtype=float)
     accs = np.array([d.acceleration for d in scene.drivers], dtype=float)
     if not len(rates) or np.any(rates == 0) or np.any(accs != 0):

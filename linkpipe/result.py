@@ -85,7 +85,8 @@ class Forces:
 class Result:
     """Everything one run produced, step axis first (like scipy's ``OdeResult``).
 
-    Kinematic arrays: ``driver_value`` (S, n_drivers), ``time`` (S,) or None, ``position``
+    Kinematic arrays: ``driver_value`` (S, n_drivers), ``time`` (S,) or None,
+    ``driver_velocity``/``driver_acceleration`` (S, n_drivers) in a [time] sweep, ``position``
     (S, n_points, 2), ``velocity``/``acceleration`` (S, n_points, 2) or None, ``link_angle``
     (S, n_links) rad unwrapped, ``link_angular_velocity``/``_acceleration`` (S, n_links) or
     None, ``status`` (S,) int8, ``residual`` (S,), ``iterations`` (S,), ``condition`` (S,).
@@ -107,6 +108,8 @@ class Result:
     condition: np.ndarray
     velocity: np.ndarray | None = None
     acceleration: np.ndarray | None = None
+    driver_velocity: np.ndarray | None = None
+    driver_acceleration: np.ndarray | None = None
     link_angular_velocity: np.ndarray | None = None
     link_angular_acceleration: np.ndarray | None = None
     velocity_residual: np.ndarray | None = None
@@ -196,6 +199,13 @@ class Result:
         ]
         if self.time is not None:
             out.append(Variable("time", ("step",), self.time, "s" if T in ("s", "") else T))
+        for name, data, per in (("driver_velocity", self.driver_velocity, T),
+                                ("driver_acceleration", self.driver_acceleration, f"{T}^2")):
+            if data is not None:
+                units = [f"{d}/{per}" for d in dunits]
+                out.append(Variable(name, ("step", "driver"), data,
+                                    units[0] if len(set(units)) == 1 else "mixed",
+                                    {"driver_units": ",".join(units)}))
         out.append(Variable("position", ("step", "point", "xy"), self.position, L))
         if self.velocity is not None:
             out.append(Variable("velocity", ("step", "point", "xy"), self.velocity, f"{L}/{T}"))

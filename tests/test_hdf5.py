@@ -26,7 +26,8 @@ def expected_contract_variables(scene) -> set[str]:
     """The contract's variables a scene calls for, from the scene alone (SCENE_FORMAT.md:
     velocities when damping or inertia is on or outputs ask, accelerations when inertia is on
     or outputs ask, `vectors` asking for both; spring variables with springs; input forces
-    when any effect is on; time when every driver has a rate, no acceleration, and all agree)."""
+    when any effect is on; time with [time], or when every driver has a rate, no acceleration,
+    and all agree)."""
     out = {"driver_value", "position", "link_angle", "status", "residual", "iterations",
            "condition"}
     effects, asked = set(scene.effects), set(scene.outputs.kinematics)
@@ -41,7 +42,9 @@ def expected_contract_variables(scene) -> set[str]:
     if effects:
         out |= {"input_force", "input_force_lagrange"}
     drivers = scene.drivers
-    if all(d.rate != 0 and d.acceleration == 0 for d in drivers):
+    if scene.time is not None:  # a [time] sweep: its instants
+        out.add("time")
+    elif all(d.rate != 0 and d.acceleration == 0 for d in drivers):
         durations = {round(abs(d.to_value - d.from_value) / abs(d.rate), 9) for d in drivers}
         if len(durations) == 1:
             out.add("time")

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import Model, driver_scale, driver_values
+from ..model import Model, driver_scale
+from ..model.drive import driver_motion as drive_motion
 from .linalg import ESTIMATE_FROM, POLISH_FROM, condition_and_inverse, estimate_inverse_norm1, is_singular
 from .sparse import engine
 from .linalg import CHUNK
@@ -152,14 +153,18 @@ def _dense_factors(model: Model, X, s):
 
 
 def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,
-                   status: np.ndarray, need_acceleration: bool):
+                   status: np.ndarray, need_acceleration: bool, time: np.ndarray | None = None):
     """Return velocities and accelerations (S, n_points, 2) by finite differences along the sweep.
 
     The shortcut many scripts take (the accuracy ladder compares it with the linear solves):
     dX/ds by second-order differences over the first driver's values (``np.gradient``),
-    then V = dX/ds * s_dot and A = d2X/ds2 * s_dot^2 + dX/ds * s_ddot. Steps next to a failed
-    step are NaN.
+    then V = dX/ds * s_dot and A = d2X/ds2 * s_dot^2 + dX/ds * s_ddot; with ``time`` (a
+    [time] sweep, whose drivers may turn back or move on other laws) by differences in time:
+    V = dX/dt, A = d2X/dt2. Steps next to a failed step are NaN.
     """
+    if time is not None:
+        ones = np.ones((len(time), 1))
+        return fd_derivatives(X, time[:, None], ones, 0 * ones, status, need_acceleration)
     S = X.shape[0]
     V = np.full_like(X, np.nan)
     A = np.full_like(X, np.nan) if need_acceleration else None
@@ -213,11 +218,9 @@ def link_rates(model: Model, X, V, A=None):
 
 
 def driver_motion(model: Model):
-    """Return driver values in scene units and (s, s_dot, s_ddot) in internal units, each (S, nd)."""
-    scene = model.scene
-    value = driver_values(scene)
-    scale = driver_scale(scene)
-    rate = np.array([d.rate for d in scene.drivers], dtype=float) * scale
-    acc = np.array([d.acceleration for d in scene.drivers], dtype=float) * scale
-    S = value.shape[0]
-    return value, value * scale, np.broadcast_to(rate, (S, len(rate))).copy(), np.broadcast_to(acc, (S, len(acc))).copy()
+    """Return driver values in scene units and (s, s_dot, s_ddot) in internal units, each
+    (S, nd): a v1 sweep's constant rates, or a [time] sweep's per-step rates
+    (:func:`linkpipe.model.drive.driver_motion`; NaN at steps without a logged value)."""
+    motion = drive_motion(model.scene)
+    scale = driver_scale(model.scene)
+    return motion.value, motion.value * scale, motion.rate * scale, motion.acceleration * scale

@@ -35,6 +35,10 @@ OFF_BRANCH = 0.01  # a fine step may move at most this part of its interval's mo
 OFF_BRANCH_ABS = 1e-6  # this times the size) from its prediction; farther is another branch
 
 
+MAX_NODE_SHARE = 0.25  # drivers that turn back at more than this share of the steps (a
+#                        noisy log): the sequential continuation on every step
+
+
 def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk: int = CHUNK,
                  start=None):
     """Solve the sweep by the general path, vectorised; return a dict.
@@ -43,23 +47,24 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
     :func:`linkpipe.kinematics.solve_positions`), ``sequential`` (S,) bool where the sequential
     continuation solved the step. Falls back to the sequential
     path for every step when the model has no engine, the scene asks for a finite-difference
-    Jacobian, or the driver values are not evenly spaced. ``start``: the
+    Jacobian, or the drivers turn back at more than MAX_NODE_SHARE of the steps (every
+    turn is a coarse node). Any spacing of the driver values is fine: the prediction is a
+    Hermite cubic in the driver value (:func:`_parameter`). ``start``: the
     :func:`linkpipe.kinematics.start_state` at ``s[0]`` when the caller has it already.
     """
     sc = model.scene.solver
     S = s.shape[0]
     eng = engine(model)
     k = max(1, int(np.ceil((S - 1) / max(1, coarse))))
-    even = S < 3 or np.allclose(np.diff(s, axis=0), (s[-1] - s[0]) / (S - 1),
-                                rtol=0, atol=1e-9 * max(1.0, float(np.abs(s).max())))
+    nodes = _nodes(s, k) if S >= VECTORISE_FROM else None
     out = {}
-    if eng is None or sc.jacobian != "analytic" or S < VECTORISE_FROM or not even:
+    if (eng is None or sc.jacobian != "analytic" or S < VECTORISE_FROM
+            or len(nodes) > MAX_NODE_SHARE * S):
         q0, slope0 = start if start is not None else (None, None)
         q, res, it, st = solve_positions(model, s, q_start=q0, start_slope=slope0)
         out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
         return out
     tol_abs = sc.tol * model.size
-    nodes = np.r_[np.arange(0, S - 1, k), S - 1]
     if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
         start = start_state(model, s[0], tol_abs, sc.max_iter)
     qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
@@ -70,30 +75,56 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
     out["q"][nodes], out["residual"][nodes] = qn, resn
     out["iterations"][nodes], out["status"][nodes] = itn, stn
     out["sequential"][nodes] = True
-    ds = (s[-1] - s[0]) / (S - 1)  # driver increment per step (nd,)
-    slope, regular = _node_slopes(model, eng, qn, s[nodes], ds, stn == OK)
-    bad_interval = _refine_between_nodes(model, eng, out, s, nodes, qn, slope, regular, chunk)
+    chord = np.diff(s[nodes], axis=0)  # each interval's driver increment (n_nodes - 1, nd)
+    slopes, regular = _node_slopes(model, eng, qn, s[nodes], chord, stn == OK)
+    bad_interval = _refine_between_nodes(model, eng, out, s, nodes, qn, slopes, regular, chunk)
     _rerun_sequentially(model, out, s, nodes, qn, bad_interval, start)
     return out
 
 
-def _node_slopes(model: Model, eng, qn, s_nodes, ds, ok):
-    """Return the slopes dq/dstep (n_nodes, n_q) at the coarse nodes, from the engine, and
-    which nodes are regular (ok, finite slope, condition clear of the singular threshold)."""
-    slope = np.full_like(qn, np.nan)
+def _nodes(s: np.ndarray, k: int) -> np.ndarray:
+    """The coarse nodes: every k-th step, the last, and every step where a driver turns back
+    (its increments change sign, or start or stop being zero), so that between two nodes
+    every driver moves one way and the Hermite parameter of :func:`_parameter` is monotonic."""
+    S = s.shape[0]
+    sign = np.sign(np.diff(s, axis=0))  # (S - 1, nd)
+    turns = np.flatnonzero((sign[1:] != sign[:-1]).any(axis=1)) + 1
+    return np.union1d(np.r_[np.arange(0, S - 1, k), S - 1], turns)
+
+
+def _parameter(s: np.ndarray, s_a: np.ndarray, chord: np.ndarray) -> np.ndarray:
+    """Where each step lies on its interval's chord, 0 at its first node and 1 at its next:
+    ``(s - s_a) . c / c . c`` (per step: s, s_a, chord (k, nd)); 0 where the drivers do not
+    move over the interval. With one driver (or drivers moving along a straight line, as
+    drivers with one law do) this is exact; the Hermite cubic in it is then a cubic in the
+    driver value, whatever the spacing of the steps."""
+    cc = np.einsum("kj,kj->k", chord, chord)
+    dot = np.einsum("kj,kj->k", s - s_a, chord)
+    return np.divide(dot, cc, out=np.zeros_like(dot), where=cc > 0)
+
+
+def _node_slopes(model: Model, eng, qn, s_nodes, chord, ok):
+    """Return each node's slope along the interval after it and along the interval before it,
+    ``dq/ds . chord`` (two (n_nodes, n_q) arrays: the Hermite data per interval), from the
+    engine, and which nodes are regular (ok, finite slopes, condition clear of the singular
+    threshold)."""
+    after, before = np.full_like(qn, np.nan), np.full_like(qn, np.nan)
     ok = ok.copy()
     if ok.any():
         Xn = model.positions(qn[ok])
         E = eng.entries(qn[ok], s_nodes[ok])
-        rhs = -model.phi_t(Xn, s_nodes[ok], np.broadcast_to(ds, (ok.sum(), len(ds))))
-        slope[ok] = np.stack(eng.solve(E, _rows(rhs)), axis=1)
+        zero = np.zeros((1, chord.shape[1]))
+        for slope, c in ((after, np.r_[chord, zero]), (before, np.r_[zero, chord])):
+            rhs = -model.phi_t(Xn, s_nodes[ok], c[ok])
+            slope[ok] = np.stack(eng.solve(E, _rows(rhs)), axis=1)
         cond = eng.condition(E)
         near_singular = is_singular(cond, model.scene.solver.singular_rcond, POLISH_FROM)
         ok[np.flatnonzero(ok)[near_singular]] = False
-    return slope, ok & np.isfinite(slope).all(axis=1)
+    regular = ok & np.isfinite(after).all(axis=1) & np.isfinite(before).all(axis=1)
+    return (after, before), regular
 
 
-def _refine_between_nodes(model: Model, eng, out: dict, s, nodes, qn, slope, regular, chunk):
+def _refine_between_nodes(model: Model, eng, out: dict, s, nodes, qn, slopes, regular, chunk):
     """Every fine step of an interval between two regular nodes, at once: Newton from the
     cubic Hermite prediction; a step that does not converge, or lands farther from its
     prediction than a small part of its interval's motion, marks its interval bad (returned,
@@ -107,16 +138,25 @@ def _refine_between_nodes(model: Model, eng, out: dict, s, nodes, qn, slope, reg
     fine = np.ones(S, dtype=bool)
     fine[nodes] = False
     steps = np.flatnonzero(fine & np.r_[interval_ok[seg], False])
+    # where each step lies on its interval (0 at its first node, 1 at the next); an interval
+    # where that is not monotonic within [0, 1] (drivers on a curved path) goes sequentially
+    chord = np.diff(s[nodes], axis=0)
+    t_all = np.zeros(S)
+    t_all[steps] = _parameter(s[steps], s[nodes][seg[steps]], chord[seg[steps]])
+    t_next = np.r_[t_all[1:], 1.0]  # the next step's parameter (1 at the next node)
+    t_next[nodes[1:] - 1] = 1.0
+    wrong = (t_all[steps] < 0) | (t_next[steps] > 1) | (t_next[steps] < t_all[steps])
+    bad_interval[np.unique(seg[steps[wrong]])] = True
+    steps = steps[~bad_interval[seg[steps]]]
     # per interval, coordinates first (the chunks below work on contiguous (n_q, k) arrays):
-    # the Hermite data (values and slopes per unit t) and the largest motion of a coordinate
-    h_int = lengths[:, None].astype(float)
-    hermite_T = [np.ascontiguousarray(a.T) for a in (qn[:-1], slope[:-1] * h_int, qn[1:],
-                                                        slope[1:] * h_int)]
+    # the Hermite data (values and slopes per unit parameter) and a coordinate's largest motion
+    after, before = slopes
+    hermite_T = [np.ascontiguousarray(a.T) for a in (qn[:-1], after[:-1], qn[1:], before[1:])]
     span_int = (np.abs(qn[1:] - qn[:-1]).max(axis=1) if model.n_q else np.zeros(len(lengths)))
     for lo in range(0, len(steps), chunk):
         ii = steps[lo:lo + chunk]
         g = seg[ii]
-        t = (ii - nodes[g]) / lengths[g]
+        t = t_all[ii]
         predT = _hermite_T(*(np.take(a, g, axis=1) for a in hermite_T), t)
         sT = np.ascontiguousarray(s[ii].T)
         qT, res, its, conv, _ = _newton_soa(eng, predT.copy(), sT, tol_abs,

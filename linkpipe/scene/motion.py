@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from . import units
 from .keys import EFFECT_NEEDS, _Table, _show, _suggest, _table_ref
+from .timing import check_not_timed
 from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver
 
 
@@ -30,6 +33,8 @@ class MotionTables:
         drivers = [self.driver(table) for table in tables]
         first = drivers[0]
         for table, driver in zip(tables[1:], drivers[1:]):
+            if self.time is not None:
+                break  # every driver has the instants of [time]
             if driver.steps != first.steps:
                 raise table.error("step" if table.has("step") else "steps",
                                   f'gives {driver.steps} steps but drivers "{first.name}" '
@@ -55,13 +60,20 @@ class MotionTables:
             raise table.error("angle", f'"{points[0]}" and "{points[1]}" are both fixed: '
                               "their direction cannot be driven",
                               "drive the direction from a point to a moving point")
-        start, stop = table.number("from"), table.number("to")
         if kind == "distance":
-            self.check_distance_driver(table, points, start, stop)
-        steps, step = self.driver_steps(table, start, stop)
-        return Driver(table.data["name"], kind, tuple(points), axis, start, stop, steps, step,
-                      rate=self.rate(table, "rate", kind, 1),
-                      acceleration=self.rate(table, "acceleration", kind, 2),
+            self.check_distance_bodies(table, points)
+        if self.time is not None:
+            fields = self.timed_driver(table, kind, self.time, self.logs)
+        else:
+            check_not_timed(table)
+            start, stop = table.number("from"), table.number("to")
+            steps, step = self.driver_steps(table, start, stop)
+            fields = dict(from_value=start, to_value=stop, steps=steps, step=step,
+                          rate=self.rate(table, "rate", kind, 1),
+                          acceleration=self.rate(table, "acceleration", kind, 2))
+        if kind == "distance" and fields.get("timed") != "log":
+            self.check_distance_values(table, fields)
+        return Driver(table.data["name"], kind, tuple(points), axis, **fields,
                       input=self.driver_input(table), relative_to=relative_to, bodies=bodies)
 
     def rate(self, table: _Table, key: str, kind: str, order: int) -> float:
@@ -122,8 +134,8 @@ class MotionTables:
                               "other link the motor turns against")
         return first, second
 
-    def check_distance_driver(self, table: _Table, points, start: float, stop: float) -> None:
-        """A linear actuator joins two bodies and has a positive length at every step."""
+    def check_distance_bodies(self, table: _Table, points) -> None:
+        """A linear actuator joins two bodies."""
         a, b = points
         if a == b:
             raise table.error("distance", f'"{a}" is named twice: a cylinder joins two points',
@@ -136,10 +148,23 @@ class MotionTables:
             raise table.error("distance", f'"{a}" and "{b}" are both points of link "{body}": '
                               "their distance is fixed by the link",
                               "attach the cylinder's ends to two different bodies")
-        for key, value in (("from", start), ("to", stop)):
+
+    def check_distance_values(self, table: _Table, fields: dict) -> None:
+        """A cylinder has a positive length at every step: from and to (a law moves between
+        them; a rate, from + rate t + acceleration t^2/2, is checked at every instant)."""
+        for key, value in (("from", fields["from_value"]), ("to", fields["to_value"])):
             if not value > 0:
                 raise table.error(key, f"{key} = {value:g}: a cylinder's length must be positive",
                                   "give the pin-to-pin length, e.g. from = 1.2, to = 1.65")
+        if fields.get("timed") == "rate":
+            t = self.time.instants - self.time.from_value
+            low = float(np.min(fields["from_value"] + fields["rate"] * t
+                               + 0.5 * fields["acceleration"] * t * t))
+            if not low > 0:
+                raise table.error("rate", f"the cylinder's length from + rate t + acceleration "
+                                  f"t^2/2 falls to {low:g} within [time]",
+                                  "a cylinder's length must stay positive: change rate, "
+                                  "acceleration or [time]")
 
     def driver_input(self, table: _Table):
         if not table.has("input"):

@@ -17,15 +17,18 @@ from .geometry import GeometryTables
 from .motion import EffectTables, MotionTables
 from .springs import SpringTables
 from . import units
+from .timing import TimeTables
 
 
-class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
+class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTables):
     """Read one scene; the table readers run in dependency order (names before their users)."""
 
     def __init__(self, data: dict, text: str, path: str):
         self.data, self.text, self.path = data, text, path
         self.points: dict[str, Point] = {}
         self.links: dict[str, Link] = {}
+        self.time = None
+        self.logs = {}
 
 
     def error(self, table: str, key: str | None, message: str, hint: str = "") -> SceneError:
@@ -103,6 +106,8 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
         self.point_table()
         self.link_tables()
         sliders = self.slider_tables()
+        self.logs = self.log_tables()
+        self.time = self.time_table(self.logs)
         drivers = self.driver_tables()
         solver = self.solver_table()
         gravity = self.gravity_table()
@@ -116,8 +121,8 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables):
                      points=tuple(self.points.values()), links=tuple(self.links.values()),
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
-                     outputs=outputs, torsion_springs=torsion_springs,
-                     warnings=self.warnings(gravity, effects))
+                     outputs=outputs, torsion_springs=torsion_springs, time=self.time,
+                     logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects))
 
 
     def warnings(self, gravity, effects) -> tuple[str, ...]:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 
 EFFECTS = ("springs", "gravity", "inertia", "damping", "loads")
 #: ``[[springs]] kind`` (first = default); "ground" as a torsion spring's second link
@@ -76,6 +78,13 @@ class Driver:
     number of steps; ``step`` is the step size when the scene gave ``step`` (values are then
     ``from + i*step``), else None (values ``from + i*(to-from)/(steps-1)``).
     ``rate`` and ``acceleration`` in driver units per s and s^2 (degrees for angles).
+
+    In a scene with ``[time]`` (:class:`TimeSweep`) the value is a function of time: ``law``
+    (one of :data:`LAWS`, from ``from_value`` to ``to_value`` over the sweep), ``rate`` and
+    ``acceleration`` (``from + rate t + acceleration t^2/2``; ``to_value`` is then that value at
+    the last instant), or ``log`` = (log name, column) times ``scale`` through a spline with
+    ``smoothing`` (``from_value``/``to_value``: the smallest and largest finite value the
+    log gives, which sets a distance row's scale). ``steps`` is then the number of instants.
     """
 
     name: str
@@ -91,11 +100,49 @@ class Driver:
     input: Input | None = None
     relative_to: tuple[str, str] | None = None
     bodies: tuple[str, str] | None = None
+    law: str | None = None
+    log: tuple[str, str] | None = None
+    scale: float = 1.0
+    smoothing: float = 0.0
+    timed: str | None = None  # in a [time] scene: "law", "log" or "rate"; None in a v1 sweep
 
     @property
     def is_angle(self) -> bool:
         """Whether the driven value is an angle (degrees in the file, radians inside)."""
         return self.kind == "angle"
+
+
+#: the motion laws of ``[[drivers]] law`` (value = from + (to - from) f(tau) over [time])
+LAWS = ("linear", "harmonic", "cycloidal", "polynomial345")
+
+
+@dataclass(frozen=True)
+class LogData:
+    """One ``[[logs]]`` entry, read and checked: ``name``, ``file`` as written, ``path`` the
+    file it resolved to, ``time`` the time column's name, ``t`` (rows,) its values (finite,
+    strictly increasing), ``columns`` {name: (rows,) float} the numeric columns drivers use
+    (NaN where the log has no value), ``names`` every column of the file."""
+
+    name: str
+    file: str
+    path: str
+    time: str
+    t: np.ndarray = field(compare=False, repr=False)
+    columns: dict[str, np.ndarray] = field(compare=False, repr=False)
+    names: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class TimeSweep:
+    """``[time]``: the steps are the ``instants`` (S,) in seconds: ``from + i (to - from)/(steps
+    - 1)`` (or ``from + i step``), or the rows of the log named ``log``."""
+
+    from_value: float
+    to_value: float
+    steps: int
+    step: float | None = None
+    log: str | None = None
+    instants: np.ndarray = field(default=None, compare=False, repr=False)
 
 
 #: Choices of the [solver] knobs that trade accuracy for speed (first = default).
@@ -212,6 +259,8 @@ class Scene:
     outputs: Outputs = Outputs()
     warnings: tuple[str, ...] = ()  # legal but probably not meant (the summary prints them)
     torsion_springs: tuple[TorsionSpring, ...] = ()
+    time: TimeSweep | None = None
+    logs: tuple[LogData, ...] = ()
 
     @property
     def point_names(self) -> tuple[str, ...]:

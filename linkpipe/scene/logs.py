@@ -1,0 +1,134 @@
+"""Reading ``[[logs]]`` files with pandas (.csv, .parquet) and checking what a scene takes from
+them: a time column that is finite and strictly increasing, numeric driver columns, the
+columns a driver names. Every problem is one :class:`SceneError` naming the file, the table,
+the key, the row and column where it applies, and what to do."""
+from __future__ import annotations
+
+import difflib
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .keys import _Table, _show
+
+#: the file kinds a log may be, by suffix
+LOG_SUFFIXES = (".csv", ".parquet")
+
+
+def resolve(scene_path: str, file: str) -> Path:
+    """The log file ``file`` relative to the scene file's folder (absolute paths stay)."""
+    base = Path(scene_path).parent if scene_path != "<string>" else Path.cwd()
+    return (base / file) if not Path(file).is_absolute() else Path(file)
+
+
+def read_frame(table: _Table, path: Path):
+    """The log's table (a pandas DataFrame): one SceneError when the file is missing, of
+    another kind, or unreadable."""
+    import pandas as pd
+
+    if path.suffix.lower() not in LOG_SUFFIXES:
+        raise table.error("file", f'"{path}" is neither .csv nor .parquet',
+                          "convert the log to CSV (a header row, then one row per sample) "
+                          "or Parquet")
+    if not path.is_file():
+        raise table.error("file", f'no such log file "{path}" (relative to the scene file)',
+                          "check the path: it is relative to the folder of the scene file")
+    try:
+        if path.suffix.lower() == ".csv":
+            return pd.read_csv(path, skipinitialspace=True)
+        return pd.read_parquet(path)
+    except Exception as exc:  # pandas raises many kinds (parser, arrow, empty, encoding)
+        raise table.error("file", f'cannot read "{path}": {type(exc).__name__}: {exc}',
+                          "write the log as CSV with a header row, or as Parquet") from None
+
+
+def row_label(path: Path, i: int) -> str:
+    """Data row ``i`` (0-based) as a user finds it: 1-based, and the CSV line (header = 1)."""
+    if path.suffix.lower() == ".csv":
+        return f"row {i + 1} (line {i + 2} of the file)"
+    return f"row {i + 1}"
+
+
+def nearest_columns(name: str, names) -> str:
+    """A hint listing the columns nearest to ``name`` (difflib), or all of them when few."""
+    names = [str(n) for n in names]
+    close = difflib.get_close_matches(name, names, n=3, cutoff=0.4)
+    same = [n for n in names if n.lower() == name.lower()]
+    near = list(dict.fromkeys(same + close))
+    listed = ", ".join(f'"{n}"' for n in (near or names[:12]))
+    return (f"nearest columns: {listed}" if near else f"the columns are: {listed}"
+            + (", ..." if len(names) > 12 else ""))
+
+
+def numeric_column(frame, column: str, path: Path, table: _Table, key: str) -> np.ndarray:
+    """The column as floats (NaN where the log has no value: empty, NaN, NA); text or an
+    infinite value is a SceneError naming its row and column."""
+    import pandas as pd
+
+    raw = frame[column]
+    if raw.dtype.kind in "fiu":
+        values = raw.to_numpy(dtype=float)
+    else:
+        text = raw.astype("string").str.strip()
+        blank = raw.isna() | (text == "")
+        values = pd.to_numeric(raw.where(~blank), errors="coerce").to_numpy(dtype=float)
+        bad = np.flatnonzero(~blank.to_numpy() & np.isnan(values))
+        if len(bad):
+            i = int(bad[0])
+            raise table.error(key, f'"{path}" {row_label(path, i)}, column "{column}": '
+                              f"{_show(str(raw.iloc[i]))} is not a number",
+                              "fix that value (leave the cell empty where a sample is missing)")
+    bad = np.flatnonzero(np.isinf(values))
+    if len(bad):
+        i = int(bad[0])
+        raise table.error(key, f'"{path}" {row_label(path, i)}, column "{column}": '
+                          f"{values[i]} is not a finite number",
+                          "fix that value (leave the cell empty where a sample is missing)")
+    return values
+
+
+def time_column(frame, column: str, path: Path, table: _Table) -> np.ndarray:
+    """The time column: numbers, finite and strictly increasing (a SceneError names the file
+    and the first bad row otherwise)."""
+    if column not in frame.columns:
+        raise table.error("time", f'"{path}" has no column "{column}"',
+                          nearest_columns(column, frame.columns))
+    t = numeric_column(frame, column, path, table, "time")
+    if len(t) < 2:
+        raise table.error("time", f'"{path}" has {len(t)} row(s): a log needs at least two '
+                          "samples", "give the log its samples, one row each")
+    missing = np.flatnonzero(np.isnan(t))
+    if len(missing):
+        raise table.error("time", f'"{path}" {row_label(path, int(missing[0]))}: the time '
+                          f'column "{column}" is empty there', "give every row its time stamp "
+                          "(a missing sample is an empty value in its data column)")
+    step = np.diff(t)
+    bad = np.flatnonzero(~(step > 0))
+    if len(bad):
+        i = int(bad[0]) + 1
+        raise table.error("time", f'"{path}" {row_label(path, i)}: time {float(t[i])!r} does '
+                          f"not increase (the row before has {float(t[i - 1])!r}); the time "
+                          "column must be strictly increasing", "sort the log by time and remove repeated "
+                          "time stamps")
+    return t
+
+
+def check_spans(log, instants: np.ndarray, table: _Table, key: str) -> None:
+    """A sweep asking for instants outside the log's time column is an error, never an
+    extrapolation."""
+    lo, hi = float(log.t[0]), float(log.t[-1])
+    first, last = float(instants[0]), float(instants[-1])
+    tiny = 1e-12 * max(1.0, abs(lo), abs(hi))
+    if first < lo - tiny or last > hi + tiny:
+        raise table.error(key, f'[time] runs from {first:g} s to {last:g} s but log '
+                          f'"{log.name}" ("{log.path}") covers only {lo:g} s to {hi:g} s',
+                          f"shorten [time] to lie within {lo:g} .. {hi:g} s, or use "
+                          f'[time] log = "{log.name}" (the log\'s own rows); a log is never '
+                          "extrapolated")
+
+
+def finite_values(values: np.ndarray) -> tuple[float, float]:
+    """The smallest and largest finite value (NaN, NaN when there is none)."""
+    finite = values[np.isfinite(values)]
+    return (float(finite.min()), float(finite.max())) if len(finite) else (math.nan, math.nan)

@@ -1,0 +1,173 @@
+"""Reading ``[time]``, ``[[logs]]`` and the time keys of ``[[drivers]]`` (``law``, ``log``,
+``scale``, ``smoothing``, ``rate`` as a function of time). The log files are read here (with
+pandas, :mod:`.logs`) so that every problem in them is a scene error before any work; the
+motion itself (laws, splines) is computed in :mod:`linkpipe.model.drive`."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import logs as logfiles
+from .keys import _Table, _show, _suggest
+from .tables import LAWS, LogData, TimeSweep
+
+#: the keys that say how a driver of a [time] scene moves (exactly one of them)
+TIMED_KEYS = ("log", "law", "rate")
+#: the driver keys that only a [time] scene gives a meaning
+TIME_ONLY_KEYS = ("law", "log", "scale", "smoothing")
+#: a rate driver's ``to``, when given, must be its value at the last instant within this
+#: part of the motion (relative)
+TO_AGREES = 1e-9
+#: the fewest finite samples a smoothing spline takes (scipy's make_smoothing_spline)
+MIN_SMOOTHING_SAMPLES = 5
+
+
+class TimeTables:
+    """The ``[[logs]]``, ``[time]`` and timed-driver readers of :class:`~.parse._Parser`."""
+
+    def log_tables(self) -> dict[str, LogData]:
+        self.frames = {}
+        logs = {}
+        for table in self.entries("logs"):
+            name = table.data["name"]
+            file = table.string("file")
+            path = logfiles.resolve(self.path, file)
+            frame = logfiles.read_frame(table, path)
+            column = table.string("time")
+            t = logfiles.time_column(frame, column, path, table)
+            self.frames[name] = frame
+            logs[name] = LogData(name, file, str(path), column, t, {},
+                                 tuple(str(c) for c in frame.columns))
+        return logs
+
+    def time_table(self, logs: dict[str, LogData]) -> TimeSweep | None:
+        if self.top("time") is None:
+            return None
+        table = self.table("time")
+        if table.has("log"):
+            for key in ("from", "to", "steps", "step"):
+                if table.has(key):
+                    raise table.error(key, "with log the instants are the log's own rows",
+                                      f"remove {key}, or remove log and keep from, to, steps")
+            log = self.log_named(table, "log", table.string("log"), logs)
+            return TimeSweep(float(log.t[0]), float(log.t[-1]), len(log.t), None, log.name,
+                             log.t)
+        if not any(table.has(k) for k in ("from", "to", "steps", "step")):
+            raise table.error("from", "missing: [time] needs from, to and steps (or step), "
+                              "or log", 'add from = 0.0, to = 4.0, steps = 4001, or log = "run3"')
+        start, stop = table.number("from"), table.number("to")
+        if not stop > start:
+            raise table.error("to", f"to = {stop:g} is not after from = {start:g}",
+                              "time runs forward: give to > from")
+        steps, step = self.driver_steps(table, start, stop)
+        i = np.arange(steps, dtype=float)
+        instants = start + i * step if step is not None else start + i * (stop - start) / (steps - 1)
+        return TimeSweep(start, stop, steps, step, None, instants)
+
+    def log_named(self, table: _Table, key: str, name: str, logs: dict[str, LogData]) -> LogData:
+        if name not in logs:
+            raise table.error(key, f'no [[logs]] entry named {_show(name)}',
+                              (_suggest(name, logs) if logs else "")
+                              + f' — add [[logs]] with name = "{name}", file and time')
+        return logs[name]
+
+    def timed_driver(self, table: _Table, kind: str, time: TimeSweep, logs) -> dict:
+        """The Driver fields of a driver in a [time] scene: how it moves and its value range."""
+        for key in ("steps", "step"):
+            if table.has(key):
+                raise table.error(key, "with [time] the steps are its instants, not the "
+                                  "driver's", f"remove {key} (the sweep is set by [time])")
+        how = table.exactly_one(TIMED_KEYS)
+        if how != "log":
+            for key in ("scale", "smoothing"):
+                if table.has(key):
+                    raise table.error(key, f"{key} belongs to a log driver",
+                                      f'remove {key}, or drive by log = "<log>.<column>"')
+        fields = dict(steps=time.steps, step=None, timed=how)
+        if how == "law":
+            if table.has("rate") or table.has("acceleration"):
+                key = "rate" if table.has("rate") else "acceleration"
+                raise table.error(key, "a law sets the rates itself",
+                                  f"remove {key}, or drive by rate instead of law")
+            law = table.string("law")
+            if law not in LAWS:
+                raise table.error("law", f"unknown law {_show(law)}", _suggest(law, LAWS))
+            fields.update(law=law, from_value=table.number("from"), to_value=table.number("to"))
+        elif how == "rate":
+            fields.update(self.rate_of_time(table, time, kind))
+        else:
+            fields.update(self.log_driver(table, kind, time, logs))
+        return fields
+
+    def rate_of_time(self, table: _Table, time: TimeSweep, kind: str) -> dict:
+        """from + rate t + acceleration t^2/2 (t from [time].from); ``to`` optional, checked;
+        rate and acceleration may carry a unit (:meth:`MotionTables.rate`)."""
+        start = table.number("from")
+        if not table.has("rate"):
+            table.number("rate")  # the missing-key message
+        rate, acc = self.rate(table, "rate", kind, 1), self.rate(table, "acceleration", kind, 2)
+        span = float(time.instants[-1] - time.from_value)
+        end = start + rate * span + 0.5 * acc * span * span
+        if table.has("to"):
+            stop = table.number("to")
+            motion = abs(end - start) + abs(stop - start)
+            if abs(stop - end) > TO_AGREES * max(motion, abs(start), 1e-300):
+                raise table.error("to", f"to = {stop:g} but from + rate t + acceleration t^2/2 "
+                                  f"reaches {end:.12g} at the last instant ({span:g} s)",
+                                  f"remove to (rate and [time] set it), or write to = {end:.12g}")
+        return dict(from_value=start, to_value=end, rate=rate, acceleration=acc)
+
+    def log_driver(self, table: _Table, kind: str, time: TimeSweep, logs) -> dict:
+        """log = "<log>.<column>", scale, smoothing: the column read and checked now."""
+        for key in ("from", "to", "rate", "acceleration"):
+            if table.has(key):
+                raise table.error(key, "a log driver takes its values from the log",
+                                  f"remove {key} (use scale for units)")
+        text = table.string("log")
+        log_name, dot, column = text.partition(".")
+        if not dot or not column:
+            raise table.error("log", f"{_show(text)} is not <log>.<column>",
+                              'write e.g. log = "run3.boom_len"')
+        log = self.log_named(table, "log", log_name, logs)
+        if column == log.time:
+            raise table.error("log", f'"{column}" is the time column of log "{log.name}"',
+                              "name a data column of the log")
+        frame = self.frames[log.name]
+        path = logfiles.Path(log.path)
+        if column not in frame.columns:
+            raise table.error("log", f'log "{log.name}" ("{log.path}") has no column '
+                              f'"{column}"', logfiles.nearest_columns(column, log.names))
+        if column not in log.columns:
+            log.columns[column] = logfiles.numeric_column(frame, column, path, table, "log")
+        scale = table.number("scale", 1.0)
+        if scale == 0:
+            raise table.error("scale", "is 0: every value would be 0",
+                              "write the factor from the column's unit, e.g. scale = 0.001")
+        smoothing = table.number("smoothing", 0.0)
+        if smoothing < 0:
+            raise table.error("smoothing", f"must be >= 0, got {smoothing:g}",
+                              "0 interpolates the samples; > 0 smooths noisy data")
+        values = log.columns[column]
+        finite = int(np.isfinite(values).sum())
+        need = MIN_SMOOTHING_SAMPLES if smoothing > 0 else 2
+        if finite < need:
+            raise table.error("log", f'column "{column}" of "{log.path}" has {finite} value(s): '
+                              f"the spline needs at least {need}", "give the log more samples")
+        logfiles.check_spans(log, time.instants, self.table("time"),
+                             "log" if time.log else "to")
+        low, high = logfiles.finite_values(values * scale)
+        if kind == "distance" and not low > 0:
+            i = int(np.flatnonzero(np.isfinite(values) & ~(values * scale > 0))[0])
+            raise table.error("log", f'"{log.path}" {logfiles.row_label(path, i)}, column '
+                              f'"{column}": a cylinder length of {values[i] * scale:g}',
+                              "a cylinder's length must be positive: check the column and scale")
+        return dict(log=(log.name, column), scale=scale, smoothing=smoothing,
+                    from_value=low, to_value=high)
+
+
+def check_not_timed(table: _Table) -> None:
+    """Outside a [time] scene the time keys of a driver are an error naming the key."""
+    for key in TIME_ONLY_KEYS:
+        if table.has(key):
+            raise table.error(key, f"{key} needs a [time] table: the steps must be instants",
+                              "add [time] with from, to and steps (or log), or remove " + key)
+

@@ -1,0 +1,230 @@
+"""Drivers from logged data (issue 14, item 2): [[logs]] read with pandas (.csv, .parquet),
+log drivers through a spline, missing samples as no_input, and one clear error per bad log.
+
+The known motion: crank angle = 40 + 30 sin(2 pi t / 3) degrees at unevenly spaced time stamps
+(spacing 0.01 .. 0.03 s). The interpolating cubic spline's derivative error is bounded by
+Hall & Meyer's constant for the complete cubic spline, |f' - s'| <= h^3 |f''''| / 24 (h the
+largest spacing), which the tests take four times over for the not-a-knot ends and the
+uneven mesh (spacing ratio up to 3).
+"""
+import pathlib
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+
+import linkpipe
+from linkpipe import closed_forms
+from linkpipe.__main__ import main
+from linkpipe.status import NO_INPUT, OK
+
+CONFIGS = pathlib.Path(__file__).resolve().parent.parent / "configs"
+CRANK_ROCKER = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+V1_DRIVER = """from = 0.0
+to = 360.0
+steps = 361
+rate = 572.9577951308232     # 10 rad/s in degrees per second"""
+AMPLITUDE, MEAN, PERIOD = 30.0, 40.0, 3.0
+W = 2 * np.pi / PERIOD
+
+
+def angle(t):
+    return MEAN + AMPLITUDE * np.sin(W * t)
+
+
+def angle_rate(t):
+    return AMPLITUDE * W * np.cos(W * t)
+
+
+def stamps(n: int = 150, seed: int = 3) -> np.ndarray:
+    """Uneven time stamps from 0: spacing drawn from 0.01 .. 0.03 s."""
+    return np.r_[0.0, np.cumsum(np.random.default_rng(seed).uniform(0.01, 0.03, n - 1))]
+
+
+def write_log(path: pathlib.Path, frame: pd.DataFrame) -> pathlib.Path:
+    if path.suffix == ".csv":
+        frame.to_csv(path, index=False)
+    else:
+        frame.to_parquet(path, index=False)
+    return path
+
+
+def encoder_frame(t=None, scale: float = 1.0) -> pd.DataFrame:
+    t = stamps() if t is None else t
+    return pd.DataFrame({"t": t, "crank_deg": angle(t) / scale, "other": np.ones(len(t))})
+
+
+def scene_text(file: str = "enc.csv", column: str = "enc.crank_deg", time: str = 'log = "enc"',
+               driver_extra: str = "", log_name: str = "enc") -> str:
+    driver = f'log = "{column}"' + (f"\n{driver_extra}" if driver_extra else "")
+    text = CRANK_ROCKER.replace(V1_DRIVER, driver)
+    return text.replace("[[drivers]]", f'[time]\n{time}\n\n[[logs]]\nname = "{log_name}"\n'
+                        f'file = "{file}"\ntime = "t"\n\n[[drivers]]', 1)
+
+
+def write_scene(tmp_path, frame=None, file="enc.csv", **kw) -> pathlib.Path:
+    write_log(tmp_path / file, encoder_frame() if frame is None else frame)
+    path = tmp_path / "encoder.toml"
+    path.write_text(scene_text(file=file, **kw))
+    return path
+
+
+def spline_velocity_bound(t: np.ndarray) -> float:
+    """4 x h^3 |f''''| / 24 in degrees per second (see the module docstring)."""
+    h = float(np.diff(t).max())
+    return 4 * h ** 3 * AMPLITUDE * W ** 4 / 24
+
+
+# ------------------------------------------------------------------ a known motion
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_logged_motion_is_reproduced(tmp_path, suffix):
+    """Written as a real file, run through ``python -m linkpipe run``, read back with h5py: the
+    instants are the stamps, driver values and positions exact at the samples (the four-bar's
+    closed form there), velocities within the spline's error bound."""
+    t = stamps()
+    path = write_scene(tmp_path, encoder_frame(t, scale=1e-3), file="enc" + suffix,
+                       driver_extra="scale = 1e-3")
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    with h5py.File(tmp_path / "out" / "fourbar_crank_rocker.h5", "r") as f:
+        np.testing.assert_array_equal(f["time"][:], t)
+        value, rate = f["driver_value"][:, 0], f["driver_velocity"][:, 0]
+        position, velocity = f["position"][:], f["velocity"][:]
+        assert (f["status"][:] == OK).all()
+    np.testing.assert_allclose(value, angle(t), rtol=1e-13, atol=0)
+    bound = spline_velocity_bound(t)
+    error = np.abs(rate - angle_rate(t)).max()
+    assert error <= bound, (error, bound)
+    scene = linkpipe.load_scene(str(path))
+    form = closed_forms.detect(scene, position[0])
+    X, V, _ = closed_forms.evaluate(form, scene, np.radians(angle(t)), np.radians(angle_rate(t)), 0.0)
+    assert np.abs(X - position).max() <= 1e-11
+    # the velocity error is the crank rate's error times |dX/dtheta| = |V| / |omega|
+    lever = np.nanmax(np.abs(V).max(axis=(1, 2)) / np.abs(np.radians(angle_rate(t))).clip(1e-3))
+    assert np.abs(V - velocity).max() <= np.radians(bound) * lever
+
+
+def test_a_time_sweep_samples_the_spline_between_the_stamps(tmp_path):
+    """[time] from/to/steps within the log: the values are the spline's, within the spline's
+    value bound (5/384 h^4 |f''''|, times four) of the known motion."""
+    t = stamps()
+    path = write_scene(tmp_path, time="from = 0.5\nto = 2.5\nsteps = 301")
+    r = linkpipe.solve(str(path))
+    assert (r.status == OK).all()
+    grid = np.linspace(0.5, 2.5, 301)
+    np.testing.assert_allclose(r.time, grid, rtol=0, atol=1e-15)
+    h = float(np.diff(t).max())
+    assert np.abs(r.driver_value[:, 0] - angle(grid)).max() <= 4 * 5 / 384 * h ** 4 * AMPLITUDE * W ** 4
+    assert np.abs(r.driver_velocity[:, 0] - angle_rate(grid)).max() <= spline_velocity_bound(t)
+
+
+def test_smoothing_keeps_a_straight_line_exact(tmp_path):
+    """A smoothing spline (smoothing > 0) of samples on a line is that line (its curvature
+    penalty and residual are both zero there): value, rate 25 deg/s and acceleration 0."""
+    t = stamps(60)
+    frame = pd.DataFrame({"t": t, "crank_deg": 10.0 + 25.0 * t})
+    r = linkpipe.solve(str(write_scene(tmp_path, frame, driver_extra="smoothing = 0.5")))
+    # to rounding: the penalised system's condition grows as smoothing / h^3 (here ~1e7),
+    # measured 1e-9 deg in value and 2e-9 deg/s in rate
+    np.testing.assert_allclose(r.driver_value[:, 0], 10.0 + 25.0 * t, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r.driver_velocity[:, 0], 25.0, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(r.driver_acceleration[:, 0], 0.0, rtol=0, atol=1e-5)
+
+
+def test_smoothing_reduces_noise(tmp_path):
+    """Noise of 0.05 deg on the samples: the smoothing spline's rate is closer to the true
+    rate than the interpolating spline's (which follows every noisy sample)."""
+    t = stamps(300)
+    noisy = angle(t) + np.random.default_rng(1).normal(0.0, 0.05, len(t))
+    frame = pd.DataFrame({"t": t, "crank_deg": noisy})
+    errors = {}
+    for smoothing in (0.0, 1e-4):
+        path = write_scene(tmp_path, frame, driver_extra=f"smoothing = {smoothing}")
+        r = linkpipe.solve(str(path))
+        errors[smoothing] = np.sqrt(np.mean((r.driver_velocity[:, 0] - angle_rate(t)) ** 2))
+    assert errors[1e-4] < 0.2 * errors[0.0]
+
+
+# ------------------------------------------------------------------ missing samples
+def test_a_missing_sample_is_no_input_and_its_neighbours_are_unharmed(tmp_path):
+    """An empty cell at row 60: that step is no_input with every moving quantity NaN; every
+    other step is ok with the same positions as without the gap (the spline still passes
+    through each finite sample). The spline's derivatives near the gap change (one cubic piece
+    spans it): at the neighbouring samples by at most the interpolation error bound, decaying
+    about 0.27 per sample away (the spline's influence factor 2 - sqrt(3)), so that 10 samples
+    away the change is below 1e-4 of the change next to the gap."""
+    t = stamps()
+    full = linkpipe.solve(str(write_scene(tmp_path)))
+    frame = encoder_frame(t)
+    frame.loc[60, "crank_deg"] = np.nan
+    path = write_scene(tmp_path, frame)
+    assert ",," in (tmp_path / "enc.csv").read_text()  # a truly empty cell in the file
+    r = linkpipe.solve(str(path))
+    assert r.status[60] == NO_INPUT
+    others = np.arange(len(t)) != 60
+    assert (r.status[others] == OK).all()
+    moving = ~r.model.fixed
+    for arr in (r.position, r.velocity, r.acceleration):
+        assert np.isnan(arr[60][moving]).all()
+    assert np.isnan(r.driver_value[60]).all() and np.isnan(r.driver_velocity[60]).all()
+    assert np.isnan(r.link_angle[60]).all()
+    np.testing.assert_allclose(r.position[others], full.position[others], rtol=0, atol=1e-11)
+    change = np.abs(r.driver_velocity[:, 0] - full.driver_velocity[:, 0])
+    assert change[[59, 61]].max() <= 2 * spline_velocity_bound(t) + 1e-12
+    assert change[[49, 71]].max() <= 1e-4 * change[[59, 61]].max()
+    with h5py.File(_run(tmp_path, path), "r") as f:
+        assert f["status"][60] == NO_INPUT
+        assert f["status"].attrs["flag_meanings"].split()[NO_INPUT] == "no_input"
+
+
+def _run(tmp_path, path) -> pathlib.Path:
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    return tmp_path / "out" / "fourbar_crank_rocker.h5"
+
+
+# ------------------------------------------------------------------ bad logs
+def _bad_time(t):
+    t = t.copy()
+    t[7] = t[6]
+    return t
+
+
+BAD_LOGS = {
+    "unknown column": (dict(column="enc.crank_dg"), ("drivers", "log", '"crank_deg"')),
+    "time not increasing": (dict(frame=encoder_frame(_bad_time(stamps()))),
+                            ("logs", "time", "row 8 (line 9 of the file)")),
+    "text in a number column": (dict(frame=encoder_frame().astype({"crank_deg": object})
+                                     .assign(crank_deg=lambda f: f.crank_deg.where(
+                                         f.index != 12, "about 40"))),
+                                ("drivers", "log", 'row 13 (line 14 of the file), column "crank_deg"')),
+    "log shorter than [time]": (dict(time="from = 0.0\nto = 9.0\nsteps = 10"),
+                                ("time", "to", "covers only")),
+    "missing file": (dict(file_in_scene="nothere.csv"), ("logs", "file", "no such log file")),
+    "log not in [[logs]]": (dict(column="run9.crank_deg"), ("drivers", "log", "no [[logs]]")),
+    "empty time stamp": (dict(frame=encoder_frame().assign(
+        t=lambda f: f.t.where(f.index != 4, np.nan))), ("logs", "time", "row 5")),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_LOGS))
+def test_each_bad_log_is_one_clear_error_and_nothing_is_written(tmp_path, capsys, case):
+    kw, (table, key, words) = BAD_LOGS[case]
+    kw = dict(kw)
+    frame = kw.pop("frame", None)
+    write_log(tmp_path / "enc.csv", encoder_frame() if frame is None else frame)
+    path = tmp_path / "encoder.toml"
+    path.write_text(scene_text(file=kw.pop("file_in_scene", "enc.csv"), **kw))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert str(path) in err and f"[{table}" in err and f"] {key}:" in err and words in err, err
+    assert "Traceback" not in err and " — " in err  # what to do
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_unknown_column_lists_the_nearest_names(tmp_path):
+    path = write_scene(tmp_path, column="enc.crank")
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.load_scene(str(path))
+    assert 'nearest columns: "crank_deg"' in str(err.value)
