@@ -12,12 +12,13 @@ import pytest
 from rerun.chunk import RrdReader
 
 from linkpipe import solve as solve_scene
-from linkpipe.stores import hdf5, rrd
+from linkpipe.stores import hdf5, rrd, rrd_forces
 
 RERUN = pathlib.Path(sys.executable).with_name("rerun")
 ARCHETYPE = {"links": "LineStrips2D", "guides": "LineStrips2D", "trace": "LineStrips2D",
              "springs": "LineStrips2D", "points": "Points2D", "ground": "Points2D",
-             "velocity": "Arrows2D", "acceleration": "Arrows2D"}
+             "velocity": "Arrows2D", "acceleration": "Arrows2D", "forces": "Arrows2D",
+             "actuators": "LineStrips2D"}
 
 
 class Recording:
@@ -87,6 +88,13 @@ def _expected_entities(result) -> set[str]:
         out |= {f"/mechanism/springs/{s}" for s in result.spring_names}   # an addition
     if "torsion_spring_torque" in forces:
         out |= {f"/plots/torsion_spring_torque/{t}" for t in result.force_coords["torsion_spring"]}
+    out |= {f"/mechanism/actuators/{d.name}" for d in sc.drivers if d.kind == "distance"}
+    if "input_force" in forces:  # force arrows, only where forces are computed
+        out |= {f"/mechanism/forces/input/{d}" for d in result.driver_names}
+        out |= {f"/mechanism/forces/loads/{x.name}" for x in sc.loads if x.point is not None}
+        if "spring_force" in forces:
+            out |= {f"/mechanism/forces/springs/{s}" for s in result.spring_names}
+        out |= {f"/mechanism/forces/reactions/{p}" for p in result.force_coords.get("fixed_point", [])}
     return out
 
 
@@ -356,3 +364,96 @@ def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
     streamed = _stream_entities(saved)
     assert "/mechanism/points" in streamed and "/solver/log10_residual" in streamed
     assert streamed == written
+
+
+def test_force_arrows_start_where_forces_act_and_are_the_stored_forces_scaled(solve, tmp_path):
+    """The basketball goal (springs, gravity, inertia, a handle input): at every step each arrow
+    starts at its point and is its stored force times the one scale named in the title."""
+    result = solve("basketball_goal")
+    rec = Recording(_write(result, tmp_path))
+    arrows, scale = rrd.forces_drawn(result)
+    assert scale > 0
+    i = {n: k for k, n in enumerate(result.point_names)}
+    X = result.position
+    F = result.forces
+
+    def logged(entity):
+        frame = rec.steps(entity)
+        origins = np.array([np.stack(r) for r in _column(frame, entity, "Arrows2D:origins")])
+        vectors = np.array([np.stack(r) for r in _column(frame, entity, "Arrows2D:vectors")])
+        return origins, vectors / scale
+
+    # springs: the tension pulls each end towards the other
+    for k, spring in enumerate(result.scene.springs):
+        a, b = (X[:, i[p]] for p in spring.between)
+        u = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
+        T = F["spring_force"][1][:, k, None]
+        origins, forces = logged(f"/mechanism/forces/springs/{spring.name}")
+        np.testing.assert_allclose(origins, np.stack([a, b], axis=1), rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(forces, np.stack([T * u, -T * u], axis=1), rtol=1e-5, atol=1e-5)
+    # ground reactions at the fixed points
+    R = F["ground_reaction"][1]
+    for k, name in enumerate(result.force_coords["fixed_point"]):
+        origins, forces = logged(f"/mechanism/forces/reactions/{name}")
+        np.testing.assert_allclose(origins[:, 0], X[:, i[name]], rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(forces[:, 0], R[:, k], rtol=1e-5, atol=1e-4)
+    # the handle's input force along its direction at its point
+    (driver,) = result.scene.drivers
+    n = np.asarray(driver.input.direction, float) / np.hypot(*driver.input.direction)
+    origins, forces = logged(f"/mechanism/forces/input/{driver.name}")
+    np.testing.assert_allclose(origins[:, 0], X[:, i[driver.input.point]], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(forces[:, 0], F["input_force"][1][:, :1] * n, rtol=1e-5, atol=1e-5)
+    # one scale: the longest arrow is FORCE_FRACTION of the mechanism's size; the title says it
+    longest = max(np.nanmax(np.hypot(v[..., 0], v[..., 1])) for *_, v in arrows) * scale
+    assert longest == pytest.approx(rrd_forces.FORCE_FRACTION * rrd.mechanism_size(result))
+    assert any(f"forces: 1 ft = {1 / scale:.3g} lbf" in t for t in rec.view_titles())
+
+
+def test_a_kinematics_only_scene_draws_no_force(solve, tmp_path):
+    rec = Recording(_write(solve("fourbar_crank_rocker"), tmp_path))
+    assert not {e for e in rec.entities if e.startswith("/mechanism/forces")}
+    assert not any("forces:" in t for t in rec.view_titles())
+
+
+def test_a_cylinder_is_drawn_and_its_force_acts_on_both_pins(solve, tmp_path):
+    result = solve("dump_truck")
+    rec = Recording(_write(result, tmp_path))
+    i = {n: k for k, n in enumerate(result.point_names)}
+    C, P = result.position[:, i["C"]], result.position[:, i["P"]]
+    frame = rec.steps("/mechanism/actuators/tipping_cylinder")
+    strips = _column(frame, "/mechanism/actuators/tipping_cylinder", "LineStrips2D:strips")
+    np.testing.assert_allclose(np.stack(strips[10][0]), np.stack([C[10], P[10]]), atol=1e-5)
+    arrows, scale = rrd.forces_drawn(result)
+    frame = rec.steps("/mechanism/forces/input/tipping_cylinder")
+    vectors = np.array([np.stack(r) for r in _column(frame, "/mechanism/forces/input/tipping_cylinder",
+                                                    "Arrows2D:vectors")]) / scale
+    u = (P - C) / np.linalg.norm(P - C, axis=1)[:, None]
+    f = result.forces["input_force"][1][:, :1]
+    np.testing.assert_allclose(vectors, np.stack([-f * u, f * u], axis=1), rtol=1e-5, atol=1e-2)
+
+
+def test_a_plate_is_its_outline_without_crossings(solve, tmp_path):
+    """The excavator's boom (O, T, BR, SC: four pins, listed out of outline order) is drawn as
+    its convex hull, closed; no two of its edges cross."""
+    result = solve("excavator_arm")
+    rec = Recording(_write(result, tmp_path))
+    frame = rec.steps("/mechanism/links/boom")
+    (strip,) = _column(frame, "/mechanism/links/boom", "LineStrips2D:strips")[0]
+    pts = np.stack(strip)
+    assert len(pts) == 5 and np.allclose(pts[0], pts[-1])
+
+    def cross(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+    edges = list(zip(pts[:-1], pts[1:]))
+    for k, (a, b) in enumerate(edges):
+        for c, d in edges[k + 2:] if k else edges[2:-1]:
+            assert not (cross(a, b, c) * cross(a, b, d) < 0 and cross(c, d, a) * cross(c, d, b) < 0)
+
+
+def test_one_driver_sweeps_have_a_timeline_of_the_drivers_value(solve, tmp_path):
+    result = solve("fourbar_crank_rocker")
+    rec = Recording(_write(result, tmp_path))
+    frame = rec.store.reader(index="crank [degree/10]", contents="/plots/link_angle/rocker").to_pandas()
+    np.testing.assert_array_equal(frame["crank [degree/10]"].to_numpy(),
+                                  np.round(result.driver_value[:, 0] * 10).astype(np.int64))

@@ -11,6 +11,7 @@ it so the mechanism appears y-up. The logged data are the scene's own coordinate
 from __future__ import annotations
 
 import contextlib
+import math
 import uuid
 
 import numpy as np
@@ -18,6 +19,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from . import atomic_path
+from .rrd_forces import KIND_COLORS, force_arrows, force_legend, force_scale
 from ..cache import derived
 
 APPLICATION_ID = "linkpipe"
@@ -146,22 +148,47 @@ def path_of(*parts) -> str:
 def log_result(stream: rr.RecordingStream, result) -> None:
     """Log every entity of the contract for ``result`` to ``stream``."""
     steps = np.arange(result.n_steps)
+    by_value = driver_timeline(result)
 
     def send(entity: str, columns, rows: np.ndarray | None = None) -> None:
         rows = slice(None) if rows is None else rows
         index = [rr.TimeColumn("step", sequence=steps[rows])]
         if result.time is not None:
             index.append(rr.TimeColumn("time", duration=np.asarray(result.time, float)[rows]))
+        if by_value is not None:
+            index.append(rr.TimeColumn(by_value[0], sequence=by_value[1][rows]))
         stream.send_columns(entity, indexes=index, columns=columns)
 
     stream.log("mechanism", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
     _log_points(stream, send, result)
     _log_links(stream, send, result)
+    _log_actuators(stream, send, result)
     _log_guides(stream, send, result)
     _log_springs(stream, send, result)
     _log_traces(stream, result)
     _log_vectors(stream, send, result)
+    _log_forces(stream, send, result)
     _log_series(stream, send, result)
+
+
+def driver_timeline(result):
+    """(name, values (S,) int64) of a timeline that is the driver's value, for a one-driver
+    sweep whose value only rises or only falls: the plots can then be read against the crank
+    angle or the cylinder's length (pick it in the time panel). Rerun's timelines count in
+    integers, so the value is written in units fine enough that every step has its own:
+    ``"crank [deg/1000]"`` holds 1000 x the angle in degrees. None otherwise."""
+    if len(result.driver_names) != 1 or result.n_steps < 2:
+        return None
+    value = np.asarray(result.driver_value[:, 0], dtype=float)
+    step = np.diff(value)
+    if not (np.isfinite(value).all() and ((step > 0).all() or (step < 0).all())):
+        return None
+    per = 10.0 ** max(0, math.ceil(-math.log10(float(np.abs(step).min()))) + 1)
+    ints = np.round(value * per).astype(np.int64)
+    if not (np.abs(value).max() * per < 2 ** 62 and (np.diff(ints) != 0).all()):
+        return None
+    unit = result.driver_units()[0]
+    return f"{result.driver_names[0]} [{unit}/{per:g}]", ints
 
 
 def _log_points(stream, send, result) -> None:
@@ -208,13 +235,41 @@ def _labels_arrow(names, ok: np.ndarray):
 
 
 def _log_links(stream, send, result) -> None:
+    """Each link as a line strip in its own colour: a bar between its two points, a plate as
+    its closed outline (the drawing's convex hull, so the outline never crosses itself; points
+    inside the plate stay points)."""
     for j, link in enumerate(result.scene.links):
-        k = _point_index(result, link.points)
-        if len(k) >= 3:
-            k.append(k[0])
+        k = _outline(result, _point_index(result, link.points))
         _send_strips(stream, send, path_of("mechanism", "links", link.name), result.position[:, k],
                      radii=rr.components.Radius.ui_points(2.5),
                      colors=_PALETTE[j % len(_PALETTE)], draw_order=20.0)
+
+
+def _outline(result, k: list[int]) -> list[int]:
+    """Point indices of a link's outline: its two points; a triangle closed; a larger plate's
+    convex hull as drawn, counter-clockwise and closed (one drawn in a line: its two extreme
+    points)."""
+    if len(k) < 4:  # a bar, or a triangle (closed in any order without crossing)
+        return k + k[:1] if len(k) == 3 else k
+    drawn = np.array([[result.scene.points[i].x, result.scene.points[i].y] for i in k])
+    try:
+        from scipy.spatial import ConvexHull
+        hull = [k[i] for i in ConvexHull(drawn).vertices]
+    except Exception:  # scipy's QhullError: every point on one line
+        axis = drawn[np.argmax(np.ptp(drawn, axis=0))] - drawn[0]
+        along = (drawn - drawn[0]) @ axis
+        return [k[int(np.argmin(along))], k[int(np.argmax(along))]]
+    return hull + hull[:1]
+
+
+def _log_actuators(stream, send, result) -> None:
+    """Each ``distance`` driver (a cylinder) as a thick grey bar between its pins."""
+    for driver in result.scene.drivers:
+        if driver.kind == "distance":
+            _send_strips(stream, send, path_of("mechanism", "actuators", driver.name),
+                         result.position[:, _point_index(result, driver.points)],
+                         radii=rr.components.Radius.ui_points(5.0), colors=_GUIDE,
+                         draw_order=15.0)
 
 
 def _send_strips(stream, send, entity: str, strips: np.ndarray, **style) -> None:
@@ -315,6 +370,32 @@ def _log_vectors(stream, send, result) -> None:
                      .partition(ok.astype(int)))
 
 
+def forces_drawn(result):
+    """(arrows, scale) of the recording's force arrows (:mod:`.rrd_forces`), built once."""
+    def build(res):
+        arrows = force_arrows(res)
+        return arrows, force_scale(res, arrows, mechanism_size(res))
+    return derived(result, "rrd_force_arrows", build)
+
+
+def _log_forces(stream, send, result) -> None:
+    """``mechanism/forces/<kind>/<name>``: every force where it acts, one scale (title)."""
+    arrows, scale = forces_drawn(result)
+    if not scale:
+        return
+    legend = force_legend(result, scale)
+    for kind, name, origins, vectors in arrows:
+        entity = path_of("mechanism", "forces", kind, name)
+        stream.log(entity, rr.Arrows2D.from_fields(
+            labels=[f"{kind} {name} ({legend})"], colors=KIND_COLORS[kind], show_labels=False,
+            radii=rr.components.Radius.ui_points(2.0), draw_order=45.0), static=True)
+        ok = np.isfinite(origins).all(axis=2) & np.isfinite(vectors).all(axis=2)  # (S, k)
+        if ok.any():
+            send(entity, rr.Arrows2D.columns(
+                origins=np.asarray(origins[ok], dtype=np.float32),
+                vectors=np.asarray(vectors[ok] * scale, dtype=np.float32)).partition(ok.sum(axis=1)))
+
+
 def _log_series(stream, send, result) -> None:
     variables = {v.name: v for v in result.variables()}
     labels = {c.name: c.data for c in result.coordinates()}
@@ -323,24 +404,25 @@ def _log_series(stream, send, result) -> None:
         var = variables.get(name)
         if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2:
             continue
-        for j, label in enumerate(labels[var.dims[1]]):
-            series.append((path_of("plots", name, label), f"{label} [{var.units}]", var.data[:, j]))
+        for j, label in enumerate(labels[var.dims[1]]):  # one colour each within a plot
+            series.append((path_of("plots", name, label), f"{label} [{var.units}]", var.data[:, j],
+                           _PALETTE[j % len(_PALETTE)]))
     for name in SOLVER:
         var = variables[name]
-        series.append((f"solver/{name}", f"{name} [{var.units}]", var.data))
+        series.append((f"solver/{name}", f"{name} [{var.units}]", var.data, _PALETTE[0]))
     log_res, log_tol = log10_residual(result)
     length = variables["residual"].units
-    series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res))
+    series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res, _PALETTE[0]))
     series.append(("solver/log10_tolerance", f"log10 tolerance [{length}]",
-                   np.full(result.n_steps, log_tol)))
-    for entity, title, values in series:
+                   np.full(result.n_steps, log_tol), _PALETTE[2]))
+    for entity, title, values, colour in series:
         values = np.asarray(values, dtype=float)
         finite = np.isfinite(values)
         if not finite.any():
             continue
         if not finite.all():  # +-inf (e.g. a failed step's residual) would wreck the axis
             values = np.where(finite, values, np.nan)
-        stream.log(entity, rr.SeriesLines(names=title), static=True)
+        stream.log(entity, rr.SeriesLines(names=title, colors=colour), static=True)
         # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
         # out would be bridged by a straight segment that looks like data
         send(entity, rr.Scalars.columns(scalars=values))
@@ -371,6 +453,9 @@ def view_bounds(result) -> tuple[np.ndarray, np.ndarray]:
     k = _point_index(result, result.scene.outputs.vectors)
     for quantity, scale in arrow_scales(result).items():    # arrow tips too
         drawn.append((result.position[:, k] + scale * getattr(result, quantity)[:, k]).reshape(-1, 2))
+    arrows, fscale = forces_drawn(result)
+    for _, _, origins, vectors in arrows if fscale else ():
+        drawn.append((origins + fscale * vectors).reshape(-1, 2))
     lo, hi = _bounds(result, np.concatenate(drawn))
     pad = 0.08 * max(float(np.max(hi - lo)), 1e-9)
     return lo - pad, hi + pad
@@ -384,6 +469,12 @@ def blueprint(result) -> rrb.Blueprint:
         colour = {"velocity": "green", "acceleration": "magenta"}
         name += "; arrows: " + ", ".join(f"{q} ({colour[q]}) {arrow_legend(result, q)}"
                                          for q in arrow_scales(result))
+    arrows, fscale = forces_drawn(result)
+    if fscale:
+        kinds = dict.fromkeys(kind for kind, *_ in arrows)
+        colour = {"input": "red", "loads": "orange", "springs": "yellow", "reactions": "blue"}
+        name += (f"; {force_legend(result, fscale)} ("
+                 + ", ".join(f"{k} {colour[k]}" for k in kinds) + ")")
     mechanism = rrb.Spatial2DView(
         origin="/", contents="mechanism/**", name=name,
         visual_bounds=rrb.VisualBounds2D(x_range=[lo[0], hi[0]], y_range=[-hi[1], -lo[1]]))
