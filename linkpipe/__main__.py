@@ -281,6 +281,11 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
             col = f[:, j]
             if np.isfinite(col).any():
                 lines.append(f"  input force {name}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} {unit}")
+    if result.measurements:
+        m = result.measurements
+        for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):
+            lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
+                         f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
     if written:
         lines.append("  wrote " + ", ".join(written))
     stage_seconds = {**result.seconds, **(writer_seconds or {})}

@@ -180,7 +180,7 @@ def _solve(scene: Scene, progress) -> Result:
                     [a for a in stored if a is not None])
 
     time, time_note = _time_axis(scene, value)
-    return Result(
+    result = Result(
         scene=scene, model=model, mobility=mobility, driver_value=value, time=time,
         driver_velocity=drive.rate if scene.time is not None else None,
         driver_acceleration=drive.acceleration if scene.time is not None else None,
@@ -194,6 +194,24 @@ def _solve(scene: Scene, progress) -> Result:
         force_coords=forces.coords if forces else {},
         seconds=seconds, message=message(status),
         solver_method_used=sweep.method, solver_note=sweep.note)
+    return _with_measurements(result) if scene.measurements else result
+
+
+def _with_measurements(result: Result) -> Result:
+    """The result with its measurements beside their computed counterparts (linkpipe.measure);
+    a measurement of a quantity the run did not compute is the scene's mistake."""
+    from dataclasses import replace
+
+    from .measure import compare
+
+    try:
+        return replace(result, measurements=compare(result))
+    except KeyError as missing:
+        m = next(m for m in result.scene.measurements if m.of[0] == missing.args[0])
+        raise SceneError(result.scene.path, f'measurements "{m.name}"', "of",
+                         f'"{m.of[0]}" is not computed by this scene',
+                         "turn on what computes it: [analysis] effects for forces, "
+                         '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None
 
 
 def _sweep_where_present(model, s, s_dot, s_ddot, order, present) -> kin.Sweep:

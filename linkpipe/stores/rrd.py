@@ -410,6 +410,15 @@ def _log_series(stream, send, result) -> None:
     for name in SOLVER:
         var = variables[name]
         series.append((f"solver/{name}", f"{name} [{var.units}]", var.data, _PALETTE[0]))
+    if result.measurements:  # computed beside measured, one plot per measurement
+        m = result.measurements
+        for k, name in enumerate(m["names"]):
+            computed = m["measured"][:, k] + m["residual"][:, k]
+            unit = m["units"][k]
+            series.append((path_of("plots", "measurements", name, "computed"),
+                           f"computed [{unit}]", computed, _PALETTE[0]))
+            series.append((path_of("plots", "measurements", name, "measured"),
+                           f"measured [{unit}]", m["measured"][:, k], _PALETTE[1]))
     log_res, log_tol = log10_residual(result)
     length = variables["residual"].units
     series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res, _PALETTE[0]))
@@ -481,6 +490,10 @@ def blueprint(result) -> rrb.Blueprint:
     variables = {v.name: v for v in result.variables()}
     plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{variables[name].units}]")
              for name in PLOTTED if name in variables]
+    if result.measurements:
+        plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
+                                     name=f"{name}: computed and measured")
+                  for name in result.measurements["names"]]
     length = variables["residual"].units
     solver = [rrb.TimeSeriesView(origin="solver", name=f"log10 residual [{length}]",
                                  contents=["solver/log10_residual", "solver/log10_tolerance"])]
