@@ -122,6 +122,7 @@ class Result:
     solver_note: str = ""  # the dyad chain, or why method = "auto" chose Newton
     time_note: str = ""  # why there is no time axis although every driver has a rate
     measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
+    kinematics: Any = field(default=None, repr=False, compare=False)  # pipeline.Kinematics
 
     # ------------------------------------------------------------------ summaries
     @property

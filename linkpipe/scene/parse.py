@@ -107,6 +107,8 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
         self.point_table()
         self.link_tables()
         sliders = self.slider_tables()
+        if self.top("fit") is not None:
+            self.table("fit")  # its keys; linkpipe.fit reads and checks the values
         self.logs = self.log_tables()
         self.time = self.time_table(self.logs)
         drivers = self.driver_tables()
