@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/bench_logs.py            # 1,000,000-row run and 100,000-row fit
     .venv/bin/python benchmarks/bench_logs.py --rows 200000 --fit-rows 20000   # quicker
 
-1. A crank-encoder log of R rows (CSV, written here: a spin-up angle(t) at uneven 1 ms stamps)
+1. A crank-encoder log of R rows (CSV, written here: angle(t) = 180 t + 10 sin(pi t) degrees
+   at uneven 1 ms stamps)
    drives the crank-rocker of configs/fourbar_crank_rocker.toml with every effect (springs,
    gravity, inertia, damping, loads) to ``.h5``: seconds reading the scene and its log
    (pandas), then solving and writing; rows/s beyond reading the file; peak memory of the
@@ -28,37 +29,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-EFFECTS = """
-[analysis]
-effects = ["springs", "gravity", "inertia", "damping", "loads"]
-[gravity]
-g = [0.0, -9.81]
-[[masses]]
-link = "crank"
-mass = 1.0
-center = [0.5, 0.0]
-inertia = 0.1
-[[masses]]
-link = "coupler"
-mass = 3.0
-center = "P"
-inertia = 3.2
-[[masses]]
-link = "rocker"
-mass = 2.5
-center = [1.5, 0.0]
-inertia = 1.9
-[[springs]]
-name = "return"
-between = ["P", "O4"]
-k = 200.0
-free_length = 2.0
-damping = 5.0
-[[loads]]
-name = "tool"
-point = "B"
-force = [-50.0, 20.0]
-"""
+from bench_sweep import EFFECTS  # noqa: E402  (the same every-effect tables as its pipeline case)
 
 
 def scene_text(measure: bool = False, k=200.0, mass=3.0, load=20.0) -> str:
@@ -78,7 +49,7 @@ def scene_text(measure: bool = False, k=200.0, mass=3.0, load=20.0) -> str:
 def write_log(folder: pathlib.Path, rows: int, torque=None) -> None:
     t = np.arange(rows) * 1e-3 + np.random.default_rng(1).uniform(0, 4e-4, rows)
     t[0] = 0.0
-    deg = 60.0 * t ** 2 + 20.0 * t  # a spin-up
+    deg = 180.0 * t + 10.0 * np.sin(np.pi * t)  # half a turn per second, with a ripple
     cols = {"t": t, "deg": deg}
     if torque is not None:
         cols["torque"] = torque
