@@ -36,6 +36,9 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     acc.add_argument("--out", default="outputs")
     acc.add_argument("--quick", action="store_true", help="a short ladder (seconds)")
     acc.add_argument("--repeats", type=int, default=5)
+    fit = sub.add_parser("fit", help="fit [fit] parameters to the scene's [[measurements]]")
+    fit.add_argument("scene")
+    fit.add_argument("--out", default="outputs", help="output folder (default: outputs)")
     return p
 
 
@@ -52,7 +55,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     or its output could not be written, 2 bad input (scene, option), 130 stopped by Ctrl-C or
     SIGTERM. Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
-    command = {"run": _run, "check": _check, "accuracy": _accuracy}[args.command]
+    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit}[args.command]
     previous = _signals_as_interrupts()
     try:
         return command(args)
@@ -281,6 +284,11 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
             col = f[:, j]
             if np.isfinite(col).any():
                 lines.append(f"  input force {name}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} {unit}")
+    if result.measurements:
+        m = result.measurements
+        for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):
+            lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
+                         f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
     if written:
         lines.append("  wrote " + ", ".join(written))
     stage_seconds = {**result.seconds, **(writer_seconds or {})}
@@ -330,6 +338,53 @@ def _accuracy(args) -> int:
         return run_accuracy(args.scene, out=pathlib.Path(args.out), quick=args.quick,
                             repeats=args.repeats)
     return outcome.code
+
+
+def _fit(args) -> int:
+    from tqdm import tqdm
+
+    from .fit import fit
+    from .scene import load_scene
+    from .stores import fit as fit_store
+
+    outcome = _Outcome()
+    with _reporting(args.scene, outcome):
+        scene = load_scene(args.scene)
+        bar = tqdm(desc=f"fit {scene.name}", unit=" evaluations", disable=None, leave=False)
+
+        def progress(n, cost):
+            bar.update(1)
+            bar.set_postfix(cost=f"{cost:.4g}")
+
+        try:
+            result = fit(scene, progress=progress)
+        finally:
+            bar.close()
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = [out / f"{scene.name}_fit.toml", out / f"{scene.name}_fit.h5"]
+        fit_store.write_toml(result, paths[0])
+        fit_store.write_h5(result, paths[1])
+        print(fit_table(result))
+        print("  wrote " + ", ".join(map(str, paths)))
+    return outcome.code
+
+
+def fit_table(result) -> str:
+    """What ``fit`` prints: each parameter initial -> fitted +- standard error, and the
+    measurements' RMS residual before and after."""
+    lines = [f"{result.scene.name}: fit of {len(result.parameters)} parameter(s) to "
+             f"{len(result.scene.measurements)} measurement(s): {result.message}",
+             f"  {result.n_evaluations} evaluations, stage 1 solved {result.stage1_solves} time(s)"]
+    width = max(len(n) for n in result.names)
+    for k, p in enumerate(result.parameters):
+        err = (f"± {result.standard_error[k]:.4g}" if result.identifiable[k]
+               else "not identifiable from these measurements")
+        lines.append(f"  {p.address:<{width}}  {p.initial:.6g} -> {result.fitted[k]:.6g} {err}")
+    b, a = result.before.measurements, result.after.measurements
+    for k, name in enumerate(b["names"]):
+        lines.append(f"  measurement {name}: rms {b['rms'][k]:.4g} -> {a['rms'][k]:.4g} {b['units'][k]}")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

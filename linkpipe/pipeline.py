@@ -100,32 +100,93 @@ def preflight(scene: Scene):
 DEFAULT_THREADS = 1
 
 
-def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREADS) -> Result:
+def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREADS,
+          kinematics: Kinematics | None = None) -> Result:
     """Run every stage the scene calls for and return the result (failed steps are data).
 
     ``progress``: an optional callable ``progress(stage_name)`` told as each stage starts
     (the CLI drives a tqdm bar with it on long sweeps). ``threads``: the BLAS thread pool's
-    size while solving (threadpoolctl; None leaves the library's own). The Result is built
-    once, here.
+    size while solving (threadpoolctl; None leaves the library's own). ``kinematics``: the
+    ``Result.kinematics`` of a scene with the same geometry and drivers (only force parameters
+    differ): stage 1 is reused, not solved again. The Result is built once, here.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     # overflow and 0/0 are data here, not warnings: such steps are marked (status.assign)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
             threadpool_limits(limits=threads, user_api="blas"):
-        return _solve(scene, progress)
+        return _solve(scene, progress, kinematics)
 
 
-def _solve(scene: Scene, progress) -> Result:
+@dataclass(frozen=True)
+class Kinematics:
+    """Stage 1 of a solved scene, kept with its Result so that a scene differing only in force
+    parameters (springs, masses, loads, gravity) can re-run stage 2 alone (``linkpipe fit``)."""
+
+    mobility: object
+    drive: object
+    s: np.ndarray
+    s_dot: np.ndarray
+    s_ddot: np.ndarray
+    sweep: object
+    link_angle: np.ndarray
+    der: dict
+    velocity: np.ndarray | None
+    acceleration: np.ndarray | None
+    link_rates: tuple
+
+
+def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Result:
     stages = Stages.of(scene)
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     t0 = _time.perf_counter()
     check_memory(scene)
     model = build_model(scene)
-    mobility = check_mobility(model)
     seconds["model"] = _time.perf_counter() - t0
+    k = _stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics
+    X, der = k.sweep.position, k.der
+    kinematic_status = der["status"]
+    forces = None
+    if stages.forces:
+        from .forces import compute_forces
 
+        tell("forces")
+        t0 = _time.perf_counter()
+        motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=X, velocity=k.velocity,
+                        acceleration=k.acceleration, status=kinematic_status,
+                        influence=der["influence"], link_angular_acceleration=k.link_rates[1])
+        forces = compute_forces(model, motion, units_of(scene))
+        seconds["forces"] = _time.perf_counter() - t0
+    stored = [X, k.link_angle, k.velocity, k.acceleration, *k.link_rates]
+    if forces:
+        stored += forces.defined_arrays()
+    status = assign([kinematic_status] + ([forces.status] if forces else []),
+                    k.sweep.residual, scene.solver.tol * model.size,
+                    [a for a in stored if a is not None])
+
+    value, drive = k.drive.value, k.drive
+    time, time_note = _time_axis(scene, value)
+    result = Result(
+        scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
+        driver_velocity=drive.rate if scene.time is not None else None,
+        driver_acceleration=drive.acceleration if scene.time is not None else None,
+        time_note=time_note, position=X, link_angle=k.link_angle, status=status,
+        residual=k.sweep.residual, iterations=k.sweep.iterations, condition=der["condition"],
+        velocity=k.velocity, acceleration=k.acceleration,
+        link_angular_velocity=k.link_rates[0], link_angular_acceleration=k.link_rates[1],
+        velocity_residual=der["velocity_residual"] if stages.velocity else None,
+        acceleration_residual=der["acceleration_residual"] if stages.acceleration else None,
+        forces=forces.variables if forces else None,
+        force_coords=forces.coords if forces else {},
+        seconds=seconds, message=message(status),
+        solver_method_used=k.sweep.method, solver_note=k.sweep.note, kinematics=k)
+    return _with_measurements(result) if scene.measurements else result
+
+
+def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:
+    """Positions, velocities, accelerations, condition and influence coefficients."""
+    mobility = check_mobility(model)
     tell("positions")
     t0 = _time.perf_counter()
     drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
@@ -148,52 +209,35 @@ def _solve(scene: Scene, progress) -> Result:
     der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                           velocity=sweep.velocity, acceleration=sweep.acceleration,
                           need_influence=stages.forces)
-    kinematic_status = der["status"]
     seconds["jacobian"] = _time.perf_counter() - t0
     if scene.solver.derivatives == "finite_difference" and stages.velocity:
         t0 = _time.perf_counter()
-        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, kinematic_status,
+        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, der["status"],
                                    stages.acceleration, drive.time))
         seconds["fd_derivatives"] = _time.perf_counter() - t0
     velocity = der["velocity"] if stages.velocity else None
     acceleration = der["acceleration"] if stages.acceleration else None
     link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
                   else (None, None))
+    return Kinematics(mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der, velocity,
+                      acceleration, link_rates)
 
-    forces = None
-    if stages.forces:
-        from .forces import compute_forces
 
-        tell("forces")
-        t0 = _time.perf_counter()
-        motion = Motion(s=s, s_dot=s_dot, s_ddot=s_ddot, position=X, velocity=velocity,
-                        acceleration=acceleration, status=kinematic_status,
-                        influence=der["influence"],
-                        link_angular_acceleration=link_rates[1])
-        forces = compute_forces(model, motion, units_of(scene))
-        seconds["forces"] = _time.perf_counter() - t0
-    stored = [X, link_angle, velocity, acceleration, *link_rates]
-    if forces:
-        stored += forces.defined_arrays()
-    status = assign([kinematic_status] + ([forces.status] if forces else []),
-                    sweep.residual, scene.solver.tol * model.size,
-                    [a for a in stored if a is not None])
+def _with_measurements(result: Result) -> Result:
+    """The result with its measurements beside their computed counterparts (linkpipe.measure);
+    a measurement of a quantity the run did not compute is the scene's mistake."""
+    from dataclasses import replace
 
-    time, time_note = _time_axis(scene, value)
-    return Result(
-        scene=scene, model=model, mobility=mobility, driver_value=value, time=time,
-        driver_velocity=drive.rate if scene.time is not None else None,
-        driver_acceleration=drive.acceleration if scene.time is not None else None,
-        time_note=time_note, position=X, link_angle=link_angle, status=status,
-        residual=sweep.residual, iterations=sweep.iterations, condition=der["condition"],
-        velocity=velocity, acceleration=acceleration,
-        link_angular_velocity=link_rates[0], link_angular_acceleration=link_rates[1],
-        velocity_residual=der["velocity_residual"] if stages.velocity else None,
-        acceleration_residual=der["acceleration_residual"] if stages.acceleration else None,
-        forces=forces.variables if forces else None,
-        force_coords=forces.coords if forces else {},
-        seconds=seconds, message=message(status),
-        solver_method_used=sweep.method, solver_note=sweep.note)
+    from .measure import compare
+
+    try:
+        return replace(result, measurements=compare(result))
+    except KeyError as missing:
+        m = next(m for m in result.scene.measurements if m.of[0] == missing.args[0])
+        raise SceneError(result.scene.path, f'measurements "{m.name}"', "of",
+                         f'"{m.of[0]}" is not computed by this scene',
+                         "turn on what computes it: [analysis] effects for forces, "
+                         '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None
 
 
 def _sweep_where_present(model, s, s_dot, s_ddot, order, present) -> kin.Sweep:

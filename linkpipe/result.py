@@ -121,6 +121,8 @@ class Result:
     solver_method_used: str = ""  # "dyads" (closed form) or "newton" (general path)
     solver_note: str = ""  # the dyad chain, or why method = "auto" chose Newton
     time_note: str = ""  # why there is no time axis although every driver has a rate
+    measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
+    kinematics: Any = field(default=None, repr=False, compare=False)  # pipeline.Kinematics
 
     # ------------------------------------------------------------------ summaries
     @property
@@ -185,6 +187,9 @@ class Result:
             coords.append(Variable("spring", ("spring",), np.array(self.spring_names, dtype=object), ""))
         for name, values in self.force_coords.items():
             coords.append(Variable(name, (name,), np.array(values, dtype=object), ""))
+        if self.measurements:
+            coords.append(Variable("measurement", ("measurement",),
+                                   np.array(self.measurements["names"], dtype=object), ""))
         return coords
 
     def variables(self) -> list[Variable]:
@@ -220,6 +225,14 @@ class Result:
         if self.forces:
             for name, (dims, data, units) in self.forces.items():
                 out.append(Variable(name, dims, data, units))
+        if self.measurements:
+            m = self.measurements
+            units = m["units"][0] if len(set(m["units"])) == 1 else "mixed"
+            per = {"measurement_units": ",".join(m["units"])}
+            out.append(Variable("measured", ("step", "measurement"), m["measured"], units, per))
+            out.append(Variable("measured_residual", ("step", "measurement"), m["residual"], units,
+                                {**per, "rms": m["rms"], "max_abs": m["max_abs"],
+                                 "long_name": "computed - measured"}))
         out.append(Variable("status", ("step",), self.status.astype(np.int8), "1", {
             "flag_values": np.arange(len(FLAG_MEANINGS), dtype=np.int8),
             "flag_meanings": " ".join(FLAG_MEANINGS),

@@ -94,6 +94,8 @@ def _expected_entities(result) -> set[str]:
     if "torsion_spring_torque" in forces:
         out |= {f"/plots/torsion_spring_torque/{t}" for t in result.force_coords["torsion_spring"]}
     out |= {f"/mechanism/actuators/{d.name}" for d in sc.drivers if d.kind == "distance"}  # addition
+    for m in sc.measurements:
+        out |= {f"/plots/measurements/{m.name}/computed", f"/plots/measurements/{m.name}/measured"}
     if "input_force" in forces:  # force arrows: only where forces are computed
         out |= {f"/mechanism/forces/input/{d}" for d in result.driver_names}
         out |= {f"/mechanism/forces/input/{d.name}/reaction" for d in sc.drivers

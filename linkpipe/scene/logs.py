@@ -34,13 +34,25 @@ def read_frame(table: _Table, path: Path):
     if not path.is_file():
         raise table.error("file", f'no such log file "{path}" (relative to the scene file)',
                           "check the path: it is relative to the folder of the scene file")
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key in _FRAMES:  # the same file, unchanged: a fit reads its scene again at every trial
+        return _FRAMES[key]
     try:
         if path.suffix.lower() == ".csv":
-            return pd.read_csv(path, skipinitialspace=True)
-        return pd.read_parquet(path)
+            frame = pd.read_csv(path, skipinitialspace=True)
+        else:
+            frame = pd.read_parquet(path)
     except Exception as exc:  # pandas raises many kinds (parser, arrow, empty, encoding)
         raise table.error("file", f'cannot read "{path}": {type(exc).__name__}: {exc}',
                           "write the log as CSV with a header row, or as Parquet") from None
+    _FRAMES.clear()  # keep one file's table: bounded memory
+    _FRAMES[key] = frame
+    return frame
+
+
+#: the last log read, by (path, modification time, size): read-only after reading
+_FRAMES: dict = {}
 
 
 def row_label(path: Path, i: int) -> str:

@@ -17,10 +17,11 @@ from .geometry import GeometryTables
 from .motion import EffectTables, MotionTables
 from .springs import SpringTables
 from . import units
-from .timing import TimeTables
+from .timing import MeasurementTables, TimeTables
 
 
-class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTables):
+class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTables,
+              MeasurementTables):
     """Read one scene; the table readers run in dependency order (names before their users)."""
 
     def __init__(self, data: dict, text: str, path: str):
@@ -106,6 +107,8 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
         self.point_table()
         self.link_tables()
         sliders = self.slider_tables()
+        if self.top("fit") is not None:
+            self.table("fit")  # its keys; linkpipe.fit reads and checks the values
         self.logs = self.log_tables()
         self.time = self.time_table(self.logs)
         drivers = self.driver_tables()
@@ -122,7 +125,9 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
                      outputs=outputs, torsion_springs=torsion_springs, time=self.time,
-                     logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects))
+                     logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects),
+                     measurements=self.measurement_tables(drivers, springs, torsion_springs,
+                                                          sliders))
 
 
     def warnings(self, gravity, effects) -> tuple[str, ...]:

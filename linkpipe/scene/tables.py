@@ -133,6 +133,27 @@ class LogData:
 
 
 @dataclass(frozen=True)
+class Measurement:
+    """A logged signal beside its computed counterpart: ``values`` (S,) the log's column times
+    ``scale`` at the scene's steps (NaN where the log has none); ``of`` the computed series
+    ``(variable, name, axis)`` (axis 0/1 for an xy variable, else None); ``sigma`` its standard
+    deviation (None: not given)."""
+
+    name: str
+    log: str
+    column: str
+    scale: float
+    of: tuple
+    sigma: float | None = None
+    values: np.ndarray = field(default=None, compare=False, repr=False)
+
+    @property
+    def address(self) -> str:
+        variable, name, axis = self.of
+        return f"{variable}.{name}" + ("" if axis is None else f".{'xy'[axis]}")
+
+
+@dataclass(frozen=True)
 class TimeSweep:
     """``[time]``: the steps are the ``instants`` (S,) in seconds: ``from + i (to - from)/(steps
     - 1)`` (or ``from + i step``), or the rows of the log named ``log``."""
@@ -261,6 +282,7 @@ class Scene:
     torsion_springs: tuple[TorsionSpring, ...] = ()
     time: TimeSweep | None = None
     logs: tuple[LogData, ...] = ()
+    measurements: tuple["Measurement", ...] = ()
 
     @property
     def point_names(self) -> tuple[str, ...]:

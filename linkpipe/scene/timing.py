@@ -8,7 +8,7 @@ import numpy as np
 
 from . import logs as logfiles
 from .keys import _Table, _show, _suggest
-from .tables import LAWS, LogData, TimeSweep
+from .tables import LAWS, LogData, Measurement, TimeSweep
 
 #: the keys that say how a driver of a [time] scene moves (exactly one of them)
 TIMED_KEYS = ("log", "law", "rate")
@@ -171,3 +171,84 @@ def check_not_timed(table: _Table) -> None:
             raise table.error(key, f"{key} needs a [time] table: the steps must be instants",
                               "add [time] with from, to and steps (or log), or remove " + key)
 
+
+
+#: what ``of`` may address: variable -> the scene names it is labelled by, and whether it has xy
+MEASURABLE = {
+    "position": ("points", True), "velocity": ("points", True), "acceleration": ("points", True),
+    "driver_value": ("drivers", False), "driver_velocity": ("drivers", False),
+    "driver_acceleration": ("drivers", False), "input_force": ("drivers", False),
+    "input_force_lagrange": ("drivers", False), "link_angle": ("links", False),
+    "link_angular_velocity": ("links", False), "link_angular_acceleration": ("links", False),
+    "link_force": ("links", False), "spring_force": ("springs", False),
+    "spring_length": ("springs", False), "spring_extension": ("springs", False),
+    "spring_energy": ("springs", False), "slider_force": ("sliders", False),
+    "torsion_spring_angle": ("torsion_springs", False),
+    "torsion_spring_torque": ("torsion_springs", False),
+    "torsion_spring_energy": ("torsion_springs", False), "joint_force": ("joints", True),
+    "ground_reaction": ("fixed_points", True),
+}
+
+
+class MeasurementTables:
+    """The ``[[measurements]]`` reader of :class:`~.parse._Parser` (after logs and [time])."""
+
+    def measurement_tables(self, drivers, springs, torsion_springs, sliders) -> tuple:
+        out = []
+        for table in self.entries("measurements"):
+            if self.time is None or self.time.log is None:
+                raise table.error("log", "a measurement needs [time] log = <its log>: the "
+                                  "steps are then the log's rows, where it was measured",
+                                  'add [time] with log = "<the log\'s name>"')
+            text = table.string("log")
+            log_name, dot, column = text.partition(".")
+            if not dot or not column:
+                raise table.error("log", f"{_show(text)} is not <log>.<column>",
+                                  'write e.g. log = "run3.p_force"')
+            log = self.log_named(table, "log", log_name, self.logs)
+            if log.name != self.time.log:
+                raise table.error("log", f'log "{log.name}" is not [time]\'s log '
+                                  f'"{self.time.log}": its rows are not the steps',
+                                  f'measure from "{self.time.log}", or make [time] log = "{log.name}"')
+            frame = self.frames[log.name]
+            if column not in frame.columns or column == log.time:
+                raise table.error("log", f'log "{log.name}" ("{log.path}") has no data column '
+                                  f'"{column}"', logfiles.nearest_columns(column, log.names))
+            if column not in log.columns:
+                log.columns[column] = logfiles.numeric_column(frame, column, logfiles.Path(log.path),
+                                                              table, "log")
+            scale = table.number("scale", 1.0)
+            sigma = table.number("sigma", None)
+            if sigma is not None and not sigma > 0:
+                raise table.error("sigma", f"must be positive, got {sigma:g}",
+                                  "the measurement's standard deviation, in its scaled unit")
+            of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
+            out.append(Measurement(table.data["name"], log.name, column, scale, of, sigma,
+                                   log.columns[column] * scale))
+        return tuple(out)
+
+    def measured_of(self, table, drivers, springs, torsion_springs, sliders) -> tuple:
+        """``of = "<variable>.<name>[.x|.y]"`` checked against the scene's names."""
+        text = table.string("of")
+        variable, _, rest = text.partition(".")
+        if variable not in MEASURABLE:
+            raise table.error("of", f'"{variable}" is not a stored variable that can be measured',
+                              _suggest(variable, MEASURABLE))
+        kind, xy = MEASURABLE[variable]
+        axis = None
+        if xy:
+            rest, dot, last = rest.rpartition(".")
+            if not dot or last not in ("x", "y"):
+                raise table.error("of", f'{_show(text)}: "{variable}" has x and y',
+                                  f'write e.g. of = "{variable}.<name>.y"')
+            axis = "xy".index(last)
+        names = {"points": list(self.points), "drivers": [d.name for d in drivers],
+                 "links": list(self.links), "springs": [s.name for s in springs],
+                 "torsion_springs": [t.name for t in torsion_springs],
+                 "sliders": [s.name for s in sliders],
+                 "joints": [f"{p}@{n}" for n, ln in self.links.items() for p in ln.points],
+                 "fixed_points": [n for n, p in self.points.items() if p.fixed]}[kind]
+        if rest not in names:
+            raise table.error("of", f'{_show(text)}: no {kind[:-1].replace("_", " ")} named '
+                              f'{_show(rest)}', _suggest(rest, names) if names else "")
+        return variable, rest, axis

@@ -7,6 +7,7 @@ import rerun.blueprint as rrb
 from . import style
 from .forces import force_arrows, force_legend
 from .geometry import arrow_legend, arrow_scales, bounds, point_index
+from .mechanism import path_of
 from .series import PLOTTED, SOLVER
 
 
@@ -47,6 +48,10 @@ def blueprint(result) -> rrb.Blueprint:
     variables = {v.name: v for v in result.variables()}
     plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{variables[name].units}]")
              for name in PLOTTED if name in variables]
+    if result.measurements:
+        plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
+                                     name=f"{name}: computed and measured")
+                  for name in result.measurements["names"]]
     length = variables["residual"].units
     solver = [rrb.TimeSeriesView(origin="solver", name=f"log10 residual [{length}]",
                                  contents=["solver/log10_residual", "solver/log10_tolerance"])]

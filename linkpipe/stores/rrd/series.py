@@ -1,4 +1,5 @@
-"""The plotted series: ``plots/<variable>/<label>`` and ``solver/**``, each in a colour of its own."""
+"""The plotted series: ``plots/<variable>/<label>``, ``plots/measurements/<name>/computed`` and
+``.../measured``, and ``solver/**``, each in a colour of its own."""
 from __future__ import annotations
 
 import numpy as np
@@ -29,6 +30,14 @@ def series_of(result) -> list[tuple[str, str, np.ndarray, list[int]]]:
     for name in SOLVER:
         var = variables[name]
         series.append((f"solver/{name}", f"{name} [{var.units}]", var.data, style.colour(0)))
+    if result.measurements:  # computed beside measured, one plot per measurement
+        m = result.measurements
+        for k, name in enumerate(m["names"]):
+            unit = m["units"][k]
+            series.append((path_of("plots", "measurements", name, "computed"), f"computed [{unit}]",
+                           m["measured"][:, k] + m["residual"][:, k], style.colour(0)))
+            series.append((path_of("plots", "measurements", name, "measured"), f"measured [{unit}]",
+                           m["measured"][:, k], style.colour(1)))
     log_res, log_tol = log10_residual(result)
     length = variables["residual"].units
     series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res, style.colour(0)))

@@ -1,0 +1,158 @@
+"""Logged data at scale (issue 14's targets), each case in a fresh process:
+
+    .venv/bin/python benchmarks/bench_logs.py            # 1,000,000-row run and 100,000-row fit
+    .venv/bin/python benchmarks/bench_logs.py --rows 200000 --fit-rows 20000   # quicker
+
+1. A crank-encoder log of R rows (CSV, written here: a spin-up angle(t) at uneven 1 ms stamps)
+   drives the crank-rocker of configs/fourbar_crank_rocker.toml with every effect (springs,
+   gravity, inertia, damping, loads) to ``.h5``: seconds reading the scene and its log
+   (pandas), then solving and writing; rows/s beyond reading the file; peak memory of the
+   process. Target: >= 200,000 rows/s, peak <= 1 GB.
+2. A fit of three force parameters (a spring rate, a mass, a load) to a measured input torque
+   over F rows (the torque made by linkpipe at known values, so the fit has an exact answer):
+   seconds for the whole fit, stage-1 solves (must be 1). Target: <= 2 s.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+EFFECTS = """
+[analysis]
+effects = ["springs", "gravity", "inertia", "damping", "loads"]
+[gravity]
+g = [0.0, -9.81]
+[[masses]]
+link = "crank"
+mass = 1.0
+center = [0.5, 0.0]
+inertia = 0.1
+[[masses]]
+link = "coupler"
+mass = 3.0
+center = "P"
+inertia = 3.2
+[[masses]]
+link = "rocker"
+mass = 2.5
+center = [1.5, 0.0]
+inertia = 1.9
+[[springs]]
+name = "return"
+between = ["P", "O4"]
+k = 200.0
+free_length = 2.0
+damping = 5.0
+[[loads]]
+name = "tool"
+point = "B"
+force = [-50.0, 20.0]
+"""
+
+
+def scene_text(measure: bool = False, k=200.0, mass=3.0, load=20.0) -> str:
+    base = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+    head = base[:base.index("[[drivers]]")]
+    text = head + ('[time]\nlog = "enc"\n[[logs]]\nname = "enc"\nfile = "enc.csv"\ntime = "t"\n'
+                   '[[drivers]]\nname = "crank"\nangle = ["O2", "A"]\nlog = "enc.deg"\n')
+    text += (EFFECTS.replace("k = 200.0", f"k = {k}").replace("mass = 3.0", f"mass = {mass}")
+             .replace("force = [-50.0, 20.0]", f"force = [-50.0, {load}]"))
+    if measure:
+        text += ('\n[[measurements]]\nname = "torque"\nlog = "enc.torque"\n'
+                 'of = "input_force.crank"\nsigma = 1.0\n[fit]\nparameters = '
+                 '["springs.return.k", "masses.coupler.mass", "loads.tool.force.1"]\n')
+    return text.replace("[outputs]", "[outputs_unused]") if "[outputs]" in text else text
+
+
+def write_log(folder: pathlib.Path, rows: int, torque=None) -> None:
+    t = np.arange(rows) * 1e-3 + np.random.default_rng(1).uniform(0, 4e-4, rows)
+    t[0] = 0.0
+    deg = 60.0 * t ** 2 + 20.0 * t  # a spin-up
+    cols = {"t": t, "deg": deg}
+    if torque is not None:
+        cols["torque"] = torque
+    import pandas as pd
+    pd.DataFrame(cols).to_csv(folder / "enc.csv", index=False, float_format="%.9g")
+
+
+def child_run(rows: int) -> None:
+    import resource
+
+    import linkpipe
+    from linkpipe.stores import hdf5
+    folder = pathlib.Path(tempfile.mkdtemp())
+    write_log(folder, rows)
+    (folder / "s.toml").write_text(scene_text())
+    t0 = time.perf_counter()
+    scene = linkpipe.load_scene(str(folder / "s.toml"))
+    t_read = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = linkpipe.solve(scene)
+    hdf5.write(result, folder / "s.h5")
+    t_work = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps(dict(rows=rows, read=t_read, work=t_work, peak_mb=peak,
+                          message=result.message, seconds=result.seconds)))
+
+
+def child_fit(rows: int) -> None:
+    import linkpipe
+    from linkpipe.fit import fit
+    folder = pathlib.Path(tempfile.mkdtemp())
+    write_log(folder, rows)
+    (folder / "truth.toml").write_text(scene_text(k=250.0, mass=3.6, load=35.0))
+    torque = linkpipe.solve(str(folder / "truth.toml")).forces["input_force"][1][:, 0]
+    write_log(folder, rows, torque)
+    (folder / "s.toml").write_text(scene_text(measure=True))
+    scene = linkpipe.load_scene(str(folder / "s.toml"))
+    t0 = time.perf_counter()
+    res = fit(scene)
+    sec = time.perf_counter() - t0
+    print(json.dumps(dict(rows=rows, seconds=sec, stage1=res.stage1_solves,
+                          fitted=list(map(float, res.fitted)), evaluations=int(res.n_evaluations))))
+
+
+def run_child(kind: str, rows: int) -> dict:
+    out = subprocess.run([sys.executable, __file__, "--child", kind, "--rows", str(rows)],
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--rows", type=int, default=1_000_000)
+    p.add_argument("--fit-rows", type=int, default=100_000)
+    p.add_argument("--child")
+    args = p.parse_args(argv)
+    if args.child == "run":
+        return child_run(args.rows) or 0
+    if args.child == "fit":
+        return child_fit(args.rows) or 0
+    r = run_child("run", args.rows)
+    rate = r["rows"] / r["work"]
+    print(f"1. {r['rows']:,}-row log, four-bar with every effect, to .h5: read {r['read']:.2f} s, "
+          f"solve + write {r['work']:.2f} s = {rate:,.0f} rows/s beyond reading "
+          f"(target >= 200,000: {'met' if rate >= 2e5 else 'MISSED'}); peak {r['peak_mb']:.0f} MB "
+          f"(target <= 1024: {'met' if r['peak_mb'] <= 1024 else 'MISSED'}); {r['message']}")
+    print("   stages: " + ", ".join(f"{k} {v:.2f}" for k, v in r["seconds"].items()))
+    f = run_child("fit", args.fit_rows)
+    print(f"2. fit of 3 force parameters over {f['rows']:,} rows: {f['seconds']:.2f} s, "
+          f"{f['evaluations']} evaluations, stage 1 solved {f['stage1']} time(s) (target <= 2 s: "
+          f"{'met' if f['seconds'] <= 2 else 'MISSED'}); fitted {f['fitted']} "
+          "(true 250, 3.6, 35)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,239 @@
+"""``linkpipe fit``: adjust named scene values to the measurements by least squares.
+
+``[fit] parameters`` address any numeric value of the scene file as ``table.entry.key[.index]``
+(entries of ``[[...]]`` tables by their ``name``, ``[[masses]]`` by their ``link``;
+``points.P.x``, ``links.coupler.lengths.A-B``, ``loads.tool.force.1``, ``gravity.g.1``).
+Each trial value is written into the scene's TOML data and read back through the scene parser,
+so every check of a scene applies to it. The objective is
+``sum(((computed - measured) / sigma)^2)`` over every measurement and every step where both
+exist at the initial values (a step that fails at a trial value counts as 1000 sigma: the
+optimiser is pushed back, never handed a NaN). ``scipy.optimize.least_squares`` (trust-region
+reflective, bounds from ``[fit] bounds``) minimises it.
+
+When every parameter is a force parameter (``springs``, ``torsion_springs``, ``masses``,
+``loads``, ``gravity``), stage 1 is solved once and reused for every trial (only the force
+stage runs again). Standard errors come from the Jacobian at the solution: the covariance is
+``inv(J^T J)`` with J of the sigma-weighted residuals, scaled by the residual variance
+``2 cost / (N - p)`` when some measurement has no ``sigma``. A parameter the data cannot
+identify (a singular value of J below ``IDENTIFIABLE_RCOND`` of the largest, with the parameter
+in the null direction) is reported as not identifiable, with no standard error.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .errors import SceneError
+from .pipeline import solve
+from .scene import Scene
+from .scene.keys import TABLES, _suggest
+
+FORCE_TABLES = ("springs", "torsion_springs", "masses", "loads", "gravity")
+#: a singular value of the weighted Jacobian below this part of the largest: not identifiable
+IDENTIFIABLE_RCOND = 1e-8
+#: a trial step that failed counts as this many sigma
+FAILED_STEP_SIGMAS = 1e3
+
+
+@dataclass(frozen=True)
+class Parameter:
+    address: str
+    path: tuple  # keys and indices into the scene's TOML data
+    initial: float
+    bounds: tuple[float, float] = (-math.inf, math.inf)
+
+    @property
+    def force_only(self) -> bool:
+        return self.path[0] in FORCE_TABLES
+
+
+@dataclass
+class FitResult:
+    """Every figure of a fit; standard errors NaN where not identifiable."""
+
+    scene: Scene
+    parameters: list[Parameter]
+    fitted: np.ndarray
+    standard_error: np.ndarray
+    identifiable: np.ndarray
+    cost: list[float]
+    before: object  # the Result at the initial values
+    after: object  # the Result at the fitted values
+    fitted_data: dict
+    stage1_solves: int
+    message: str = ""
+    n_evaluations: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def names(self) -> list[str]:
+        return [p.address for p in self.parameters]
+
+
+def parameters_of(scene: Scene, data: dict) -> list[Parameter]:
+    """The ``[fit]`` table's parameters, located in ``data`` (scene errors name the key)."""
+    raw = data.get("fit")
+    where = f"{scene.path}"
+    if not isinstance(raw, dict) or "parameters" not in raw:
+        raise SceneError(where, "fit", "parameters", "missing: a fit needs [fit] parameters",
+                         'add [fit] with parameters = ["springs.<name>.k", ...]')
+    unknown = set(raw) - {"parameters", "bounds"}
+    if unknown:
+        key = sorted(unknown)[0]
+        raise SceneError(where, "fit", key, "unknown key", _suggest(key, ["parameters", "bounds"]))
+    names = raw["parameters"]
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise SceneError(where, "fit", "parameters", "expected a non-empty array of strings",
+                         'write e.g. parameters = ["springs.cable.k"]')
+    if len(set(names)) != len(names):
+        raise SceneError(where, "fit", "parameters", "a parameter is named twice", "name each once")
+    bounds = raw.get("bounds", {})
+    if not isinstance(bounds, dict):
+        raise SceneError(where, "fit", "bounds", "expected a table", 'write bounds = { "springs.cable.k" = [0.0, 1e5] }')
+    out = []
+    for name in names:
+        path, value = locate(scene, data, name)
+        lo, hi = _bounds_of(scene, bounds, name, value)
+        out.append(Parameter(name, path, float(value), (lo, hi)))
+    for name in bounds:
+        if name not in names:
+            raise SceneError(where, "fit.bounds", name, "is not one of [fit] parameters",
+                             _suggest(name, names))
+    return out
+
+
+def _bounds_of(scene, bounds, name, value):
+    if name not in bounds:
+        return -math.inf, math.inf
+    b = bounds[name]
+    if (not isinstance(b, list) or len(b) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in b)
+            or not b[0] < b[1] or not b[0] <= value <= b[1]):
+        raise SceneError(scene.path, "fit.bounds", name,
+                         f"expected [low, high] with low < high around the value {value:g}, got {b!r}",
+                         f'write e.g. "{name}" = [{value / 10 if value > 0 else value - 1:g}, '
+                         f"{value * 10 if value > 0 else value + 1:g}]")
+    return float(b[0]), float(b[1])
+
+
+def locate(scene: Scene, data: dict, address: str):
+    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``."""
+    parts = address.split(".")
+
+    def fail(message, hint=""):
+        return SceneError(scene.path, "fit", "parameters", f'"{address}": {message}', hint)
+
+    table = parts[0]
+    if table not in TABLES or table not in data:
+        raise fail(f'no table "{table}" in the scene', _suggest(table, [t for t in TABLES if t in data]))
+    node, path, rest = data[table], [table], parts[1:]
+    if TABLES[table] == "array":
+        if not rest:
+            raise fail(f"name an entry of [[{table}]]", f'write "{table}.<name>.<key>"')
+        field_name = "link" if table == "masses" else "name"
+        matches = [i for i, e in enumerate(node) if e.get(field_name) == rest[0]]
+        if not matches:
+            raise fail(f'no [[{table}]] entry with {field_name} = "{rest[0]}"',
+                       _suggest(rest[0], [e.get(field_name) for e in node]))
+        node, path, rest = node[matches[0]], path + [matches[0]], rest[1:]
+    for part in rest:
+        if isinstance(node, dict) and part in node:
+            node, path = node[part], path + [part]
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node, path = node[int(part)], path + [int(part)]
+        else:
+            choices = list(node) if isinstance(node, dict) else [str(i) for i in range(len(node))] \
+                if isinstance(node, list) else []
+            raise fail(f'no "{part}" there', _suggest(part, choices) if choices else "")
+    if isinstance(node, bool) or not isinstance(node, (int, float)):
+        raise fail(f"is not a number ({type(node).__name__})", "address a numeric value, "
+                   "e.g. an index of an array: loads.tool.force.1")
+    return tuple(path), node
+
+
+def _set(data: dict, path: tuple, value: float) -> None:
+    node = data
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = float(value)
+
+
+def scene_with(scene: Scene, data: dict, params, x) -> Scene:
+    """The scene with the parameters at ``x``, parsed (and checked) as a scene file is."""
+    from .scene.parse import _Parser
+
+    trial = copy.deepcopy(data)
+    for p, v in zip(params, x):
+        _set(trial, p.path, v)
+    trial.pop("fit", None)
+    return _Parser(trial, scene.text, scene.path).parse()
+
+
+def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
+    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc."""
+    data = tomllib.loads(scene.text)
+    params = parameters_of(scene, data)
+    if not scene.measurements:
+        raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "
+                         "[[measurements]]", "add [[measurements]] with log, of and sigma")
+    x0 = np.array([p.initial for p in params])
+    force_only = all(p.force_only for p in params)
+    counter = {"stage1": 0}
+    before = _solve_counted(scene_with(scene, data, params, x0), None, counter)
+    reuse = before.kinematics if force_only else None
+    mask = np.isfinite(before.measurements["residual"])
+    sigma = np.array([m.sigma if m.sigma is not None else 1.0 for m in scene.measurements])
+    cost: list[float] = []
+
+    def residuals(x):
+        try:
+            r = _solve_counted(scene_with(scene, data, params, x), reuse, counter)
+        except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
+            return np.full(int(mask.sum()), FAILED_STEP_SIGMAS)
+        weighted = r.measurements["residual"] / sigma
+        out = np.where(np.isfinite(weighted), weighted, FAILED_STEP_SIGMAS)[mask]
+        cost.append(0.5 * float(out @ out))
+        if progress is not None:
+            progress(len(cost), cost[-1])
+        return out
+
+    lower, upper = zip(*(p.bounds for p in params))
+    sol = least_squares(residuals, x0, bounds=(lower, upper), method="trf", x_scale="jac",
+                        diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                        max_nfev=max_evaluations)
+    se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
+                                                             for m in scene.measurements))
+    after = _solve_counted(scene_with(scene, data, params, sol.x), reuse, counter)
+    fitted_data = copy.deepcopy(data)
+    for p, v in zip(params, sol.x):
+        _set(fitted_data, p.path, v)
+    return FitResult(scene, params, sol.x, se, identifiable, cost, before, after, fitted_data,
+                     counter["stage1"], sol.message, sol.nfev)
+
+
+def _solve_counted(scene, reuse, counter):
+    if reuse is None:
+        counter["stage1"] += 1
+    return solve(scene, kinematics=reuse)
+
+
+def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):
+    """Return (standard errors (p,), identifiable (p,) bool) from the weighted Jacobian."""
+    n, p = J.shape
+    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    small = sv < IDENTIFIABLE_RCOND * (sv[0] if len(sv) and sv[0] > 0 else 1.0)
+    identifiable = np.ones(p, dtype=bool)
+    for k in np.flatnonzero(small):  # parameters in a direction the data do not see
+        identifiable &= ~(np.abs(Vt[k]) > 0.1)
+    inv_sv2 = np.where(small, 0.0, 1.0 / np.where(small, 1.0, sv) ** 2)
+    cov = (Vt.T * inv_sv2) @ Vt
+    if not sigma_given:
+        dof = max(n - p, 1)
+        cov = cov * (float(residual @ residual) / dof)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    return np.where(identifiable, se, np.nan), identifiable

@@ -1,0 +1,60 @@
+"""Write a fit (:class:`linkpipe.fit.FitResult`): ``<name>_fit.toml`` and ``<name>_fit.h5``.
+
+The TOML is the scene's own text edited with tomlkit (comments and layout kept), the fitted
+values put in place and the ``[[logs]]`` file paths rewritten so that the file works from the
+output folder. The HDF5 (netCDF-4 layout like ``<name>.h5``) holds ``initial``, ``fitted``,
+``standard_error`` and ``identifiable`` on dimension ``parameter`` (the addresses), ``cost`` on
+``iteration`` (one per evaluation of the objective), and the measurements' residuals before and
+after (``measured_residual_before``, ``measured_residual_after``: step, measurement).
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+
+import numpy as np
+import tomlkit
+
+from . import atomic_path, hdf5
+from ..result import Variable
+
+
+def write_toml(fit, path: str | os.PathLike) -> None:
+    doc = tomlkit.parse(fit.scene.text)
+    for p, value in zip(fit.parameters, fit.fitted):
+        node = doc
+        for key in p.path[:-1]:
+            node = node[key]
+        node[p.path[-1]] = float(value)
+    out_dir = pathlib.Path(path).resolve().parent
+    for entry, log in zip(doc.get("logs", []), fit.scene.logs):
+        entry["file"] = os.path.relpath(log.path, out_dir)
+    text = tomlkit.dumps(doc)
+    with atomic_path(path, len(text.encode()) + 4096) as tmp:
+        pathlib.Path(tmp).write_text(text)
+
+
+def write_h5(fit, path: str | os.PathLike) -> None:
+    names = np.array(fit.names, dtype=object)
+    before, after = fit.before.measurements, fit.after.measurements
+    units = before["units"][0] if len(set(before["units"])) == 1 else "mixed"
+    coords = [Variable("parameter", ("parameter",), names, ""),
+              Variable("measurement", ("measurement",), np.array(before["names"], dtype=object), ""),
+              Variable("step", ("step",), np.arange(len(before["residual"])), "1"),
+              Variable("iteration", ("iteration",), np.arange(len(fit.cost)), "1")]
+    variables = [
+        Variable("initial", ("parameter",), np.array([p.initial for p in fit.parameters]), ""),
+        Variable("fitted", ("parameter",), np.asarray(fit.fitted, float), ""),
+        Variable("standard_error", ("parameter",), np.asarray(fit.standard_error, float), "",
+                 {"long_name": "one standard error; NaN where the data cannot identify it"}),
+        Variable("identifiable", ("parameter",), fit.identifiable.astype(np.int8), "1"),
+        Variable("cost", ("iteration",), np.asarray(fit.cost, float), "1",
+                 {"long_name": "0.5 sum(((computed - measured) / sigma)^2) per evaluation"}),
+        Variable("measured_residual_before", ("step", "measurement"), before["residual"], units,
+                 {"rms": before["rms"], "max_abs": before["max_abs"]}),
+        Variable("measured_residual_after", ("step", "measurement"), after["residual"], units,
+                 {"rms": after["rms"], "max_abs": after["max_abs"]}),
+    ]
+    attrs = {"scene_name": fit.scene.name, "optimizer_message": str(fit.message),
+             "evaluations": int(fit.n_evaluations), "stage1_solves": int(fit.stage1_solves)}
+    hdf5.write_layout(path, attrs, coords, variables)
