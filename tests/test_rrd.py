@@ -12,7 +12,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from linkpipe import solve as solve_scene
-from linkpipe.stores import hdf5, rrd, rrd_forces
+from linkpipe.stores import hdf5, rrd
 
 RERUN = pathlib.Path(sys.executable).with_name("rerun")
 ARCHETYPE = {"links": "LineStrips2D", "guides": "LineStrips2D", "trace": "LineStrips2D",
@@ -57,6 +57,11 @@ def _column(frame, entity, component):
     return frame[f"{entity}:{component}"]
 
 
+def _area(xy) -> float:
+    x, y = np.asarray(xy, float).T
+    return 0.5 * float(x @ np.roll(y, -1) - y @ np.roll(x, -1))
+
+
 def _write(result, folder):
     folder.mkdir(exist_ok=True)
     path = folder / f"{result.scene.name}.rrd"
@@ -88,14 +93,18 @@ def _expected_entities(result) -> set[str]:
         out |= {f"/mechanism/springs/{s}" for s in result.spring_names}   # an addition
     if "torsion_spring_torque" in forces:
         out |= {f"/plots/torsion_spring_torque/{t}" for t in result.force_coords["torsion_spring"]}
-    out |= {f"/mechanism/actuators/{d.name}" for d in sc.drivers if d.kind == "distance"}
+    out |= {f"/mechanism/actuators/{d.name}" for d in sc.drivers if d.kind == "distance"}  # addition
     for m in sc.measurements:
         out |= {f"/plots/measurements/{m.name}/computed", f"/plots/measurements/{m.name}/measured"}
-    if "input_force" in forces:  # force arrows, only where forces are computed
+    if "input_force" in forces:  # force arrows: only where forces are computed
         out |= {f"/mechanism/forces/input/{d}" for d in result.driver_names}
-        out |= {f"/mechanism/forces/loads/{x.name}" for x in sc.loads if x.point is not None}
-        if "spring_force" in forces:
-            out |= {f"/mechanism/forces/springs/{s}" for s in result.spring_names}
+        out |= {f"/mechanism/forces/input/{d.name}/reaction" for d in sc.drivers
+                if d.relative_to is not None and (d.bodies or ("", ""))[1] != "ground"}
+        if "loads" in sc.effects:
+            out |= {f"/mechanism/forces/loads/{x.name}" for x in sc.loads if x.point is not None}
+        if "gravity" in sc.effects:
+            out |= {f"/mechanism/forces/weights/{m.link}" for m in sc.masses}
+        out |= {f"/mechanism/forces/springs/{s}" for s in result.spring_names if sc.springs}
         out |= {f"/mechanism/forces/reactions/{p}" for p in result.force_coords.get("fixed_point", [])}
     return out
 
@@ -146,14 +155,17 @@ def test_values_match_the_result_and_the_hdf5_file(solve, tmp_path):
     got = np.concatenate(_column(iterations, "/solver/iterations", "Scalars:scalars").to_list())
     np.testing.assert_array_equal(got, result.iterations)
 
-    # the coupler's outline is closed (A, B, P, A); the crank's is its two points
+    # the coupler's outline is its triangle, closed and counter-clockwise; the crank's is its
+    # two points
     i = {n: k for k, n in enumerate(result.point_names)}
     coupler = rec.steps("/mechanism/links/coupler")
     strips = _column(coupler, "/mechanism/links/coupler", "LineStrips2D:strips")
     step = 100
     (strip,) = strips[step]
-    np.testing.assert_allclose(np.stack(strip), position[step, [i["A"], i["B"], i["P"], i["A"]]],
-                               rtol=1e-6, atol=1e-6)
+    k = rrd.outline(result, [i["A"], i["B"], i["P"]])
+    assert sorted(k[:3]) == sorted([i["A"], i["B"], i["P"]]) and k[3] == k[0]
+    np.testing.assert_array_equal(np.stack(strip), position[step, k].astype(np.float32))
+    assert _area(np.stack(strip)[:-1]) > 0
 
     # arrows: scaled so the longest is 25 % of the mechanism's size; the label names the scale
     scale = rrd.arrow_scales(result)["velocity"]
@@ -300,7 +312,7 @@ def test_a_crash_mid_write_keeps_the_previous_recording(solve, tmp_path, monkeyp
     def failing(*args):
         raise RuntimeError("viewer on fire")
 
-    monkeypatch.setattr(rrd, "_log_series", failing)
+    monkeypatch.setattr(rrd.series, "log_series", failing)
     with pytest.raises(RuntimeError, match="viewer on fire"):
         rrd.write(result, path)
     assert path.read_bytes() == before
@@ -368,94 +380,256 @@ def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
     assert streamed == written
 
 
-def test_force_arrows_start_where_forces_act_and_are_the_stored_forces_scaled(solve, tmp_path):
+# -- forces, plates, colours, the driver's timeline (issue 13, item 5) ----------------------------
+
+
+def _arrows(rec, entity):
+    """(origins, vectors) (S, k, 2) float32 of an Arrows2D entity at every step, as logged."""
+    frame = rec.steps(entity)
+    np.testing.assert_array_equal(frame["step"], np.arange(len(frame)))
+    origins = np.array([np.stack(r) for r in _column(frame, entity, "Arrows2D:origins")])
+    vectors = np.array([np.stack(r) for r in _column(frame, entity, "Arrows2D:vectors")])
+    return origins, vectors
+
+
+def _f32(a):
+    return np.asarray(a, dtype=np.float32)
+
+
+def _unit(d):
+    return d / np.hypot(d[:, 0], d[:, 1])[:, None]
+
+
+def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve, tmp_path):
     """The basketball goal (springs, gravity, inertia, a handle input): at every step each arrow
-    starts at its point and is its stored force times the one scale named in the title."""
+    starts at the stored point and is the stored force times the one scale (float32: exact)."""
     result = solve("basketball_goal")
     rec = Recording(_write(result, tmp_path))
-    arrows, scale = rrd.forces_drawn(result)
-    assert scale > 0
+    arrows, scale = rrd.force_arrows(result)
+    X, F = result.position, result.forces
     i = {n: k for k, n in enumerate(result.point_names)}
-    X = result.position
-    F = result.forces
-
-    def logged(entity):
-        frame = rec.steps(entity)
-        origins = np.array([np.stack(r) for r in _column(frame, entity, "Arrows2D:origins")])
-        vectors = np.array([np.stack(r) for r in _column(frame, entity, "Arrows2D:vectors")])
-        return origins, vectors / scale
-
-    # springs: the tension pulls each end towards the other
-    for k, spring in enumerate(result.scene.springs):
-        a, b = (X[:, i[p]] for p in spring.between)
-        u = (b - a) / np.linalg.norm(b - a, axis=1)[:, None]
-        T = F["spring_force"][1][:, k, None]
-        origins, forces = logged(f"/mechanism/forces/springs/{spring.name}")
-        np.testing.assert_allclose(origins, np.stack([a, b], axis=1), rtol=1e-6, atol=1e-6)
-        np.testing.assert_allclose(forces, np.stack([T * u, -T * u], axis=1), rtol=1e-5, atol=1e-5)
-    # ground reactions at the fixed points
-    R = F["ground_reaction"][1]
-    for k, name in enumerate(result.force_coords["fixed_point"]):
-        origins, forces = logged(f"/mechanism/forces/reactions/{name}")
-        np.testing.assert_allclose(origins[:, 0], X[:, i[name]], rtol=1e-6, atol=1e-6)
-        np.testing.assert_allclose(forces[:, 0], R[:, k], rtol=1e-5, atol=1e-4)
-    # the handle's input force along its direction at its point
+    # the handle's input force at its point, along its direction
     (driver,) = result.scene.drivers
     n = np.asarray(driver.input.direction, float) / np.hypot(*driver.input.direction)
-    origins, forces = logged(f"/mechanism/forces/input/{driver.name}")
-    np.testing.assert_allclose(origins[:, 0], X[:, i[driver.input.point]], rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(forces[:, 0], F["input_force"][1][:, :1] * n, rtol=1e-5, atol=1e-5)
-    # one scale: the longest arrow is FORCE_FRACTION of the mechanism's size; the title says it
+    origins, vectors = _arrows(rec, f"/mechanism/forces/input/{driver.name}")
+    np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[driver.input.point]]))
+    np.testing.assert_array_equal(vectors[:, 0], _f32(F["input_force"][1][:, :1] * n * scale))
+    # each spring's force on both ends: a tension pulls them together
+    for k, spring in enumerate(result.scene.springs):
+        a, b = (X[:, i[p]] for p in spring.between)
+        pull = F["spring_force"][1][:, k, None] * _unit(b - a)
+        origins, vectors = _arrows(rec, f"/mechanism/forces/springs/{spring.name}")
+        np.testing.assert_array_equal(origins, _f32(np.stack([a, b], axis=1)))
+        np.testing.assert_array_equal(vectors, _f32(np.stack([pull, -pull], axis=1) * scale))
+    # the ground's reaction at each fixed point
+    for k, name in enumerate(result.force_coords["fixed_point"]):
+        origins, vectors = _arrows(rec, f"/mechanism/forces/reactions/{name}")
+        np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[name]]))
+        np.testing.assert_array_equal(vectors[:, 0], _f32(F["ground_reaction"][1][:, k] * scale))
+    # each weight m g at its centre (the backboard's centre is its point G)
+    g = np.asarray(result.scene.gravity)
+    for mass in result.scene.masses:
+        origins, vectors = _arrows(rec, f"/mechanism/forces/weights/{mass.link}")
+        if isinstance(mass.center, str):
+            np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[mass.center]]))
+        np.testing.assert_array_equal(vectors[:, 0], np.broadcast_to(_f32(mass.mass * g * scale),
+                                                                     vectors[:, 0].shape))
+    # one scale: 1 ft stands for a round force; the longest arrow is at most 30 % of the
+    # mechanism's size and at least half of that; the 2D view's title says it
+    per = 1 / scale
+    assert per / 10 ** np.floor(np.log10(per)) in (1.0, 2.0, 2.5, 5.0)
     longest = max(np.nanmax(np.hypot(v[..., 0], v[..., 1])) for *_, v in arrows) * scale
-    assert longest == pytest.approx(rrd_forces.FORCE_FRACTION * rrd.mechanism_size(result))
-    assert any(f"forces: 1 ft = {1 / scale:.3g} lbf" in t for t in rec.view_titles())
+    size = rrd.mechanism_size(result)
+    assert 0.15 * size <= longest <= 0.3 * size * (1 + 1e-12)
+    (title,) = [t for t in rec.view_titles() if t.startswith("basketball_goal")]
+    assert f"forces 1 ft = {per:,.10g} lbf (input red, weights violet, springs yellow, " \
+           "reactions cyan)" in title
+    # each item is labelled with what it is, once (a spring's two arrows: at their centre)
+    assert list(rec.static("/mechanism/forces/input/theta3a", "Arrows2D:labels")) == ["theta3a"]
+    assert list(rec.static("/mechanism/forces/reactions/O2", "Arrows2D:labels")) == ["R O2"]
+    assert list(rec.static("/mechanism/forces/springs/left", "Arrows2D:labels")) == ["left"]
+
+
+def test_cylinders_loads_and_weights_of_the_excavator(solve, tmp_path):
+    """Each cylinder is drawn between its pins and its axial force pushes both pins apart when
+    positive; the bucket load acts at its point; a kinematics step cleared clears its arrows."""
+    base = solve("excavator_arm")
+    input_force = base.forces["input_force"][1].copy()
+    input_force[5] = np.nan                       # a step without an input force
+    result = dataclasses.replace(base, forces={**base.forces, "input_force": (
+        base.forces["input_force"][0], input_force, base.forces["input_force"][2])})
+    rec = Recording(_write(result, tmp_path))
+    _, scale = rrd.force_arrows(result)
+    X = result.position
+    i = {n: k for k, n in enumerate(result.point_names)}
+    for j, driver in enumerate(result.scene.drivers):
+        a, b = (X[:, i[p]] for p in driver.points)
+        entity = f"/mechanism/actuators/{driver.name}"
+        strips = _column(rec.steps(entity), entity, "LineStrips2D:strips")
+        np.testing.assert_array_equal(np.stack(strips[10][0]), _f32(np.stack([a[10], b[10]])))
+        frame = rec.steps(f"/mechanism/forces/input/{driver.name}")
+        counts = [len(r) for r in _column(frame, f"/mechanism/forces/input/{driver.name}",
+                                          "Arrows2D:vectors")]
+        assert counts == [2] * 5 + [0] + [2] * (result.n_steps - 6)
+        push = input_force[:, j, None] * _unit(b - a)
+        keep = np.arange(result.n_steps) != 5
+        frame = frame[keep]
+        vectors = np.array([np.stack(r) for r in _column(frame, f"/mechanism/forces/input/{driver.name}",
+                                                         "Arrows2D:vectors")])
+        np.testing.assert_array_equal(vectors, _f32(np.stack([-push, push], axis=1)[keep] * scale))
+    (load,) = [ld for ld in result.scene.loads if ld.point is not None]
+    origins, vectors = _arrows(rec, f"/mechanism/forces/loads/{load.name}")
+    np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[load.point]]))
+    np.testing.assert_array_equal(vectors[:, 0], np.broadcast_to(
+        _f32(np.asarray(load.force) * scale), vectors[:, 0].shape))
+    assert rec.entities == _expected_entities(result)
+
+
+def test_an_angle_drivers_torque_is_drawn_as_the_force_at_its_arm(solve, tmp_path):
+    """Without an input point, an angle driver's torque is the force at the driven vector's
+    head, perpendicular to it, whose moment about its tail is the torque."""
+    result = solve("hatch_gas_spring")
+    rec = Recording(_write(result, tmp_path))
+    _, scale = rrd.force_arrows(result)
+    (driver,) = result.scene.drivers
+    i = {n: k for k, n in enumerate(result.point_names)}
+    a, b = (result.position[:, i[p]] for p in driver.points)
+    origins, vectors = _arrows(rec, f"/mechanism/forces/input/{driver.name}")
+    np.testing.assert_array_equal(origins[:, 0], _f32(b))
+    force = vectors[:, 0].astype(float) / scale
+    arm = b - a
+    torque = result.forces["input_force"][1][:, 0]
+    np.testing.assert_allclose(arm[:, 0] * force[:, 1] - arm[:, 1] * force[:, 0], torque,
+                               rtol=1e-6, atol=1e-6 * np.abs(torque).max())
+    np.testing.assert_allclose(np.einsum("ij,ij->i", arm, force), 0, atol=1e-6 * np.abs(torque).max())
 
 
 def test_a_kinematics_only_scene_draws_no_force(solve, tmp_path):
-    rec = Recording(_write(solve("fourbar_crank_rocker"), tmp_path))
-    assert not {e for e in rec.entities if e.startswith("/mechanism/forces")}
-    assert not any("forces:" in t for t in rec.view_titles())
-
-
-def test_a_cylinder_is_drawn_and_its_force_acts_on_both_pins(solve, tmp_path):
-    result = solve("dump_truck")
+    result = solve("fourbar_crank_rocker")
+    assert result.forces is None
     rec = Recording(_write(result, tmp_path))
+    assert not {e for e in rec.entities if e.startswith("/mechanism/forces")}
+    assert not any("forces" in t for t in rec.view_titles())
+    assert rrd.force_arrows(result) == ([], 0.0)
+
+
+def _crosses(strip) -> bool:
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    edges = list(zip(strip[:-1], strip[1:]))
+    for k, (a, b) in enumerate(edges):
+        for c, d in edges[k + 2:len(edges) - (k == 0)]:
+            if cross(a, b, c) * cross(a, b, d) < 0 and cross(c, d, a) * cross(c, d, b) < 0:
+                return True
+    return False
+
+
+def test_plates_are_closed_polygons_that_do_not_cross(solve, tmp_path):
+    """The excavator's boom lists O, T, BR, SC and its stick T, K, SR, BB, N out of outline
+    order: each is drawn as the convex hull of its pins, closed, counter-clockwise, at every
+    step, with every pin inside or on it. Three pins on one line (the goal's upper arm) are a
+    segment between the extreme two."""
+    result = solve("excavator_arm")
+    rec = Recording(_write(result, tmp_path / "excavator"))
     i = {n: k for k, n in enumerate(result.point_names)}
-    C, P = result.position[:, i["C"]], result.position[:, i["P"]]
-    frame = rec.steps("/mechanism/actuators/tipping_cylinder")
-    strips = _column(frame, "/mechanism/actuators/tipping_cylinder", "LineStrips2D:strips")
-    np.testing.assert_allclose(np.stack(strips[10][0]), np.stack([C[10], P[10]]), atol=1e-5)
-    arrows, scale = rrd.forces_drawn(result)
-    frame = rec.steps("/mechanism/forces/input/tipping_cylinder")
-    vectors = np.array([np.stack(r) for r in _column(frame, "/mechanism/forces/input/tipping_cylinder",
-                                                    "Arrows2D:vectors")]) / scale
-    u = (P - C) / np.linalg.norm(P - C, axis=1)[:, None]
-    f = result.forces["input_force"][1][:, :1]
-    np.testing.assert_allclose(vectors, np.stack([-f * u, f * u], axis=1), rtol=1e-5, atol=1e-2)
+    for link in result.scene.links:
+        entity = f"/mechanism/links/{link.name}"
+        strips = _column(rec.steps(entity), entity, "LineStrips2D:strips")
+        for step in (0, result.n_steps // 2, result.n_steps - 1):
+            (strip,) = strips[step]
+            strip = np.stack(strip).astype(float)
+            if len(link.points) == 2:
+                assert len(strip) == 2
+                continue
+            np.testing.assert_array_equal(strip[0], strip[-1])              # closed
+            assert _area(strip[:-1]) > 0 and not _crosses(strip)
+            for p in link.points:                                            # covers its pins
+                q = result.position[step, i[p]]
+                edge = np.diff(strip, axis=0)
+                side = edge[:, 0] * (q[1] - strip[:-1, 1]) - edge[:, 1] * (q[0] - strip[:-1, 0])
+                assert (side >= -1e-5 * np.hypot(*edge.T)).all(), (link.name, p)
+    boom = [result.point_names[k] for k in rrd.outline(result, [i[p] for p in ("O", "T", "BR", "SC")])]
+    assert boom[0] == boom[-1] and sorted(boom[:-1]) == ["BR", "O", "SC", "T"]
+    goal = solve("basketball_goal")
+    j = {n: k for k, n in enumerate(goal.point_names)}
+    upper = [goal.point_names[k] for k in rrd.outline(goal, [j[p] for p in ("O2", "B", "S2")])]
+    assert sorted(upper) == ["B", "O2"]
 
 
-def test_a_plate_is_its_outline_without_crossings(solve, tmp_path):
-    """The excavator's boom (O, T, BR, SC: four pins, listed out of outline order) is drawn as
-    its convex hull, closed; no two of its edges cross."""
+def _rgba(colour) -> int:
+    r, g, b = colour[:3]
+    return (int(r) << 24) | (int(g) << 16) | (int(b) << 8) | 255
+
+
+def test_each_series_of_a_plot_has_its_own_colour(solve, tmp_path):
     result = solve("excavator_arm")
     rec = Recording(_write(result, tmp_path))
-    frame = rec.steps("/mechanism/links/boom")
-    (strip,) = _column(frame, "/mechanism/links/boom", "LineStrips2D:strips")[0]
-    pts = np.stack(strip)
-    assert len(pts) == 5 and np.allclose(pts[0], pts[-1])
-
-    def cross(a, b, c):
-        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
-
-    edges = list(zip(pts[:-1], pts[1:]))
-    for k, (a, b) in enumerate(edges):
-        for c, d in edges[k + 2:] if k else edges[2:-1]:
-            assert not (cross(a, b, c) * cross(a, b, d) < 0 and cross(c, d, a) * cross(c, d, b) < 0)
+    for plot in ("input_force", "link_angle"):
+        colours = {e: int(rec.static(e, "SeriesLines:colors")[0]) for e in rec.entities
+                   if e.startswith(f"/plots/{plot}/")}
+        assert len(colours) >= 3 and len(set(colours.values())) == len(colours), plot
+    # a link's angle is plotted in the link's colour
+    for link in result.link_names:
+        strip = int(rec.static(f"/mechanism/links/{link}", "LineStrips2D:colors")[0])
+        assert int(rec.static(f"/plots/link_angle/{link}", "SeriesLines:colors")[0]) == strip
+    residual = int(rec.static("/solver/log10_residual", "SeriesLines:colors")[0])
+    assert residual != int(rec.static("/solver/log10_tolerance", "SeriesLines:colors")[0])
+    many = [tuple(rrd.style.colour(j)) for j in range(40)]
+    assert len(set(many)) == 40
 
 
 def test_one_driver_sweeps_have_a_timeline_of_the_drivers_value(solve, tmp_path):
-    result = solve("fourbar_crank_rocker")
+    """The crank-rocker's crank in whole degrees: timeline "crank [degree]"; the dump truck's
+    cylinder length in metres: a decimal fraction of a metre; several drivers: none."""
+    rocker = solve("fourbar_crank_rocker")
+    rec = Recording(_write(rocker, tmp_path / "rocker"))
+    frame = rec.store.reader(index="crank [degree]", contents="/plots/link_angle/rocker").to_pandas()
+    np.testing.assert_array_equal(frame["crank [degree]"].to_numpy(),
+                                  rocker.driver_value[:, 0].astype(np.int64))
+    np.testing.assert_array_equal(frame["step"].to_numpy(), np.arange(rocker.n_steps))
+    truck = solve("dump_truck")
+    name, values = rrd.driver_timeline(truck)
+    assert name.startswith("tipping_cylinder [0.") and name.endswith(" m]")
+    per = 1 / float(name.split("[")[1].split()[0])
+    np.testing.assert_array_equal(values, np.round(truck.driver_value[:, 0] * per).astype(np.int64))
+    assert (np.diff(values) >= 10).all() or (np.diff(values) <= -10).all()
+    rec = Recording(_write(truck, tmp_path / "truck"))
+    frame = rec.store.reader(index=name, contents="/mechanism/points").to_pandas()
+    np.testing.assert_array_equal(frame[name].to_numpy(), values)
+    assert rrd.driver_timeline(solve("excavator_arm")) is None        # three drivers
+    encoder = solve("fourbar_crank_encoder")                           # a missing sample: NaN
+    assert not np.isfinite(encoder.driver_value).all() and rrd.driver_timeline(encoder) is None
+
+
+def test_a_motor_between_links_is_drawn_on_both(tmp_path):
+    """tests/data/two_link_arm.toml: the elbow motor (B about A, relative to A -> O) turns the
+    forearm with its torque (force at B, moment about A) and the upper arm with minus it (force
+    at O, moment about A); the shoulder's torque is a force at A."""
+    from conftest import CONFIG_DIR
+
+    result = solve_scene(str(CONFIG_DIR.parent / "tests" / "data" / "two_link_arm.toml"))
     rec = Recording(_write(result, tmp_path))
-    frame = rec.store.reader(index="crank [degree/10]", contents="/plots/link_angle/rocker").to_pandas()
-    np.testing.assert_array_equal(frame["crank [degree/10]"].to_numpy(),
-                                  np.round(result.driver_value[:, 0] * 10).astype(np.int64))
+    _, scale = rrd.force_arrows(result)
+    i = {n: k for k, n in enumerate(result.point_names)}
+    X, tau = result.position, result.forces["input_force"][1]
+    origins, vectors = _arrows(rec, "/mechanism/forces/input/elbow")
+    reaction_at, reaction = _arrows(rec, "/mechanism/forces/input/elbow/reaction")
+    np.testing.assert_array_equal(np.concatenate([origins, reaction_at], axis=1),
+                                  _f32(X[:, [i["B"], i["O"]]]))
+    force = np.concatenate([vectors, reaction], axis=1).astype(float) / scale
+    assert list(rec.static("/mechanism/forces/input/elbow/reaction", "Arrows2D:labels")) == [
+        "elbow reaction"]
+
+    def moment(at, f, about):
+        r = at - about
+        return r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]
+
+    A = X[:, i["A"]]
+    scale_tau = np.abs(tau).max()
+    np.testing.assert_allclose(moment(X[:, i["B"]], force[:, 0], A), tau[:, 1], atol=1e-5 * scale_tau)
+    np.testing.assert_allclose(moment(X[:, i["O"]], force[:, 1], A), -tau[:, 1], atol=1e-5 * scale_tau)
+    origins, vectors = _arrows(rec, "/mechanism/forces/input/shoulder")
+    np.testing.assert_array_equal(origins[:, 0], _f32(A))
+    np.testing.assert_allclose(moment(A, vectors[:, 0].astype(float) / scale, X[:, i["O"]]), tau[:, 0],
+                               atol=1e-5 * scale_tau)

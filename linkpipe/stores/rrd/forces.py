@@ -1,0 +1,262 @@
+"""Force arrows: ``mechanism/forces/<kind>/<name>``, every force where it acts, one scale.
+
+Only a run with a force stage draws them (a kinematics-only scene computes no force, so none is
+drawn), and only the kinds it computed. Each kind is one row of :data:`KINDS`: the variable of
+``result.forces`` whose presence calls for it, its colour, and a function that returns, for each
+named item, where its forces act and what they are at every step (force units, the stored
+values; the recording multiplies them by the one scale):
+
+* ``input`` (red): each driver's ``input_force``. With ``input``, at the input point along its
+  direction (turning with ``input.link``). Without: a ``distance`` driver's axial force on its
+  two pins (pushing them apart when positive); a ``coordinate`` driver's force at its point along
+  its axis; an ``angle`` driver's torque as the equivalent force at the head ``b`` of the driven
+  vector ``a -> b``, perpendicular to it, torque / |ab| (the force at ``b`` that turns the link
+  about ``a`` with that torque); with ``relative_to`` ``c -> d`` on a moving second body, also
+  the reaction on it, ``input/<driver>/reaction``: minus the torque, at ``d``, perpendicular
+  to ``c -> d``.
+* ``loads`` (orange): each force load at its point (couples are not arrows).
+* ``weights`` (violet): each mass's weight ``m g`` at its centre, per link.
+* ``springs`` (yellow): each two-point spring's force (``spring_force``, damping included) on
+  its two ends; a tension pulls them together.
+* ``reactions`` (cyan): ``ground_reaction``, the force the ground exerts at each fixed point.
+
+The scale makes the longest arrow of the sweep at most :data:`FORCE_FRACTION` of the mechanism's
+size, rounded so that one length unit stands for 1, 2, 2.5 or 5 times a power of ten force
+units; the 2D view's title says it (``forces 1 m = 250 N``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import rerun as rr
+
+from ...cache import derived
+from .geometry import finite_rows, mechanism_size
+from .mechanism import path_of
+
+#: the longest force arrow of a sweep, at most this fraction of the mechanism's size
+FORCE_FRACTION = 0.3
+#: an item's label is drawn when its arrows are this long (fraction of the size) at 80 % of
+#: the steps or more
+LABEL_FRACTION = 0.06
+
+
+@dataclass(frozen=True)
+class ForceKind:
+    """One kind of force arrow: drawn when ``result.forces`` holds ``variable``."""
+
+    name: str
+    variable: str
+    colour: tuple[int, int, int]
+    colour_name: str
+    arrows: Callable  # result -> [(item (a name, or a tuple of path parts), origins (S, k, 2),
+    #                              forces (S, k, 2))]
+    tag: str          # the arrows' drawn label: "<tag> <item>" ("R O2"), or the item alone
+
+
+def _points(result) -> tuple[np.ndarray, dict[str, int]]:
+    return result.position, {n: i for i, n in enumerate(result.point_names)}
+
+
+def _unit(d: np.ndarray) -> np.ndarray:
+    """Rows of d (S, 2) divided by their length (NaN where it is 0)."""
+    length = np.hypot(d[:, 0], d[:, 1])
+    return d / np.where(length > 0, length, np.nan)[:, None]
+
+
+def _perp(d: np.ndarray) -> np.ndarray:
+    """Rows of d (S, 2) turned a quarter turn counter-clockwise."""
+    return np.stack([-d[:, 1], d[:, 0]], axis=1)
+
+
+def input_direction(result, driver_input) -> np.ndarray:
+    """Unit direction (S, 2) an input pushes along: global, or with ``link`` in that link's frame
+    (u from its first point to its second, v a quarter turn CCW); the same rule as
+    :func:`linkpipe.forces.virtual_work.input_direction`, evaluated on the stored positions."""
+    n = np.asarray(driver_input.direction, dtype=float)
+    n = n / np.hypot(*n)
+    if driver_input.link is None:
+        return np.broadcast_to(n, (result.n_steps, 2))
+    X, idx = _points(result)
+    link = next(ln for ln in result.scene.links if ln.name == driver_input.link)
+    e = _unit(X[:, idx[link.points[1]]] - X[:, idx[link.points[0]]])
+    return np.stack([n[0] * e[:, 0] - n[1] * e[:, 1], n[0] * e[:, 1] + n[1] * e[:, 0]], axis=1)
+
+
+def input_arrows(result) -> list:
+    X, idx = _points(result)
+    F = result.forces["input_force"][1]
+    out = []
+    for j, driver in enumerate(result.scene.drivers):
+        f = F[:, j, None]
+        if driver.input is not None:
+            at, force = [X[:, idx[driver.input.point]]], [f * input_direction(result, driver.input)]
+        elif driver.kind == "coordinate":
+            axis = np.eye(2)[driver.axis]
+            at, force = [X[:, idx[driver.points[0]]]], [f * axis]
+        elif driver.kind == "distance":
+            a, b = X[:, idx[driver.points[0]]], X[:, idx[driver.points[1]]]
+            u = _unit(b - a)
+            at, force = [a, b], [-(f * u), f * u]
+        else:  # a torque: the force at b, perpendicular to a -> b, that turns it about a
+            a, b = X[:, idx[driver.points[0]]], X[:, idx[driver.points[1]]]
+            at, force = [b], [_torque_as_force(f, b - a)]
+            if driver.relative_to is not None and (driver.bodies or ("", ""))[1] != "ground":
+                # the motor's reaction on the second body: an entity of its own beneath the
+                # driver's, so that each label sits at its own arrow
+                c, d = X[:, idx[driver.relative_to[0]]], X[:, idx[driver.relative_to[1]]]
+                out.append(((driver.name, "reaction"), d[:, None], _torque_as_force(-f, d - c)[:, None]))
+        out.append((driver.name, np.stack(at, axis=1), np.stack(force, axis=1)))
+    return out
+
+
+def _torque_as_force(torque: np.ndarray, arm: np.ndarray) -> np.ndarray:
+    """The force (S, 2) at the end of ``arm`` (S, 2) with moment ``torque`` (S, 1) about its start."""
+    length = np.hypot(arm[:, 0], arm[:, 1])[:, None]
+    return (torque / np.where(length > 0, length, np.nan)) * _perp(_unit(arm))
+
+
+def load_arrows(result) -> list:
+    if "loads" not in result.scene.effects:
+        return []
+    X, idx = _points(result)
+    return [(load.name, X[:, idx[load.point]][:, None],
+             np.broadcast_to(np.asarray(load.force, float), (result.n_steps, 1, 2)))
+            for load in result.scene.loads if load.point is not None and load.force is not None]
+
+
+def weight_arrows(result) -> list:
+    g = np.asarray(result.scene.gravity, dtype=float)
+    centres: dict[str, list] = {}
+    for mass in result.scene.masses:
+        centres.setdefault(mass.link, []).append((mass_centre(result, mass), mass.mass * g))
+    return [(link, np.stack([c for c, _ in items], axis=1),
+             np.broadcast_to(np.stack([w for _, w in items]), (result.n_steps, len(items), 2)))
+            for link, items in centres.items()]
+
+
+def mass_centre(result, mass) -> np.ndarray:
+    """A mass's centre (S, 2): its point, or local (u, v) along the link's first two points."""
+    X, idx = _points(result)
+    if isinstance(mass.center, str):
+        return X[:, idx[mass.center]]
+    link = next(ln for ln in result.scene.links if ln.name == mass.link)
+    a = X[:, idx[link.points[0]]]
+    e = _unit(X[:, idx[link.points[1]]] - a)
+    u, v = mass.center
+    return a + u * e + v * _perp(e)
+
+
+def spring_arrows(result) -> list:
+    X, idx = _points(result)
+    T = result.forces["spring_force"][1]
+    out = []
+    for k, spring in enumerate(result.scene.springs):
+        a, b = X[:, idx[spring.between[0]]], X[:, idx[spring.between[1]]]
+        pull = T[:, k, None] * _unit(b - a)   # on a, towards b when in tension
+        out.append((spring.name, np.stack([a, b], axis=1), np.stack([pull, -pull], axis=1)))
+    return out
+
+
+def reaction_arrows(result) -> list:
+    X, idx = _points(result)
+    R = result.forces["ground_reaction"][1]
+    return [(name, X[:, idx[name]][:, None], R[:, k][:, None])
+            for k, name in enumerate(result.force_coords["fixed_point"])]
+
+
+#: the kinds of force arrows, drawn in this order; a new kind is one row (the loads are the
+#: scene's own constants: drawn whenever forces are computed, i.e. ``input_force`` is there)
+KINDS = (
+    ForceKind("input", "input_force", (255, 50, 50), "red", input_arrows, ""),
+    ForceKind("loads", "input_force", (255, 160, 0), "orange", load_arrows, ""),
+    ForceKind("weights", "gravity_energy", (190, 130, 255), "violet", weight_arrows, "W"),
+    ForceKind("springs", "spring_force", (255, 230, 40), "yellow", spring_arrows, ""),
+    ForceKind("reactions", "ground_reaction", (0, 220, 255), "cyan", reaction_arrows, "R"),
+)
+
+
+def force_arrows(result) -> list[tuple[ForceKind, str, np.ndarray, np.ndarray]]:
+    """Return [(kind, item, origins (S, k, 2), forces (S, k, 2))] of every force to draw (force
+    units), with the scale (length per force unit, 0 if there is nothing to draw); built once."""
+    return derived(result, "rrd_force_arrows", _force_arrows)
+
+
+def _force_arrows(result):
+    forces = result.forces or {}
+    arrows = [(kind, item, origins, vectors) for kind in KINDS if kind.variable in forces
+              for item, origins, vectors in kind.arrows(result)]
+    largest = 0.0
+    for *_, vectors in arrows:   # over finite arrows: an overflowed step (inf) is not drawn
+        with np.errstate(invalid="ignore", over="ignore"):
+            norm = np.hypot(vectors[..., 0], vectors[..., 1])
+        norm = norm[np.isfinite(norm)]
+        if norm.size:
+            largest = max(largest, float(norm.max()))
+    if not largest > 0:
+        return [], 0.0
+    return arrows, 1.0 / nice_ceiling(largest / (FORCE_FRACTION * mechanism_size(result)))
+
+
+def nice_ceiling(x: float) -> float:
+    """The smallest of 1, 2, 2.5, 5 times a power of ten that is >= x (> 0)."""
+    power = 10.0 ** math.floor(math.log10(x))
+    for step in (1.0, 2.0, 2.5, 5.0, 10.0):
+        if step * power >= x * (1 - 1e-12):
+            return step * power
+    return 10.0 * power
+
+
+def force_legend(result) -> str:
+    """``"forces 1 m = 250 N (input red, reactions cyan)"``: the scale and the kinds drawn."""
+    arrows, scale = force_arrows(result)
+    if not scale:
+        return ""
+    units = result.units()
+    kinds = dict.fromkeys(kind for kind, *_ in arrows)
+    return (f"forces 1 {units['length']} = {1 / scale:,.10g} {units['force']} ("
+            + ", ".join(f"{k.name} {k.colour_name}" for k in kinds) + ")")
+
+
+def log_forces(stream, send, result) -> None:
+    """``mechanism/forces/<kind>/<item>``: each item's arrows at every step where they are finite
+    (a failed step clears them), each labelled with its item (a reaction ``R <point>``, a weight
+    ``W <link>``): drawn where the arrows are long enough to carry it (:func:`_labelled`), else on
+    hover; the kinds' colours and the scale are in the 2D view's title."""
+    arrows, scale = force_arrows(result)
+    if not scale:
+        return
+    size = mechanism_size(result)
+    for kind, item, origins, vectors in arrows:
+        parts = item if isinstance(item, tuple) else (item,)
+        entity = path_of("mechanism", "forces", kind.name, *parts)
+        tag = " ".join(([kind.tag] if kind.tag else []) + [str(p) for p in parts])  # one per item: drawn at the
+        # centre of its arrows (a cylinder's or a spring's middle), not once per arrow
+        stream.log(entity, rr.Arrows2D.from_fields(
+            labels=[tag], colors=kind.colour, show_labels=_labelled(vectors, scale, size),
+            radii=rr.components.Radius.ui_points(2.0), draw_order=45.0), static=True)
+        ok = finite_rows(origins) & finite_rows(vectors)          # (S, k)
+        if ok.all():  # no masked copies
+            origins, vectors = origins.reshape(-1, 2), vectors.reshape(-1, 2)
+        elif ok.any():
+            origins, vectors = origins[ok], vectors[ok]
+        else:
+            continue
+        send(entity, rr.Arrows2D.columns(
+            origins=origins.astype(np.float32),
+            vectors=(vectors * scale).astype(np.float32)).partition(ok.sum(axis=1)))
+
+
+def _labelled(vectors: np.ndarray, scale: float, size: float) -> bool:
+    """Whether an item's label is drawn: always for two or more arrows (its label sits at their
+    centre, e.g. a cylinder's middle, away from the points' labels); for one arrow, when it is,
+    scaled, at least LABEL_FRACTION of the size at 80 % of the steps or more (a shorter one
+    would put its label, drawn at the arrow's middle, on its point's own)."""
+    if vectors.shape[1] > 1:
+        return True
+    with np.errstate(invalid="ignore"):
+        longest = np.nanmax(np.hypot(vectors[..., 0], vectors[..., 1]), axis=1, initial=0.0)
+    return bool(np.mean(longest * scale >= LABEL_FRACTION * size) >= 0.8)

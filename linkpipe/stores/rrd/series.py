@@ -1,0 +1,78 @@
+"""The plotted series: ``plots/<variable>/<label>``, ``plots/measurements/<name>/computed`` and
+``.../measured``, and ``solver/**``, each in a colour of its own."""
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from . import style
+from .mechanism import path_of
+
+#: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
+PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle")
+SOLVER = ("residual", "iterations")
+
+
+def series_of(result) -> list[tuple[str, str, np.ndarray, list[int]]]:
+    """Return [(entity, name, values (S,), colour)] of every plotted series. Within a plot each
+    series has its own colour (:func:`.style.colour` of its column: a link's angle is drawn in
+    the link's colour); the residual and the tolerance beside it differ too."""
+    variables = {v.name: v for v in result.variables()}
+    labels = {c.name: c.data for c in result.coordinates()}
+    series = []
+    for name in PLOTTED:
+        var = variables.get(name)
+        if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2:
+            continue
+        for j, label in enumerate(labels[var.dims[1]]):
+            series.append((path_of("plots", name, label), f"{label} [{var.units}]", var.data[:, j],
+                           style.colour(j)))
+    for name in SOLVER:
+        var = variables[name]
+        series.append((f"solver/{name}", f"{name} [{var.units}]", var.data, style.colour(0)))
+    if result.measurements:  # computed beside measured, one plot per measurement
+        m = result.measurements
+        for k, name in enumerate(m["names"]):
+            unit = m["units"][k]
+            series.append((path_of("plots", "measurements", name, "computed"), f"computed [{unit}]",
+                           m["measured"][:, k] + m["residual"][:, k], style.colour(0)))
+            series.append((path_of("plots", "measurements", name, "measured"), f"measured [{unit}]",
+                           m["measured"][:, k], style.colour(1)))
+    log_res, log_tol = log10_residual(result)
+    length = variables["residual"].units
+    series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res, style.colour(0)))
+    series.append(("solver/log10_tolerance", f"log10 tolerance [{length}]",
+                   np.full(result.n_steps, log_tol), style.colour(3)))
+    return series
+
+
+def log_series(stream, send, result) -> None:
+    for entity, title, values, colour in series_of(result):
+        values = np.asarray(values, dtype=float)
+        finite = np.isfinite(values)
+        if not finite.any():
+            continue
+        if not finite.all():  # +-inf (e.g. a failed step's residual) would wreck the axis
+            values = np.where(finite, values, np.nan)
+        stream.log(entity, rr.SeriesLines(names=title, colors=[colour]), static=True)
+        # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
+        # out would be bridged by a straight segment that looks like data
+        send(entity, rr.Scalars.columns(scalars=values))
+
+
+def log10_residual(result) -> tuple[np.ndarray, float]:
+    """Return (log10 of the residual (S,), log10 of the solver's tolerance), lengths in scene units.
+
+    The viewer labels no axis below ~1e-13, so the raw ``solver/residual`` of a solved sweep
+    (rounding level, ~1e-16 of the size) plots as unlabelled noise; its log10 beside the
+    tolerance's (``tol`` x the mechanism's size, what Newton stops at) reads at a glance. A
+    residual of exactly 0 is drawn one decade below rounding level (log10(eps x size) - 1);
+    NaN (a step without assembly) stays NaN and is not drawn.
+    """
+    size = result.model.size
+    floor = float(np.log10(np.finfo(float).eps * size)) - 1.0
+    res = np.asarray(result.residual, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.log10(res)
+    out[res == 0] = floor
+    return out, float(np.log10(result.scene.solver.tol * size))
