@@ -274,7 +274,8 @@ def test_h5_holds_what_measure_returned(tmp_path):
 def test_every_knob_has_rows_and_dyads_never_crash():
     ladder = accuracy.measure(str(CONFIGS / "shear_press.toml"), quick=True, repeats=1)
     knobs = {r.knob for r in ladder.rows}
-    assert knobs == set(accuracy.KNOBS)
+    # every knob but the log knobs, which need a [time] scene driven by motion laws (below)
+    assert knobs == set(accuracy.KNOBS) - {"log"}
     methods = {r.value: r for r in rows(ladder, "method")}
     assert set(methods) == {"auto", "newton", "dyads"}
     assert methods["auto"].available and methods["newton"].available
@@ -364,3 +365,51 @@ def test_version_2_springs_and_cylinders_show_their_force_error_in_the_ladder(na
         assert tighter <= 2 * looser + 1e-14, forces
     assert forces[0] > 1e-4  # tol 1e-2 is visibly wrong: the ladder measures something
     assert forces[-1] <= 1e-12
+
+
+LAW_SCENE_TAIL = '''[time]
+from = 0.0
+to = 2.0
+steps = 401
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+law = "cycloidal"
+from = 0.0
+to = 360.0
+[analysis]
+effects = ["inertia"]
+[[masses]]
+link = "coupler"
+mass = 2.0
+center = "P"
+inertia = 0.5
+'''
+
+
+def test_log_knobs_measure_a_log_of_the_law_against_the_law_itself():
+    """A cycloidal crank law, logged at every k-th instant and driven through the spline:
+    against the law's exact closed form, position errors fall as h^4 (at least 8x per halving
+    of the spacing, 16x in theory), accelerations as h^2 (at least 3x, 4x in theory); a log at
+    every instant reproduces the positions to rounding (the spline interpolates); smoothing
+    only adds error to noise-free samples, more as lam grows."""
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+    scene = linkpipe.scene.parse_scene(text[:text.index("[[drivers]]")] + LAW_SCENE_TAIL, "law.toml")
+    ladder = accuracy.measure(scene, repeats=1, knobs=("log",))
+    assert ladder.reference.startswith("closed form")
+    every = sorted(rows(ladder, "log_every"), key=lambda r: int(r.value))
+    assert [int(r.value) for r in every] == [1, 2, 4, 8, 16]
+    assert every[0].relative_error["position"] <= 1e-13
+    for fine, coarse in zip(every[1:], every[2:]):
+        assert coarse.relative_error["position"] >= 8 * fine.relative_error["position"]
+        assert coarse.relative_error["acceleration"] >= 3 * fine.relative_error["acceleration"]
+        assert coarse.relative_error["input_force"] > fine.relative_error["input_force"]
+    smooth = sorted(rows(ladder, "log_smoothing"), key=lambda r: float(r.value))
+    errors = [r.relative_error["velocity"] for r in smooth]
+    assert len(errors) == 3 and errors == sorted(errors)
+    assert errors[0] > every[0].relative_error["velocity"]
+    assert all(r.seconds_solve > 0 for r in every + smooth)
+
+
+def test_log_knobs_only_for_law_driven_time_scenes():
+    assert accuracy.knobs.log_settings(coarse("fourbar_crank_rocker")) == []

@@ -48,7 +48,12 @@ def _all_orders(scene: Scene) -> Scene:
                                                 kinematics=("velocity", "acceleration")))
 
 
-KNOBS = ("tol", "max_iter", "jacobian", "derivatives", "predictor", "method")
+KNOBS = ("tol", "max_iter", "jacobian", "derivatives", "predictor", "method", "log")
+
+#: the log knobs (a [time] scene driven by motion laws: each driver replaced by a log of its own
+#: law): keep every k-th sample; smoothing lam in units of h^3 (h: the mean sample spacing)
+LOG_EVERY = {False: (1, 2, 4, 8, 16), True: (1, 4)}
+LOG_SMOOTHING_H3 = {False: (1e-2, 1.0, 1e2), True: (1.0,)}
 
 
 def settings(scene: Scene, quick: bool = False, knobs=KNOBS) -> list[tuple[str, str, Scene, str]]:
@@ -90,6 +95,42 @@ def settings(scene: Scene, quick: bool = False, knobs=KNOBS) -> list[tuple[str, 
     if "method" in knobs:
         for method in ("auto", "newton", "dyads"):
             out.append(("method", method, _with_solver(base, method=method), "kinematics"))
+    if "log" in knobs:
+        out += log_settings(base, quick)
+    return out
+
+
+def log_settings(scene: Scene, quick: bool = False) -> list[tuple[str, str, Scene, str]]:
+    """Rows measuring what driving from a log costs against the known motion law: for a
+    ``[time]`` scene whose drivers follow laws (or rates), each driver replaced by a log
+    sampled from its own law at every k-th instant (the last one kept), through the
+    interpolating spline (``log_every``) or a smoothing one (``log_smoothing``, lam in seconds^3);
+    the instants, and so the reference, stay the scene's. Empty for any other scene."""
+    if scene.time is None or not all(d.timed in ("law", "rate") for d in scene.drivers):
+        return []
+    import numpy as np
+
+    from ..model.drive import driver_motion
+    from ..scene.tables import LogData
+
+    law = driver_motion(scene).value  # (S, nd) in scene units
+    t = np.asarray(scene.time.instants, dtype=float)
+    S = len(t)
+
+    def variant(k: int, smoothing: float) -> Scene:
+        idx = np.unique(np.r_[np.arange(0, S, k), S - 1])
+        columns = {d.name: law[idx, j].copy() for j, d in enumerate(scene.drivers)}
+        log = LogData("law_samples", "(sampled from the motion laws)", "(in memory)", "t",
+                      t[idx], columns, ("t", *columns))
+        drivers = tuple(dc.replace(d, timed="log", log=("law_samples", d.name), scale=1.0,
+                                   smoothing=smoothing, law=None) for d in scene.drivers)
+        return dc.replace(scene, drivers=drivers, logs=tuple(scene.logs) + (log,))
+
+    out = [("log_every", str(k), variant(k, 0.0), "kinematics") for k in LOG_EVERY[quick]
+           if (S - 1) // k >= 3]
+    h = float(np.mean(np.diff(t))) if S > 1 else 1.0
+    out += [("log_smoothing", f"{f * h ** 3:.2e}", variant(1, f * h ** 3), "kinematics")
+            for f in LOG_SMOOTHING_H3[quick]]
     return out
 
 
