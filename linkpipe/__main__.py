@@ -25,6 +25,9 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="ADDR", help="also stream to a running viewer (rerun+http://...)")
     run.add_argument("--quiet", action="store_true", help="print only errors")
+    run.add_argument("--rrd-max-steps", type=_threads, default=100_000, metavar="N",
+                     help="the most steps a recording keeps; past it a uniform stride (the "
+                          ".h5 keeps every step; 0: no limit; default 100,000)")
     run.add_argument("--threads", type=_threads, default=1, metavar="N",
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
@@ -165,7 +168,8 @@ def _run(args) -> int:
             if bar:
                 bar.close()
             if not args.quiet:
-                print(summary(result, written, time.perf_counter() - t0, writer_seconds))
+                print(summary(result, written, time.perf_counter() - t0, writer_seconds,
+                              None if args.no_rrd else args.rrd_max_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
         print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
     return outcome.code
@@ -199,7 +203,8 @@ def _write_locked(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict
             bar.stage("rrd")
         t0 = time.perf_counter()
         target = None if args.no_rrd else out / f"{name}.rrd"
-        rrd.write(result, target, spawn=args.spawn, connect=args.connect)
+        rrd.write(result, target, spawn=args.spawn, connect=args.connect,
+                  max_steps=args.rrd_max_steps)
         seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))
@@ -239,7 +244,8 @@ def _progress_bar(scene, args):
     return _StageBar(scene, len(Stages.of(scene).stages) + 1 + writers)
 
 
-def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
+def summary(result, written=(), seconds_total=None, writer_seconds=None,
+            rrd_max_steps=None) -> str:
     """Return the short per-scene report printed by ``run``."""
     sc = result.scene
     lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
@@ -289,6 +295,14 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None) -> str:
         for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):
             lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
                          f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
+    if rrd_max_steps:
+        from .stores.rrd import stride_of
+
+        stride = stride_of(result.n_steps, rrd_max_steps)
+        if stride > 1:
+            kept = -(-result.n_steps // stride)
+            lines.append(f"  recording: every {stride}th step ({kept:,} of {result.n_steps:,}; "
+                         f"--rrd-max-steps {rrd_max_steps:,}); the .h5 keeps every step")
     if written:
         lines.append("  wrote " + ", ".join(written))
     stage_seconds = {**result.seconds, **(writer_seconds or {})}

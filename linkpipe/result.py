@@ -5,7 +5,7 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -123,6 +123,27 @@ class Result:
     time_note: str = ""  # why there is no time axis although every driver has a rate
     measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
     kinematics: Any = field(default=None, repr=False, compare=False)  # pipeline.Kinematics
+    step_numbers: np.ndarray | None = None  # the sweep's step of each row (None: 0, 1, ...)
+
+    #: the fields that hold one row per step (step axis first)
+    PER_STEP = ("driver_value", "time", "position", "link_angle", "status", "residual",
+                "iterations", "condition", "velocity", "acceleration", "driver_velocity",
+                "driver_acceleration", "link_angular_velocity", "link_angular_acceleration",
+                "velocity_residual", "acceleration_residual")
+
+    def strided(self, rows: np.ndarray) -> "Result":
+        """The result at the steps ``rows`` only (the recording's view of a long sweep), each
+        row remembering its step number; the force and measurement arrays likewise."""
+        changes = {name: getattr(self, name)[rows] for name in self.PER_STEP
+                   if getattr(self, name) is not None}
+        if self.forces:
+            changes["forces"] = {name: (dims, data[rows] if dims[:1] == ("step",) else data, unit)
+                                 for name, (dims, data, unit) in self.forces.items()}
+        if self.measurements:
+            changes["measurements"] = {k: (v[rows] if k in ("measured", "residual") else v)
+                                       for k, v in self.measurements.items()}
+        steps = self.step_numbers if self.step_numbers is not None else np.arange(self.n_steps)
+        return replace(self, **changes, kinematics=None, step_numbers=steps[rows])
 
     # ------------------------------------------------------------------ summaries
     @property

@@ -633,3 +633,30 @@ def test_a_motor_between_links_is_drawn_on_both(tmp_path):
     np.testing.assert_array_equal(origins[:, 0], _f32(A))
     np.testing.assert_allclose(moment(A, vectors[:, 0].astype(float) / scale, X[:, i["O"]]), tau[:, 0],
                                atol=1e-5 * scale_tau)
+
+
+def test_a_long_sweep_is_recorded_at_a_stride_and_says_so(tmp_path, capsys):
+    """--rrd-max-steps 100 on 361 steps: every 4th step in the recording (91 rows), numbered as
+    in the sweep; a static info text says so, as does the summary; the .h5 keeps all 361."""
+    from linkpipe.__main__ import main
+    from conftest import CONFIG_DIR
+
+    assert main(["run", str(CONFIG_DIR / "fourbar_crank_rocker.toml"), "--out", str(tmp_path),
+                 "--rrd-max-steps", "100"]) == 0
+    out = capsys.readouterr().out
+    assert "recording: every 4th step (91 of 361; --rrd-max-steps 100); the .h5 keeps every step" in out
+    rec = Recording(tmp_path / "fourbar_crank_rocker.rrd")
+    frame = rec.steps("/mechanism/points")
+    np.testing.assert_array_equal(frame["step"].to_numpy(), np.arange(0, 361, 4))
+    result = solve_scene(str(CONFIG_DIR / "fourbar_crank_rocker.toml"))
+    got = np.array([np.stack(r) for r in _column(frame, "/mechanism/points", "Points2D:positions")])
+    np.testing.assert_allclose(got, result.position[::4], rtol=1e-6, atol=1e-6)
+    (text,) = rec.static("/info", "TextDocument:text")
+    assert "every 4th step (91 of 361" in str(text)
+    with h5py.File(tmp_path / "fourbar_crank_rocker.h5") as f:
+        assert f["position"].shape[0] == 361
+
+
+def test_short_sweeps_keep_every_step_and_no_info(solve, tmp_path):
+    rec = Recording(_write(solve("fourbar_crank_rocker"), tmp_path))
+    assert "/info" not in rec.entities

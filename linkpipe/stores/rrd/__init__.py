@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import uuid
 
+import numpy as np
 import rerun as rr
 
 from .. import atomic_path
@@ -38,15 +39,36 @@ __all__ = ["write", "log_result", "blueprint", "path_of", "arrow_scales", "arrow
 APPLICATION_ID = "linkpipe"
 
 
-def write(result, path, spawn: bool = False, connect: str | None = None) -> None:
+#: the most steps a recording keeps; past it a uniform stride (the HDF5 keeps every step)
+MAX_STEPS = 100_000
+
+
+def stride_of(n_steps: int, max_steps: int | None = MAX_STEPS) -> int:
+    """The stride a recording of ``n_steps`` keeps (1: every step; ``max_steps`` 0/None: no cap)."""
+    if not max_steps or n_steps <= max_steps:
+        return 1
+    return -(-n_steps // max_steps)
+
+
+def write(result, path, spawn: bool = False, connect: str | None = None,
+          max_steps: int | None = MAX_STEPS) -> None:
     """Write the recording of ``result`` to ``path`` (``None``: no file) and optionally stream it.
 
     ``spawn=True`` starts a Rerun viewer and streams to it; ``connect`` streams to a running
     viewer at that address (``rerun+http://host:port/proxy``). The file is written to a
-    temporary name and renamed into place when complete.
+    temporary name and renamed into place when complete. A sweep longer than ``max_steps`` is
+    recorded at a uniform stride of steps (:func:`stride_of`), said in a static ``info`` text
+    entity; the step timeline keeps the sweep's own step numbers.
     """
     if path is None and not spawn and not connect:
         return
+    stride = stride_of(result.n_steps, max_steps)
+    info = None
+    if stride > 1:
+        rows = np.arange(0, result.n_steps, stride)
+        info = (f"This recording keeps every {stride}th step ({len(rows):,} of "
+                f"{result.n_steps:,}, --rrd-max-steps {max_steps:,}); the .h5 keeps every step.")
+        result = result.strided(rows)
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
     # generous on purpose: the recording holds float32 copies of the arrays plus labels, and
@@ -64,6 +86,8 @@ def write(result, path, spawn: bool = False, connect: str | None = None) -> None
         stream.set_sinks(*sinks, default_blueprint=blueprint(result))
         with stream:  # on exit: flush, and finalise the file (footer) so it is complete
             stream.send_recording_name(scene.name)
+            if info:
+                stream.log("info", rr.TextDocument(info), static=True)
             log_result(stream, result)
     if spawn or connect:
         stream.disconnect()

@@ -12,7 +12,8 @@ def sender(stream: rr.RecordingStream, result):
     """Return ``send(entity, columns, rows=None)``: ``stream.send_columns`` on the timelines of
     the contract (``step``, and ``time`` when the sweep has instants) and, for a one-driver
     sweep, the driver's value (:func:`driver_timeline`), at the steps ``rows`` (all if None)."""
-    steps = np.arange(result.n_steps)
+    steps = (np.arange(result.n_steps) if result.step_numbers is None
+             else np.asarray(result.step_numbers))
     seconds = None if result.time is None else np.asarray(result.time, float)
     by_value = driver_timeline(result)
 
