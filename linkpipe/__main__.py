@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        sys.unraisablehook = sys.__unraisablehook__
 
 
 class _Terminated(KeyboardInterrupt):
@@ -90,6 +91,13 @@ def _signals_as_interrupts() -> dict:
         interrupt()
         raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
+    def unraisable(info, default=sys.unraisablehook):
+        # a signal that lands in a finaliser or weakref callback is swallowed there by Python
+        # ("Exception ignored in ..."); interrupt() has marked it, the next write stops the run
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            default(info)
+
+    sys.unraisablehook = unraisable
     return {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
 
 

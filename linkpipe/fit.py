@@ -183,7 +183,7 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
                          "[[measurements]]", "add [[measurements]] with log, of and sigma")
     x0 = np.array([p.initial for p in params])
     force_only = all(p.force_only for p in params)
-    counter = {"stage1": 0}
+    counter = {"stage1": 0, "wanted": frozenset(m.of[0] for m in scene.measurements)}
     before = _solve_counted(scene_with(scene, data, params, x0), None, counter)
     reuse = before.kinematics if force_only else None
     mask = np.isfinite(before.measurements["residual"])
@@ -219,7 +219,7 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
 def _solve_counted(scene, reuse, counter):
     if reuse is None:
         counter["stage1"] += 1
-    return solve(scene, kinematics=reuse)
+    return solve(scene, kinematics=reuse, wanted=counter["wanted"])
 
 
 def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):

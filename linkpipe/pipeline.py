@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -101,21 +101,24 @@ DEFAULT_THREADS = 1
 
 
 def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREADS,
-          kinematics: Kinematics | None = None) -> Result:
+          kinematics: Kinematics | None = None, wanted: frozenset | None = None) -> Result:
     """Run every stage the scene calls for and return the result (failed steps are data).
 
     ``progress``: an optional callable ``progress(stage_name)`` told as each stage starts
     (the CLI drives a tqdm bar with it on long sweeps). ``threads``: the BLAS thread pool's
     size while solving (threadpoolctl; None leaves the library's own). ``kinematics``: the
     ``Result.kinematics`` of a scene with the same geometry and drivers (only force parameters
-    differ): stage 1 is reused, not solved again. The Result is built once, here.
+    differ): stage 1 is reused, not solved again. ``wanted``: the names of the variables the
+    caller will read (None: every one the scene calls for); the Lagrange multipliers and the
+    forces only they give are solved only when one of them is wanted (a fit's trials read its
+    measurements alone). The Result is built once, here.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     # overflow and 0/0 are data here, not warnings: such steps are marked (status.assign)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
             threadpool_limits(limits=threads, user_api="blas"):
-        return _solve(scene, progress, kinematics)
+        return _solve(scene, progress, kinematics, wanted)
 
 
 @dataclass(frozen=True)
@@ -134,9 +137,13 @@ class Kinematics:
     velocity: np.ndarray | None
     acceleration: np.ndarray | None
     link_rates: tuple
+    #: what the force stage may keep between calls on this stage 1 without the Lagrange side
+    #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
+    force_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
 
-def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Result:
+def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
+           wanted: frozenset | None = None) -> Result:
     stages = Stages.of(scene)
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
@@ -149,14 +156,17 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Resu
     kinematic_status = der["status"]
     forces = None
     if stages.forces:
-        from .forces import compute_forces
+        from .forces import LAGRANGE_VARIABLES, compute_forces
 
         tell("forces")
         t0 = _time.perf_counter()
         motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=X, velocity=k.velocity,
                         acceleration=k.acceleration, status=kinematic_status,
                         influence=der["influence"], link_angular_acceleration=k.link_rates[1])
-        forces = compute_forces(model, motion, units_of(scene))
+        lagrange = wanted is None or bool(wanted & LAGRANGE_VARIABLES)
+        forces = compute_forces(model, motion, units_of(scene), lagrange=lagrange,
+                                cache=k.force_cache if kinematics is not None and not lagrange
+                                else None)
         seconds["forces"] = _time.perf_counter() - t0
     stored = [X, k.link_angle, k.velocity, k.acceleration, *k.link_rates]
     if forces:
@@ -205,7 +215,7 @@ def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinemat
 
     tell("jacobian")
     t0 = _time.perf_counter()
-    Xz = np.where(np.isfinite(X), X, 0.0)
+    Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
     der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                           velocity=sweep.velocity, acceleration=sweep.acceleration,
                           need_influence=stages.forces)

@@ -32,15 +32,18 @@ class Context:
     velocity: np.ndarray
     acceleration: np.ndarray
     masses: tuple
+    #: whether the Lagrange side (``lagrange``, ``bodies`` of each Effect) is wanted
+    lagrange: bool = True
 
     @classmethod
-    def of(cls, model: Model, motion: Motion, units: dict) -> "Context":
+    def of(cls, model: Model, motion: Motion, units: dict, lagrange: bool = True) -> "Context":
         X = motion.position
         zeros = np.zeros_like(X)
         masses = tuple((m, center_frame(model, m.link, m.center)) for m in model.scene.masses)
         return cls(model, motion, units, frozenset(model.scene.effects), X,
                    motion.velocity if motion.velocity is not None else zeros,
-                   motion.acceleration if motion.acceleration is not None else zeros, masses)
+                   motion.acceleration if motion.acceleration is not None else zeros, masses,
+                   lagrange)
 
     @property
     def n_steps(self) -> int:
@@ -143,6 +146,8 @@ def inertia(ctx: Context) -> Effect:
         add_at_body_point(point_forces, -m.mass * a_center, ia, ib, u, v, L)
         li = link_index(model, m.link)
         couples[:, li] += -m.inertia * ctx.motion.link_angular_acceleration[:, li]
+        if not ctx.lagrange:
+            continue
         body_m_qdd = ctx.zeros_points()  # M_k Xdd of this body
         add_at_body_point(body_m_qdd, m.mass * a_center, ia, ib, u, v, L)
         dd = A[:, ib] - A[:, ia]
@@ -151,7 +156,8 @@ def inertia(ctx: Context) -> Effect:
         m_qdd += body_m_qdd
         bodies.setdefault(li, ctx.zeros_points())
         bodies[li] += body_m_qdd
-    return Effect(Applied(point_forces, couples), lagrange=-m_qdd, bodies=bodies)
+    return Effect(Applied(point_forces, couples), lagrange=-m_qdd if ctx.lagrange else None,
+                  bodies=bodies)
 
 
 def applies(name: str, ctx: Context) -> bool:
