@@ -25,6 +25,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="ADDR", help="also stream to a running viewer (rerun+http://...)")
     run.add_argument("--quiet", action="store_true", help="print only errors")
+    run.add_argument("-v", "--verbose", action="store_true",
+                     help="also print a table of where the time went, stage by stage")
     run.add_argument("--rrd-max-steps", type=_threads, default=100_000, metavar="N",
                      help="the most steps a recording keeps; past it a uniform stride (the "
                           ".h5 keeps every step; 0: no limit; default 100,000)")
@@ -176,8 +178,12 @@ def _run(args) -> int:
             if bar:
                 bar.close()
             if not args.quiet:
-                print(summary(result, written, time.perf_counter() - t0, writer_seconds,
+                total = time.perf_counter() - t0
+                print(summary(result, written, total, writer_seconds,
                               None if args.no_rrd else args.rrd_max_steps))
+                if args.verbose:
+                    print(stage_table({**result.seconds, **writer_seconds}, total,
+                                      result.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
         print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
     return outcome.code
@@ -318,6 +324,20 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
     if seconds_total is not None:
         secs += f"; total {seconds_total:.3f}"
     lines.append(f"  seconds: {secs}")
+    return "\n".join(lines)
+
+
+def stage_table(seconds: dict, total: float, n_steps: int) -> str:
+    """The time of each stage, its share of the scene's total and its rate in steps per second;
+    "other" is what no stage timed: first imports of the writers (h5py, rerun), the memory
+    check, statuses, the Result."""
+    rows = dict(seconds)
+    rows["other"] = max(total - sum(seconds.values()), 0.0)
+    lines = [f"  {'stage':<14}{'seconds':>9}{'share':>8}{'steps/s':>12}"]
+    for stage, sec in rows.items():
+        rate = f"{n_steps / sec:,.0f}" if sec > 0 and stage != "other" else ""
+        lines.append(f"  {stage:<14}{sec:>9.3f}{sec / total if total else 0:>8.0%}{rate:>12}")
+    lines.append(f"  {'total':<14}{total:>9.3f}{'100%':>8}{n_steps / total if total else 0:>12,.0f}")
     return "\n".join(lines)
 
 
