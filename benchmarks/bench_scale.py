@@ -32,8 +32,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 CASE = r"""
 import json, resource, sys, time
 sys.path.insert(0, {bench!r})
-sys.path.insert(0, {repo!r})
-from bench_threads import chain_text
+from bench_threads import chain_text  # (puts this checkout first on sys.path)
+sys.path.insert(0, {repo!r})  # import linkpipe from {repo!r}
 import linkpipe
 import scipy.sparse.linalg  # noqa: F401  imported by the sparse path: not timed
 from linkpipe.scene import parse_scene
@@ -53,6 +53,7 @@ scene = parse_scene(text, "chain.toml")
 t0 = time.perf_counter()
 r = linkpipe.solve(scene, threads=threads)
 seconds = time.perf_counter() - t0
+assert linkpipe.__file__.startswith({repo!r}), linkpipe.__file__
 print(json.dumps(dict(seconds=seconds, stages=r.seconds, message=r.message,
                       rss=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
                       linear_algebra=getattr(r, "linear_algebra_used", ""))))
@@ -118,15 +119,20 @@ def measure_threads(args) -> None:
     """Every core (threadpoolctl limit None) against 1 BLAS thread, alternating."""
     cores = os.cpu_count() or 1
     for loops in args.loops[-2:]:
-        times = {1: [], None: []}
+        runs = {1: [], None: []}
         for _ in range(args.repeats):
-            for threads in times:
-                times[threads].append(run_case(args.repo, loops, args.steps, True, threads,
-                                               args.linear_algebra)["seconds"])
+            for threads in runs:
+                runs[threads].append(run_case(args.repo, loops, args.steps, True, threads,
+                                              args.linear_algebra))
+        times = {k: [r["seconds"] for r in v] for k, v in runs.items()}
         ratio = min(times[None]) / min(times[1])
         print(f"- N = {loops} with gravity: 1 thread {_spread(times[1])} s, the library's own "
               f"({cores} cores) {_spread(times[None])} s: {ratio:.2f}x, target <= 1.1x: "
               f"{'met' if ratio <= 1.1 else 'MISSED'} (run's default: 1 thread)")
+        for threads, rs in runs.items():  # where the slowest run's time went
+            worst = max(rs, key=lambda r: r["seconds"])["stages"]
+            print(f"    slowest with threads {threads or cores}: "
+                  + ", ".join(f"{k} {v:.3f}" for k, v in worst.items()))
 
 
 def main(argv=None) -> int:
@@ -138,8 +144,10 @@ def main(argv=None) -> int:
     p.add_argument("--linear-algebra", default="", choices=["", "auto", "dense", "sparse"],
                    help='[solver] linear_algebra for every case ("": the scene default)')
     p.add_argument("--no-threads", action="store_true", help="skip the threads comparison")
+    p.add_argument("--no-sizes", action="store_true", help="only the threads comparison")
     args = p.parse_args(argv)
-    report_sizes(args, measure_sizes(args))
+    if not args.no_sizes:
+        report_sizes(args, measure_sizes(args))
     if not args.no_threads:
         measure_threads(args)
     return 0

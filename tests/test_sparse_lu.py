@@ -159,3 +159,18 @@ def test_one_step_factor_agrees_with_numpy(loops, seed, spread):
     cond = f.condition(1e-6, 1e-3, within=10.0)
     assert exact / 3.2 <= cond <= exact * (1 + 1e-9)
     assert f.condition(1e-6, 1e-3, within=1e6) == pytest.approx(exact, rel=1e-9)  # exact near
+
+
+def test_the_accuracy_ladder_shows_the_choice_and_both_rows():
+    from linkpipe import accuracy
+
+    scene = chain_scene(16, 40)
+    ladder = accuracy.measure(scene, repeats=1, knobs=("linear_algebra",))
+    rows = {r.value: r for r in ladder.rows}
+    assert rows["dense"].linear_algebra == "dense (forced)"
+    assert rows["sparse"].linear_algebra == "sparse LU (forced)"
+    # the same errors against the reference, to rounding (tol 1e-12 of the size)
+    for q in ("position", "velocity", "acceleration"):
+        assert abs(rows["dense"].relative_error[q] - rows["sparse"].relative_error[q]) < 1e-12
+    assert "one-step solves: sparse LU (auto: 64 >= 64 unknowns)" in accuracy.header(ladder)
+    assert "newton (sparse LU)" in accuracy.table(ladder)
