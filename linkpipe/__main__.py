@@ -281,6 +281,8 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
     changed = {k: v for k, v in vars(sc.solver).items() if v != getattr(Solver, k)}
     used = getattr(result, "solver_method_used", "")
     path = [f"path {used}"] if used else []
+    if getattr(result, "linear_algebra_used", ""):
+        path.append(f"linear algebra {result.linear_algebra_used}")
     if changed or path:  # the path taken, and the [solver] knobs not at linkpipe's defaults
         lines.append("  solver: " + ", ".join(path + [f"{k} {v}" for k, v in changed.items()]))
     if used == "newton" and result.solver_note:  # why not the fast path, why not sparse

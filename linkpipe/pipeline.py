@@ -190,7 +190,9 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
         forces=forces.variables if forces else None,
         force_coords=forces.coords if forces else {},
         seconds=seconds, message=message(status),
-        solver_method_used=k.sweep.method, solver_note=k.sweep.note, kinematics=k)
+        solver_method_used=k.sweep.method, solver_note=k.sweep.note,
+        linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
+        kinematics=k)
     return _with_measurements(result) if scene.measurements else result
 
 

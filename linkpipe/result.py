@@ -126,6 +126,7 @@ class Result:
     message: str = ""
     solver_method_used: str = ""  # "dyads" (closed form) or "newton" (general path)
     solver_note: str = ""  # the dyad chain, or why method = "auto" chose Newton
+    linear_algebra_used: str = ""  # general path: the one-step solves' dense or sparse LU, and why
     time_note: str = ""  # why there is no time axis although every driver has a rate
     measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
     kinematics: Any = field(default=None, repr=False, compare=False)  # pipeline.Kinematics
@@ -298,6 +299,8 @@ class Result:
             "solver_method": sc.solver.method,
             "solver_method_used": self.solver_method_used,
             "solver_note": self.solver_note,
+            "solver_linear_algebra": sc.solver.linear_algebra,
+            "solver_linear_algebra_used": self.linear_algebra_used,
             "solver_jacobian": sc.solver.jacobian,
             "solver_derivatives": sc.solver.derivatives,
             "solver_predictor": sc.solver.predictor,

@@ -48,7 +48,7 @@ def _all_orders(scene: Scene) -> Scene:
                                                 kinematics=("velocity", "acceleration")))
 
 
-KNOBS = ("tol", "max_iter", "jacobian", "derivatives", "predictor", "method", "log")
+KNOBS = ("tol", "max_iter", "jacobian", "linear_algebra", "derivatives", "predictor", "method", "log")
 
 #: the log knobs (a [time] scene driven by motion laws: each driver replaced by a log of its own
 #: law): keep every k-th sample; smoothing lam in units of h^3 (h: the mean sample spacing)
@@ -79,6 +79,9 @@ def settings(scene: Scene, quick: bool = False, knobs=KNOBS) -> list[tuple[str, 
     if "jacobian" in knobs:
         for jac in ("analytic", "finite_difference"):
             out.append(("jacobian", jac, _with_solver(newton, jacobian=jac), "positions"))
+    if "linear_algebra" in knobs:  # the general path's one-step solves: dense or sparse LU
+        for la in ("dense", "sparse"):
+            out.append(("linear_algebra", la, _with_solver(newton, linear_algebra=la), "positions"))
     m = scene.n_steps - 1
     if m >= 2 and "derivatives" in knobs:
         out.append(("derivatives", "linear", _with_solver(newton, derivatives="linear"),

@@ -64,7 +64,8 @@ def table(ladder: Ladder, markdown: bool = False, compact: bool = False) -> str:
     lines = []
     for r in ladder.rows:
         mark = " (base)" if r.base else " (newton base)" if r.newton_base else ""
-        cells = [r.knob, r.value + mark, r.path, str(r.steps)]
+        sparse = " (sparse LU)" if r.linear_algebra.startswith("sparse") else ""
+        cells = [r.knob, r.value + mark, r.path + sparse, str(r.steps)]
         if not compact:
             cells.append(r.stage)
         if not r.available:
@@ -117,6 +118,13 @@ def header(ladder: Ladder, markdown: bool = False) -> str:
         "errors within 2x count as equal)",
         f"machine: {ladder.machine}; {ladder.created}",
     ]
+    from ..kinematics import linear_algebra_used
+    from ..model import build_model
+
+    # which linear algebra the scene's own settings take on the general path
+    rest.insert(3, f"linear algebra of the general path's one-step solves: "
+                   f"{linear_algebra_used(build_model(sc))}; linear_algebra rows force dense or "
+                   f"sparse LU")
     if markdown:
         return "\n".join([f"**{first}**", ""] + [f"- {line}" for line in rest])
     return "\n".join([first] + [f"  {line}" for line in rest])

@@ -53,6 +53,7 @@ class Row:
     #: finite-difference row (h: the step in driver value), per quantity; NaN elsewhere
     observed_order: dict = field(default_factory=lambda: {q: math.nan for q in QUANTITIES})
     path: str = ""  # the path the solve took: "dyads" (closed form) or "newton"
+    linear_algebra: str = ""  # newton: its one-step solves' "dense ..." or "sparse LU ..." and why
     base: bool = False  # the scene's own settings
     newton_base: bool = False  # the scene's own settings on the general path (method newton)
     front: bool = False  # on the Pareto front (whole-solve time vs worst relative error)
@@ -60,7 +61,7 @@ class Row:
 
     @property
     def label(self) -> str:
-        if self.knob in ("tol", "max_iter", "jacobian", "method"):
+        if self.knob in ("tol", "max_iter", "jacobian", "linear_algebra", "method"):
             return f"{self.knob}={self.value}"
         return f"{self.knob}={self.value},steps={self.steps}"
 
@@ -223,6 +224,9 @@ class Ladder:
             col("branch_kept", np.array([r.branch_kept for r in rows], dtype=np.int8), "1", **flag),
             strings("path", [r.path for r in rows],
                     long_name="the path the solve took: dyads (closed form) or newton"),
+            strings("linear_algebra", [r.linear_algebra for r in rows],
+                    long_name="newton: the one-step solves' linear algebra (dense or sparse "
+                              "LU) and why; empty on the dyads path"),
             col("base", np.array([r.base for r in rows], dtype=np.int8), "1",
                 long_name="the scene's own solver settings", **flag),
             col("newton_base", np.array([r.newton_base for r in rows], dtype=np.int8), "1",

@@ -130,6 +130,7 @@ def _measure(scene: Scene, quick: bool, repeats: int, tell, knobs) -> Ladder:
             tell(f"  {row.label}: {row.note}")
             continue
         row.path = str(getattr(result, "solver_method_used", "") or "newton")
+        row.linear_algebra = str(getattr(result, "linear_algebra_used", ""))
         if knob == "method":
             row.available, row.note = method_available(result, value)
             if not row.available:

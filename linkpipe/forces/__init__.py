@@ -21,7 +21,7 @@ import numpy as np
 from ..model import Model
 from ..result import Forces, Motion
 from ..status import OK
-from .applied import with_couples_as_pairs
+from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
 from .effects import EFFECTS, Context, applies
 from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
 from .virtual_work import Influence, along_input_directions
@@ -165,7 +165,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
         else:
             lagrange_points = lagrange_points + effect.lagrange
         for li, body in effect.bodies.items():
-            bodies[li] = bodies[li] + body if li in bodies else body
+            merge_bodies(bodies.setdefault(li, {}), body)
 
     ok = motion.status == OK
     q_minus_m_qdd = with_couples_as_pairs(model, lagrange_points, lagrange_couples, Xz)
@@ -190,13 +190,11 @@ def _reactions(model: Model, ctx: Context, lam, q_minus_m_qdd, bodies, Xz, ok, u
                loads) -> tuple[dict, dict]:
     """``joint_force`` (and ``ground_reaction`` where there are fixed points), with the
     uniqueness flags a redundant scene needs."""
-    scene, force_unit, n_steps = model.scene, ctx.units["force"], ctx.n_steps
+    scene, force_unit = model.scene, ctx.units["force"]
     if loads is not None:  # a couple on a link acts on that body: part of its own -Q_k
         for li in np.flatnonzero(np.any(loads.couples != 0, axis=0)):
-            couple = np.zeros_like(loads.couples)
-            couple[:, li] = loads.couples[:, li]
-            as_pairs = with_couples_as_pairs(model, np.zeros((n_steps, model.n_points, 2)), couple, Xz)
-            bodies[li] = bodies[li] - as_pairs if li in bodies else -as_pairs
+            as_pairs = couple_as_body(model, loads.couples[:, li], int(li), Xz)
+            merge_bodies(bodies.setdefault(int(li), {}), as_pairs, -1.0)
     ground, pin_forces = reactions(model, lam, q_minus_m_qdd, bodies, Xz, ctx.motion.s, ok)
     pairs = joints(model)
     out = {"joint_force": (("step", "joint", "xy"), pin_forces, force_unit)}

@@ -65,14 +65,59 @@ def scatter_pairs(point_forces, ia, ib, f):
         point_forces[:, ib[k]] -= f[:, k]
 
 
-def add_at_body_point(point_forces, force, ia, ib, u, v, L):
-    """Distribute a force at body point (u, v) onto the basic points: N_G^T f, in place."""
-    force = np.broadcast_to(force, (point_forces.shape[0], 2))
+def body_point_loads(force, ia, ib, u, v, L, n_steps: int) -> dict:
+    """Return a force (S, 2) at body point (u, v) distributed onto the basic points, N_G^T f,
+    as {point: (S, 2)} (the two points a and b only)."""
+    force = np.broadcast_to(force, (n_steps, 2))
     C = (u * np.eye(2) + v * _R90) / L  # r_G = (I - C) r_a + C r_b
     # force @ M written out: BLAS' threaded matmul of (S, 2) x (2, 2) is slow on a busy machine
+    out = {}
     for idx, M in ((ia, np.eye(2) - C), (ib, C)):
-        point_forces[:, idx, 0] += force[:, 0] * M[0, 0] + force[:, 1] * M[1, 0]
-        point_forces[:, idx, 1] += force[:, 0] * M[0, 1] + force[:, 1] * M[1, 1]
+        f = np.empty((n_steps, 2))
+        f[:, 0] = force[:, 0] * M[0, 0] + force[:, 1] * M[1, 0]
+        f[:, 1] = force[:, 0] * M[0, 1] + force[:, 1] * M[1, 1]
+        out[idx] = f
+    return out
+
+
+def add_at_body_point(point_forces, force, ia, ib, u, v, L):
+    """Distribute a force at body point (u, v) onto the basic points: N_G^T f, in place."""
+    add_body(point_forces, body_point_loads(force, ia, ib, u, v, L, point_forces.shape[0]))
+
+
+# A body's own loads (its part of ``M_k Xdd - Q_k``) at the few points they act on: a dict
+# {point index: (S, 2)}, never a (S, n_points, 2) array per body (that grows as bodies x points).
+
+def add_body(point_forces, body: dict, sign: float = 1.0):
+    """point_forces (S, P, 2) += sign * body ({point: (S, 2)}), in place; returns point_forces."""
+    for p, f in body.items():
+        if sign == 1.0:
+            point_forces[:, p] += f
+        else:
+            point_forces[:, p] -= f
+    return point_forces
+
+
+def merge_bodies(into: dict, body: dict, sign: float = 1.0) -> dict:
+    """into[p] (+)= sign * body[p] for each point of ``body`` ({point: (S, 2)}); returns into
+    (new arrays: the inputs are not changed)."""
+    for p, f in body.items():
+        if p in into:
+            into[p] = into[p] + f if sign == 1.0 else into[p] - f
+        else:
+            into[p] = f.copy() if sign == 1.0 else -f
+    return into
+
+
+def couple_as_body(model: Model, couple, li: int, X) -> dict:
+    """A couple (S,) on link ``li`` as its force pair {b: tau R d / L^2, a: -tau R d / L^2}
+    (as :func:`with_couples_as_pairs` places it)."""
+    a, b = int(model.link_a[li]), int(model.link_b[li])
+    d = X[:, b] - X[:, a]
+    n2 = np.einsum("sj,sj->s", d, d)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        f = (couple / n2)[:, None] * perp(d)
+    return merge_bodies({b: f}, {a: f}, -1.0)
 
 
 def with_couples_as_pairs(model: Model, point_forces, couples, X):

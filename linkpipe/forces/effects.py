@@ -3,7 +3,7 @@
 Each effect takes the :class:`Context` of a solved sweep and returns an :class:`Effect`: the
 loads it applies (for virtual work), what it adds to the Lagrange side ``Q - M qdd`` where that
 differs (inertia enters there through the mass matrix), what it adds to each body's own
-``M_k Xdd - Q_k`` (for the pin forces) and the output variables it stores. Adding an effect or a
+``M_k Xdd - Q_k`` (for the pin forces; at that body's points only: {point: (S, 2)}) and the output variables it stores. Adding an effect or a
 spring kind is one function here (or a law in :mod:`.springs`) and one entry in :data:`EFFECTS`.
 """
 from __future__ import annotations
@@ -14,7 +14,8 @@ import numpy as np
 
 from ..model import Model
 from ..result import Motion
-from .applied import Applied, add_at_body_point, body_point, center_frame, link_index
+from .applied import (Applied, add_at_body_point, add_body, body_point, body_point_loads, center_frame,
+                      link_index, merge_bodies)
 from .springs import SpringGeometry, TorsionSprings, couples_on_bodies, spring_law
 
 
@@ -60,7 +61,7 @@ class Context:
 class Effect:
     """What one effect contributes. ``lagrange``: its point forces on the Lagrange side when
     they differ from ``applied`` (None: the applied loads themselves); ``bodies``: {link index:
-    (S, P, 2)} added to that body's ``M_k Xdd - Q_k``; ``variables``: output variables;
+    {point: (S, 2)}} added to that body's ``M_k Xdd - Q_k``; ``variables``: output variables;
     ``coords``: {dimension: labels} of the dimensions those add."""
 
     applied: Applied
@@ -111,15 +112,17 @@ def gravity(ctx: Context) -> Effect:
     """Each mass's weight ``m g`` at its centre; its potential energy."""
     model, g = ctx.model, np.asarray(ctx.model.scene.gravity, dtype=float)
     bodies = {}
-    for m, frame in ctx.masses:
-        li = link_index(model, m.link)
-        bodies.setdefault(li, ctx.zeros_points())
-        add_at_body_point(bodies[li], -m.mass * g, *frame)  # -Q_k: the weight on the body
+    for m, frame in ctx.masses:  # -Q_k: the weight on the body
+        merge_bodies(bodies.setdefault(link_index(model, m.link), {}),
+                     body_point_loads(-m.mass * g, *frame, ctx.n_steps))
     potential = np.zeros(ctx.n_steps)
     for m, frame in ctx.masses:
         G = body_point(ctx.position, *frame)
         potential -= m.mass * (G[:, 0] * g[0] + G[:, 1] * g[1])
-    return Effect(Applied(-sum(bodies.values()), ctx.zeros_links()), bodies=bodies, variables={
+    weight = ctx.zeros_points()
+    for body in bodies.values():
+        add_body(weight, body, -1.0)
+    return Effect(Applied(weight, ctx.zeros_links()), bodies=bodies, variables={
         "gravity_energy": (("step",), potential, f"{ctx.units['force']}*{ctx.units['length']}")})
 
 
@@ -148,14 +151,12 @@ def inertia(ctx: Context) -> Effect:
         couples[:, li] += -m.inertia * ctx.motion.link_angular_acceleration[:, li]
         if not ctx.lagrange:
             continue
-        body_m_qdd = ctx.zeros_points()  # M_k Xdd of this body
-        add_at_body_point(body_m_qdd, m.mass * a_center, ia, ib, u, v, L)
+        body_m_qdd = body_point_loads(m.mass * a_center, ia, ib, u, v, L, ctx.n_steps)  # M_k Xdd
         dd = A[:, ib] - A[:, ia]
-        body_m_qdd[:, ib] += m.inertia / L**2 * dd
-        body_m_qdd[:, ia] -= m.inertia / L**2 * dd
-        m_qdd += body_m_qdd
-        bodies.setdefault(li, ctx.zeros_points())
-        bodies[li] += body_m_qdd
+        body_m_qdd[ib] += m.inertia / L**2 * dd
+        body_m_qdd[ia] -= m.inertia / L**2 * dd
+        add_body(m_qdd, body_m_qdd)
+        merge_bodies(bodies.setdefault(li, {}), body_m_qdd)
     return Effect(Applied(point_forces, couples), lagrange=-m_qdd if ctx.lagrange else None,
                   bodies=bodies)
 

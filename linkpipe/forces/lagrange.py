@@ -104,7 +104,7 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
     from that coordinate's row of the equations of motion, ``-mu = Phi_X^T lambda - (Q - M Xdd)``
     (``point_forces`` (S, P, 2) holds ``Q - M Xdd`` at every point, fixed ones included).
     Pins: the force the pin at point P exerts on body k is ``(M_k Xdd - Q_k)_P + sum over the
-    body's own rows of lambda_r dPhi_r/dX_P`` (``bodies``: {link: M_k Xdd - Q_k at the points}),
+    body's own rows of lambda_r dPhi_r/dX_P`` (``bodies``: {link: {point: M_k Xdd - Q_k (S, 2)}}),
     for the pairs of :func:`joints`. NaN at steps that are not ok.
     """
     fixed = np.flatnonzero(model.fixed)
@@ -122,11 +122,13 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
         Rc = -point_forces[ii][:, fixed]
         Fc = np.zeros((len(ii), len(pairs), 2))
         extra = motor_terms(model, X[ii], s[ii], lam_c)
-        for li, body in bodies.items():
-            extra[li] = extra[li] + body[ii] if li in extra else body[ii]
         for (li, p), k in pair_slot.items():
-            if li in extra:
-                Fc[:, k] = extra[li][:, p]
+            motor = extra.get(li, {}).get(p)
+            body = bodies.get(li, {}).get(p)
+            if motor is not None and body is not None:
+                Fc[:, k] = motor + body[ii]
+            elif motor is not None or body is not None:
+                Fc[:, k] = motor if body is None else body[ii]
         for r, p, gx, gy in model.jacobian_terms(X[ii], s[ii]):
             lr = lam_c[:, r]
             k = fixed_slot.get(p)
@@ -143,7 +145,7 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
 
 
 def motor_terms(model: Model, X, s, lam) -> dict:
-    """Return {link: (S, P, 2)}: the part of each relative angle row ``lambda_r dPhi_r/dX`` that
+    """Return {link: {point: (S, 2)}}: the part of each relative angle row ``lambda_r dPhi_r/dX`` that
     acts on each of the two links a motor turns against each other (the driven vector's points
     on the first, the reference vector's on the second; ground takes its part through the
     ground reactions). X (S, P, 2), s (S, nd), lam (S, n_rows)."""
@@ -160,10 +162,11 @@ def motor_terms(model: Model, X, s, lam) -> dict:
             if name not in links:
                 continue  # ground
             li = links[name]
-            acc = out.setdefault(li, np.zeros(X.shape))
+            acc = out.setdefault(li, {})
             for p, gx, gy in part:
-                acc[:, p, 0] += lam[:, r] * gx
-                acc[:, p, 1] += lam[:, r] * gy
+                f = acc.setdefault(p, np.zeros((X.shape[0], 2)))
+                f[:, 0] += lam[:, r] * gx
+                f[:, 1] += lam[:, r] * gy
     return out
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from ..kinematics.rates import link_angles_unwrapped
 from ..model import Model
 from ..scene.tables import GROUND
-from .applied import Applied, link_index, scatter_pairs, with_couples_as_pairs
+from .applied import Applied, couple_as_body, link_index, merge_bodies, scatter_pairs
 
 
 @dataclass(frozen=True)
@@ -146,12 +146,7 @@ class TorsionSprings:
 
 
 def couples_on_bodies(model: Model, couples, X) -> dict:
-    """{link: (S, P, 2)} each link's couple as a force pair, negated: its part of that body's
-    own ``M_k Xdd - Q_k`` (a couple acts on the body, not at a pin)."""
-    bodies = {}
-    zeros = np.zeros((X.shape[0], model.n_points, 2))
-    for li in np.flatnonzero(np.any(couples != 0, axis=0)):
-        only = np.zeros_like(couples)
-        only[:, li] = couples[:, li]
-        bodies[int(li)] = -with_couples_as_pairs(model, zeros, only, X)
-    return bodies
+    """{link: {point: (S, 2)}} each link's couple as a force pair, negated: its part of that
+    body's own ``M_k Xdd - Q_k`` (a couple acts on the body, not at a pin)."""
+    return {int(li): merge_bodies({}, couple_as_body(model, couples[:, li], li, X), -1.0)
+            for li in np.flatnonzero(np.any(couples != 0, axis=0))}

@@ -10,8 +10,9 @@ import numpy as np
 
 from ..model import Model
 from ..status import NO_ASSEMBLY, NOT_CONVERGED
-from .linalg import MODE_SETTLED_BELOW, POLISH_FROM, condition, condition_and_inverse_one, is_singular, lin_solve
+from .linalg import EXACT_WITHIN, MODE_SETTLED_BELOW, POLISH_FROM, POLISH_WITHIN, condition, condition_and_inverse_one, is_singular, lin_solve
 from .roots import _classify_failure, _converging_at_cap, _lm_root, _mirror_root, _null_line_roots, _polish, aim_drivers, drivers_aligned, newton
+from .sparse_lu import StepFactor
 from .start import start_state
 from .step import _step_kernels
 
@@ -99,6 +100,8 @@ class _Continuation:
         # finite-difference Jacobian knob changes Newton's iteration matrix only: the
         # condition and the slopes use the analytic one either way)
         self.fast = _step_kernels(model) if model.n_q else None
+        # large mechanisms: each step's Phi_q as a sparse LU (sparse_lu; None: dense)
+        self.lu = self.fast.lu if self.fast is not None else None
 
     def sweep(self, s, q_start, start_slope, stop_on_failure):
         n_steps, nq = s.shape[0], self.model.n_q
@@ -238,7 +241,8 @@ class _Continuation:
         """A converged step: polish it near a singular shape, keep the assembly mode across a
         gap, and move the path on (with the step's slope where the step is regular)."""
         model = self.model
-        qi, J, cond, inv = att.q, *self._condition(att.q, s_i)
+        # a sparse step's condition is estimated, exact near the thresholds decided below
+        qi, J, cond, inv = att.q, *self._condition(att.q, s_i, path.mode_pending)
         if is_singular(cond, self.rcond, POLISH_FROM):
             # within 1000 of the singular threshold: at a double root Newton stops at tol on a
             # slow (linear) approach, with the Jacobian less singular than at the root;
@@ -256,7 +260,7 @@ class _Continuation:
             # settled; a re-entry on or next to the limit leaves the check to the steps after it
             path.mode_pending = False
         if self.square and regular:
-            path.sign = np.linalg.slogdet(J[0])[0]
+            path.sign = _det_sign(J)
         att.q = qi
         dq = self._slope(qi, J, inv, s_i)
         if regular and np.all(np.isfinite(dq)) and np.abs(dq).max() < 1e8 * model.size:
@@ -267,9 +271,16 @@ class _Continuation:
         # the slope from before it; predicting across with that slope keeps the branch
         path.q, path.s = qi[0], s_i
 
-    def _condition(self, qi, s_i):
-        """(Φq (1, m, n), its condition, its inverse or None) at a root."""
+    def _condition(self, qi, s_i, mode_pending: bool):
+        """(Φq (1, m, n) or its sparse :class:`StepFactor`, its condition, its inverse or None)
+        at a root; a sparse condition is estimated, exact near the thresholds :meth:`accept`
+        decides at (the mode's, when one is pending)."""
         fast = self.fast
+        if self.lu is not None:
+            factor = self.lu.factor(qi[0], s_i)
+            threshold, within = ((MODE_SETTLED_BELOW, EXACT_WITHIN) if mode_pending
+                                 else (POLISH_FROM, POLISH_WITHIN))
+            return factor, factor.condition(self.rcond, threshold, within), None
         if fast is not None:
             J = fast.jac(qi[0], s_i)[None]
         else:
@@ -283,7 +294,7 @@ class _Continuation:
         """Re-entering after a gap: no path connects the two sides, so keep the assembly mode
         (sign of det Φq) of the last regular step, if it exists here."""
         model = self.model
-        if np.linalg.slogdet(J[0])[0] == path.sign:
+        if _det_sign(J) == path.sign:
             return qi, J, inv
 
         def same_mode(qq, si=s_i):
@@ -319,7 +330,7 @@ class _Continuation:
             e = np.zeros((1, model.n_drivers))
             e[0, j] = 1.0
             g = model.gamma(X, model.velocities(dq[:, j][None]), s_i[None], e, np.zeros_like(e))
-            d2[:, j, j] = lin_solve(J, g)[0]
+            d2[:, j, j] = _solve_one(J, g[0])
         return d2
 
     def classify(self, att: _Attempt, path: _Path, s_i) -> int:
@@ -349,4 +360,14 @@ def _velocity_one(model, X, s, s_dot, J=None):
     if J is None:
         J = model.jacobian(X, s)
     rhs = -model.phi_t(X, s, s_dot)
-    return lin_solve(J, rhs)[0]
+    return _solve_one(J, rhs[0])
+
+
+def _solve_one(J, b: np.ndarray) -> np.ndarray:
+    """Solve Φq x = b (m,) at one step: J dense (1, m, n) or a sparse :class:`StepFactor`."""
+    return J.solve(b) if isinstance(J, StepFactor) else lin_solve(J, b[None])[0]
+
+
+def _det_sign(J) -> float:
+    """The sign of det Φq at one step: J dense (1, n, n) or a sparse :class:`StepFactor`."""
+    return J.det_sign() if isinstance(J, StepFactor) else np.linalg.slogdet(J[0])[0]

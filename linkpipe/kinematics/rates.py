@@ -7,7 +7,8 @@ import numpy as np
 
 from ..model import Model, driver_scale
 from ..model.drive import driver_motion as drive_motion
-from .linalg import ESTIMATE_FROM, POLISH_FROM, condition_and_inverse, estimate_inverse_norm1, is_singular
+from .linalg import (ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse, estimated_condition,
+                     is_singular)
 from .sparse import engine
 from .linalg import CHUNK
 from ..status import OK, SINGULAR
@@ -111,12 +112,7 @@ def _engine_factors(eng, with_inverse: bool, rcond: float):
             cond = eng.condition(E, inv)
         else:
             inv = None
-            est = estimate_inverse_norm1(lambda b: eng.solve(E, b),
-                                         lambda b: eng.solve_transpose(E, b), model.n_q, E.shape[1])
-            cond = np.where(np.isfinite(est), eng.norm1(E) * est, np.inf)
-            near = is_singular(cond, rcond, POLISH_FROM)
-            if near.any():
-                cond[near] = eng.condition(E[:, near])
+            cond = engine_condition(eng, E, rcond)
 
         def regular_steps(rows):
             Eg = E if rows.all() else E[:, rows]
@@ -143,6 +139,17 @@ def _engine_factors(eng, with_inverse: bool, rcond: float):
         return cond, regular_steps
 
     return factorise
+
+
+def engine_condition(eng, E: np.ndarray, rcond: float, threshold: float = SINGULAR_AT,
+                     within: float = EXACT_WITHIN) -> np.ndarray:
+    """The condition (S,) of the engine's Jacobians, entries E (nnz, S), without the inverse:
+    :func:`.linalg.estimated_condition` on the engine's block solves, exact (the inverse) at
+    the steps near the thresholds."""
+    return estimated_condition(eng.norm1(E), lambda b: eng.solve(E, b),
+                               lambda b: eng.solve_transpose(E, b),
+                               lambda near: eng.condition(E[:, near]), eng.model.n_q, E.shape[1],
+                               rcond, threshold, within)
 
 
 def _dense_factors(model: Model, X, s):

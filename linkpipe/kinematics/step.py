@@ -8,6 +8,7 @@ from ..model import Model, derived
 from ..model import equations as eq
 from .linalg import lin_solve
 from .newton import ONE, iterate
+from .sparse_lu import step_lu
 
 
 
@@ -30,6 +31,7 @@ class _Step:
         for k, pc in enumerate(self.qpos):
             self.col[pc] = k
         self.angle = np.flatnonzero(md.drv_angle)
+        self.lu = step_lu(model)  # large mechanisms: Phi_q as a sparse LU (None: dense)
 
     def _xy(self, q):
         X = self.points(q)
@@ -93,6 +95,8 @@ class _Step:
             return self.phi(qc, s)
 
         def correction(qc, F):
+            if self.lu is not None and jacobian == "analytic":
+                return self.lu.factor(qc, s).solve(-F)
             return lin_solve(jac(qc, s)[None], -F[None])[0]
 
         q, res, its, conv = iterate(residual, correction, np.array(q, dtype=float).reshape(-1),

@@ -10,7 +10,9 @@ import numpy as np
 from ..model import Model
 from ..model import equations as eq
 from .continuation import solve_positions
-from .linalg import POLISH_FROM, is_singular
+from .linalg import POLISH_FROM, POLISH_WITHIN, is_singular
+from .rates import engine_condition
+from .sparse_lu import uses_sparse
 from .sparse import _rows, engine
 from .newton import _colmax, iterate
 from .start import start_state
@@ -107,7 +109,7 @@ def _node_slopes(model: Model, eng, qn, s_nodes, chord, ok):
     """Return each node's slope along the interval after it and along the interval before it,
     ``dq/ds . chord`` (two (n_nodes, n_q) arrays: the Hermite data per interval), from the
     engine, and which nodes are regular (ok, finite slopes, condition clear of the singular
-    threshold)."""
+    threshold: estimated on the sparse path, :func:`.sparse_lu.uses_sparse`)."""
     after, before = np.full_like(qn, np.nan), np.full_like(qn, np.nan)
     ok = ok.copy()
     if ok.any():
@@ -117,8 +119,12 @@ def _node_slopes(model: Model, eng, qn, s_nodes, chord, ok):
         for slope, c in ((after, np.r_[chord, zero]), (before, np.r_[zero, chord])):
             rhs = -model.phi_t(Xn, s_nodes[ok], c[ok])
             slope[ok] = np.stack(eng.solve(E, _rows(rhs)), axis=1)
-        cond = eng.condition(E)
-        near_singular = is_singular(cond, model.scene.solver.singular_rcond, POLISH_FROM)
+        rcond = model.scene.solver.singular_rcond
+        # large mechanisms: the condition estimated (exact near the thresholds), not from the
+        # inverse (n block solves per node)
+        cond = (engine_condition(eng, E, rcond, POLISH_FROM, POLISH_WITHIN) if uses_sparse(model)
+                else eng.condition(E))
+        near_singular = is_singular(cond, rcond, POLISH_FROM)
         ok[np.flatnonzero(ok)[near_singular]] = False
     regular = ok & np.isfinite(after).all(axis=1) & np.isfinite(before).all(axis=1)
     return (after, before), regular

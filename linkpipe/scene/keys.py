@@ -65,7 +65,7 @@ KEYS: dict[str, dict[str, str]] = {
     "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]", "link": '"handle"'},
     "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
                "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
-               "singular_rcond": "1e-6"},
+               "singular_rcond": "1e-6", "linear_algebra": '"auto"'},
     "analysis": {"effects": '["springs", "gravity"]'},
     "gravity": {"g": "[0.0, -9.81]"},
     "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",

@@ -172,6 +172,7 @@ SOLVER_CHOICES = {
     "derivatives": ("linear", "finite_difference"),
     "predictor": ("first", "second", "none"),
     "method": ("auto", "newton", "dyads"),
+    "linear_algebra": ("auto", "dense", "sparse"),
 }
 
 
@@ -188,6 +189,9 @@ class Solver:
     change point or assembly limit even a fully converged solution has a smallest singular value
     of about sqrt(machine eps) ~ 1e-8 (the root is double), so values much below 1e-6 stop
     flagging exact singular configurations.
+    ``linear_algebra``: the one-step work of the general path (sequential continuation, start)
+    on dense Jacobians (``dense``), on a sparse LU (``sparse``), or by size (``auto``: sparse
+    from :data:`linkpipe.kinematics.sparse_lu.SPARSE_FROM` unknowns).
     """
 
     tol: float = 1e-12
@@ -197,6 +201,7 @@ class Solver:
     predictor: str = "first"
     method: str = "auto"
     singular_rcond: float = 1e-6
+    linear_algebra: str = "auto"
 
 
 @dataclass(frozen=True)
