@@ -12,7 +12,7 @@ from .model import build_model, check_mobility
 from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
 from .result import Motion, Result, units_of
-from .status import NO_INPUT, OK, assign, counts
+from .status import NO_INPUT, OK, assign, counts, finite_rows
 from .errors import SceneError
 from .scene import Scene, load_scene
 
@@ -141,6 +141,17 @@ class Kinematics:
     #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
     force_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
+    @property
+    def finite(self) -> np.ndarray:
+        """(S,) True where every stored kinematic array is finite (computed once: a fit's
+        trials reuse it)."""
+        if "finite" not in self.force_cache:
+            stored = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
+                      *self.link_rates]
+            self.force_cache["finite"] = finite_rows([a for a in stored if a is not None],
+                                                     len(self.s))
+        return self.force_cache["finite"]
+
 
 def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
            wanted: frozenset | None = None) -> Result:
@@ -168,12 +179,9 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
                                 cache=k.force_cache if kinematics is not None and not lagrange
                                 else None)
         seconds["forces"] = _time.perf_counter() - t0
-    stored = [X, k.link_angle, k.velocity, k.acceleration, *k.link_rates]
-    if forces:
-        stored += forces.defined_arrays()
     status = assign([kinematic_status] + ([forces.status] if forces else []),
                     k.sweep.residual, scene.solver.tol * model.size,
-                    [a for a in stored if a is not None])
+                    forces.defined_arrays() if forces else [], finite=k.finite)
 
     value, drive = k.drive.value, k.drive
     time, time_note = _time_axis(scene, value)

@@ -39,12 +39,11 @@ class Context:
     @classmethod
     def of(cls, model: Model, motion: Motion, units: dict, lagrange: bool = True) -> "Context":
         X = motion.position
-        zeros = np.zeros_like(X)
+        V, A = motion.velocity, motion.acceleration
+        zeros = np.zeros_like(X) if V is None or A is None else None
         masses = tuple((m, center_frame(model, m.link, m.center)) for m in model.scene.masses)
         return cls(model, motion, units, frozenset(model.scene.effects), X,
-                   motion.velocity if motion.velocity is not None else zeros,
-                   motion.acceleration if motion.acceleration is not None else zeros, masses,
-                   lagrange)
+                   V if V is not None else zeros, A if A is not None else zeros, masses, lagrange)
 
     @property
     def n_steps(self) -> int:
