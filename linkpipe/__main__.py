@@ -42,7 +42,29 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit [fit] parameters to the scene's [[measurements]]")
     fit.add_argument("scene")
     fit.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    study = sub.add_parser("study", help="solve the variants of a [study]: <name>_study.h5 and .rrd")
+    study.add_argument("study", help="a study file (configs/studies/*.toml) or a scene with [study]")
+    study.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _executor_options(study)
+    study.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
+    study.add_argument("--quiet", action="store_true", help="print only errors")
     return p
+
+
+def _executor_options(p) -> None:
+    """--workers / --scheduler: where batches run (default: in this process)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive, metavar="N",
+                       help="run batches on a local Dask cluster of N worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run batches on an existing Dask cluster (tcp://host:8786)")
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise ValueError(text)
+    return value
 
 
 def _threads(text: str) -> int:
@@ -58,7 +80,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     or its output could not be written, 2 bad input (scene, option), 130 stopped by Ctrl-C or
     SIGTERM. Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
-    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit}[args.command]
+    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
+               "study": _study}[args.command]
     previous = _signals_as_interrupts()
     try:
         return command(args)
@@ -399,6 +422,32 @@ def fit_table(result) -> str:
     for k, name in enumerate(b["names"]):
         lines.append(f"  measurement {name}: rms {b['rms'][k]:.4g} -> {a['rms'][k]:.4g} {b['units'][k]}")
     return "\n".join(lines)
+
+
+def _study(args) -> int:
+    from .study import load_study, run_study
+    from .study.report import study_table
+
+    outcome = _Outcome()
+    with _reporting(args.study, outcome):
+        t0 = time.perf_counter()
+        study = load_study(args.study)
+        executor = "dask" if args.workers or args.scheduler else "in_process"
+        path = run_study(study, args.out, executor, args.workers, args.scheduler,
+                         progress=not args.quiet)
+        written = [str(path)]
+        if not args.no_rrd:
+            from .stores.rrd import study as study_rrd
+            from .stores.study import read_arrays
+            from .study.view import study_view
+
+            rrd_path = path.with_suffix(".rrd")
+            study_rrd.write(study_view(study, read_arrays(path)), rrd_path)
+            written.append(str(rrd_path))
+        if not args.quiet:
+            print(study_table(study, path, time.perf_counter() - t0))
+            print("  wrote " + ", ".join(written))
+    return outcome.code
 
 
 if __name__ == "__main__":

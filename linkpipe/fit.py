@@ -121,12 +121,16 @@ def _bounds_of(scene, bounds, name, value):
     return float(b[0]), float(b[1])
 
 
-def locate(scene: Scene, data: dict, address: str):
-    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``."""
+def locate(scene: Scene, data: dict, address: str, where=None):
+    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``.
+
+    ``where``: (file, table, key) a mistake is reported at (default: the scene's ``[fit]
+    parameters``; a study names its own file and ``[study.parameters]``)."""
     parts = address.split(".")
+    where = where or (scene.path, "fit", "parameters")
 
     def fail(message, hint=""):
-        return SceneError(scene.path, "fit", "parameters", f'"{address}": {message}', hint)
+        return SceneError(*where, f'"{address}": {message}', hint)
 
     table = parts[0]
     if table not in TABLES or table not in data:

@@ -1,0 +1,234 @@
+"""Design studies: every row equals a one-by-one run of the same variant; bad study files are
+one clear message; a killed study resumes to the same file; the Dask path gives that file too."""
+import copy
+import pathlib
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+import tomli_w
+
+import linkpipe
+from linkpipe.errors import SceneError
+from linkpipe.scene import parse_scene
+from linkpipe.status import OK
+from linkpipe.stores.study import partial_path, read_arrays
+from linkpipe.study import load_study, run_study
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+GOAL = ROOT / "configs" / "basketball_goal.toml"
+
+STUDY = """
+[scene]
+name = "{name}"
+
+[study]
+base = "{base}"
+samples = {samples}
+seed = 3
+batch_size = {batch}
+
+[study.parameters]
+"springs.left.k" = {{ from = 2.0, to = 6.0, steps = 3 }}
+"points.S1.y" = {{ from = -0.75, to = -0.55, steps = 2 }}
+"points.O4.y" = {{ normal = [-2.0, 0.0005] }}
+"links.backboard.lengths.B-C" = {{ uniform = [0.999, 1.001] }}
+
+[study.metrics]
+peak_handle = "max(abs(input_force.theta3a))"
+p95_spring = "percentile(spring_force.left, 95)"
+mean_x = "mean(position.B.x) - 2 * min(spring_force.right) / 4"
+"""
+
+
+def write_study(folder, name="goal", samples=2, batch=4, extra=""):
+    path = pathlib.Path(folder) / f"{name}.toml"
+    path.write_text(STUDY.format(name=name, base=GOAL.as_posix(), samples=samples,
+                                 batch=batch) + extra)
+    return path
+
+
+def one_by_one(study, v):
+    """Variant v built independently: the base scene's TOML with the values set by hand."""
+    data = tomllib.loads(GOAL.read_text())
+    data = copy.deepcopy(data)
+    k, s1y, o4y, bc = study.values[v]
+    data["springs"][0]["k"] = k
+    data["points"]["S1"]["y"] = s1y
+    data["points"]["O4"]["y"] = o4y
+    data["links"][2]["lengths"]["B-C"] = bc
+    try:
+        return linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+    except SceneError:
+        return None
+
+
+def expected_row(r):
+    """The study's columns of one Result, by plain numpy on its ok steps."""
+    ok = r.status == OK
+    f = r.forces["input_force"][1][ok, 0]
+    P = r.position[ok, r.point_names.index("B"), 0]
+    right = r.forces["spring_force"][1][ok, 1]
+    left = r.forces["spring_force"][1][ok, 0]
+    return {"peak_input_force": np.abs(f).max(), "rms_input_force": np.sqrt(np.mean(f * f)),
+            "input_force_range": f.max() - f.min(), "peak_handle": np.abs(f).max(),
+            "p95_spring": np.percentile(left, 95), "mean_x": P.mean() - 2 * right.min() / 4,
+            "worst_status": int(r.status.max()),
+            "first_failed_step": int(np.flatnonzero(~ok)[0]) if (~ok).any() else -1}
+
+
+def test_study_rows_equal_one_by_one_runs(tmp_path):
+    study = load_study(write_study(tmp_path))
+    assert study.n_variants == 3 * 2 * 2
+    path = run_study(study, tmp_path / "out")
+    f = read_arrays(path)
+    assert f["parameter"].tolist() == ["springs.left.k", "points.S1.y", "points.O4.y",
+                                       "links.backboard.lengths.B-C"]
+    assert f["parameter_value"].shape == (12, 4) and f["batch_done"].tolist() == [1, 1, 1]
+    for v in range(study.n_variants):
+        want = expected_row(one_by_one(study, v))
+        for name, value in want.items():
+            got = f[name][v].reshape(-1)[0]
+            assert got == pytest.approx(value, rel=1e-12, abs=1e-12), (v, name)
+
+
+def test_grid_product_and_seeded_draws(tmp_path):
+    study = load_study(write_study(tmp_path, samples=3))
+    values = study.values
+    assert values.shape == (18, 4)
+    grid = [(k, y) for k in (2.0, 4.0, 6.0) for y in (-0.75, -0.55) for _ in range(3)]
+    assert values[:, :2].tolist() == [list(g) for g in grid]
+    rng = np.random.default_rng(3)
+    np.testing.assert_array_equal(values[:, 2], rng.normal(-2.0, 0.0005, 18))
+    np.testing.assert_array_equal(values[:, 3], rng.uniform(0.999, 1.001, 18))
+
+
+def test_a_variant_that_cannot_assemble_is_a_row(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"points.O4.y" = { from = -2.0, to = -5.0, steps = 3 }\n')
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    assert f["worst_status"].tolist()[0] == OK and f["first_failed_step"][0] == -1
+    for v in (1, 2):
+        r = one_by_one_o4(study.values[v, 0])
+        if r is None:  # the start does not assemble: every step no_assembly
+            assert f["worst_status"][v] == 1 and f["first_failed_step"][v] == 0
+            assert np.isnan(f["peak_input_force"][v, 0])
+        else:
+            assert f["worst_status"][v] == r.status.max()
+            assert f["first_failed_step"][v] == np.flatnonzero(r.status != OK)[0]
+    assert f["worst_status"][2] == 1  # 3 ft below: the parallelogram cannot close
+
+
+def one_by_one_o4(y):
+    data = tomllib.loads(GOAL.read_text())
+    data["points"]["O4"]["y"] = y
+    try:
+        return linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+    except SceneError:
+        return None
+
+
+def test_killed_study_resumes_to_the_same_file(tmp_path):
+    study = load_study(write_study(tmp_path, batch=3))
+    whole = read_arrays(run_study(study, tmp_path / "whole"))
+
+    def kill(n):
+        if n == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_study(study, tmp_path / "cut", after_batch=kill)
+    path = tmp_path / "cut" / "goal_study.h5"
+    assert not path.exists() and partial_path(path).exists()
+    solved = []
+    import linkpipe.study.run as run_module
+    original = run_module.solve_batch
+
+    def counting(st, lo, hi):
+        solved.append(lo)
+        return original(st, lo, hi)
+
+    run_module.solve_batch = counting
+    try:
+        resumed = read_arrays(run_study(study, tmp_path / "cut"))
+    finally:
+        run_module.solve_batch = original
+    assert sorted(solved) == [6, 9]  # only the batches not written before the kill
+    assert not partial_path(path).exists()
+    assert resumed.keys() == whole.keys()
+    for name in whole:
+        if name == "attrs":
+            assert {k: str(v) for k, v in resumed[name].items()} == \
+                   {k: str(v) for k, v in whole[name].items()}
+        else:
+            np.testing.assert_array_equal(resumed[name], whole[name])
+
+
+def test_dask_local_cluster_gives_the_same_file(tmp_path):
+    pytest.importorskip("dask.distributed")
+    study = load_study(write_study(tmp_path, samples=1, batch=2))
+    here = read_arrays(run_study(study, tmp_path / "here"))
+    there = read_arrays(run_study(study, tmp_path / "dask", "dask", workers=2))
+    for name in here:
+        if name != "attrs":
+            np.testing.assert_array_equal(there[name], here[name])
+
+
+@pytest.mark.parametrize("parameters, metrics, table, key, words", [
+    ('"springs.lft.k" = { from = 1.0, to = 2.0, steps = 2 }', "", "study.parameters",
+     "springs.lft.k", 'did you mean "left"'),
+    ('"springs.left.k" = { from = 1.0, to = 1.0, steps = 3 }', "", "study.parameters",
+     "springs.left.k", "empty range"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 0 }', "", "study.parameters",
+     "springs.left.k", "empty range"),
+    ('"springs.left.k" = { uniform = [2.0, 1.0] }', "", "study.parameters",
+     "springs.left.k", "empty range"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "max(3 * 2)"',
+     "study.metrics", "x", "got a number"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "max(abs(input_forc.theta3a))"',
+     "study.metrics", "x", "'input_forc' is not a variable"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "2 + 3"',
+     "study.metrics", "x", "names no stored variable"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "__import__(\'os\')"',
+     "study.metrics", "x", "unexpected"),
+])
+def test_bad_study_file_is_one_message(tmp_path, parameters, metrics, table, key, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n{parameters}\n'
+                    f"[study.metrics]\n{metrics}\n")
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert (err.value.path, err.value.table, err.value.key) == (str(path), table, key)
+    assert words in str(err.value)
+
+
+def test_cli_bad_study_exits_2_without_traceback(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"springs.left.kk" = { from = 1.0, to = 2.0, steps = 2 }\n')
+    proc = subprocess.run([sys.executable, "-m", "linkpipe", "study", str(path), "--out",
+                           str(tmp_path)], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith(f"error: {path}: [study.parameters] springs.left.kk:")
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_study_inside_a_scene(tmp_path):
+    text = GOAL.read_text() + ('\n[study]\n[study.parameters]\n'
+                               '"masses.backboard.mass" = { from = 1.0, to = 2.0, steps = 2 }\n')
+    path = tmp_path / "goal_in_scene.toml"
+    path.write_text(text)
+    assert linkpipe.load_scene(path).name == "basketball_goal"  # a scene may hold [study]
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    assert study.name == "basketball_goal"
+    for v, mass in enumerate((1.0, 2.0)):
+        data = tomllib.loads(GOAL.read_text())
+        data["masses"][0]["mass"] = mass
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        assert f["peak_input_force"][v, 0] == pytest.approx(
+            np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
