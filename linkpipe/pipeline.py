@@ -158,12 +158,8 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Resu
                         influence=der["influence"], link_angular_acceleration=k.link_rates[1])
         forces = compute_forces(model, motion, units_of(scene))
         seconds["forces"] = _time.perf_counter() - t0
-    stored = [X, k.link_angle, k.velocity, k.acceleration, *k.link_rates]
-    if forces:
-        stored += forces.defined_arrays()
-    status = assign([kinematic_status] + ([forces.status] if forces else []),
-                    k.sweep.residual, scene.solver.tol * model.size,
-                    [a for a in stored if a is not None])
+    status = status_of(model, kinematic_status, k.sweep.residual,
+                       [X, k.link_angle, k.velocity, k.acceleration, *k.link_rates], forces)
 
     value, drive = k.drive.value, k.drive
     time, time_note = _time_axis(scene, value)
@@ -182,6 +178,18 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Resu
         seconds=seconds, message=message(status),
         solver_method_used=k.sweep.method, solver_note=k.sweep.note, kinematics=k)
     return _with_measurements(result) if scene.measurements else result
+
+
+def status_of(model, kinematic_status, residual, stored: list, forces, size=None) -> np.ndarray:
+    """Every step's final status (S,): the stages' verdicts, the residual against the
+    tolerance, and whether everything ``stored`` (kinematic arrays, step axis first, None
+    where not computed) and the forces' arrays are finite (:func:`linkpipe.status.assign`).
+    ``size``: the length scale of the tolerance, float or (S,) (default ``model.size``)."""
+    if forces:
+        stored = stored + forces.defined_arrays()
+    return assign([kinematic_status] + ([forces.status] if forces else []), residual,
+                  model.scene.solver.tol * (model.size if size is None else size),
+                  [a for a in stored if a is not None])
 
 
 def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:

@@ -232,3 +232,73 @@ def test_study_inside_a_scene(tmp_path):
         r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
         assert f["peak_input_force"][v, 0] == pytest.approx(
             np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
+
+
+EVERY_EFFECT = GOAL.read_text().replace(
+    'effects = ["springs", "gravity", "inertia"]',
+    'effects = ["springs", "gravity", "inertia", "damping", "loads"]').replace(
+    "free_length = 0.5833\n", "free_length = 0.5833\ndamping = 0.3\n") + """
+[[loads]]
+name = "hand"
+point = "H"
+force = [0.0, -5.0]
+
+[[loads]]
+name = "twist"
+link = "upper"
+torque = 1.5
+"""
+
+FORCE_STUDY = """
+[study]
+base = "goal_every_effect.toml"
+samples = 2
+seed = 5
+batch_size = 7
+
+[study.parameters]
+"springs.left.k" = { from = 2.0, to = 6.0, steps = 3 }
+"points.S1.y" = { from = -0.9, to = -0.4, steps = 2 }
+"springs.right.damping" = { uniform = [0.1, 0.5] }
+"masses.backboard.inertia" = { normal = [0.375, 0.01] }
+"loads.hand.force.1" = { uniform = [-8.0, -2.0] }
+"loads.twist.torque" = { normal = [1.5, 0.2] }
+"gravity.g.1" = { uniform = [-32.2, -32.1] }
+
+[study.metrics]
+peak_ground = "max(abs(ground_reaction.S1.y))"
+energy = "mean(spring_energy.left) + rms(gravity_energy)"
+"""
+
+
+def test_force_parameters_take_the_vectorised_path_equal_to_one_by_one(tmp_path):
+    """Spring rates and damping, an anchor (S1 widens the drawing: its own size), inertia,
+    loads and gravity, every effect on: stage 1 once, the force stage on all variants of a
+    batch at once; every stored variable of every variant equals its own run."""
+    from linkpipe.study.vector import variant_arrays
+
+    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
+    path = tmp_path / "forces.toml"
+    path.write_text(FORCE_STUDY)
+    study = load_study(path)
+    assert study.slots is not None and study.path_note.startswith("vectorised")
+    status, arrays = variant_arrays(study, study.slots, 0, study.n_variants)
+    base = tomllib.loads(EVERY_EFFECT)
+    for v in range(study.n_variants):
+        data = copy.deepcopy(base)
+        k, s1y, c, inertia, fy, torque, gy = study.values[v]
+        data["springs"][0]["k"], data["points"]["S1"]["y"] = k, s1y
+        data["springs"][1]["damping"], data["masses"][0]["inertia"] = c, inertia
+        data["loads"][0]["force"][1], data["loads"][1]["torque"], data["gravity"]["g"][1] = fy, torque, gy
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        stored = {x.name: x.data for x in r.variables() if x.dims[:1] == ("step",)}
+        assert stored.keys() == arrays.keys()
+        for name, want in stored.items():
+            np.testing.assert_allclose(arrays[name][v], want, rtol=1e-12, atol=1e-12,
+                                       err_msg=f"variant {v} {name}")
+    f = read_arrays(run_study(study, tmp_path / "out"))
+    assert study.n_variants == 12 and f["batch_done"].tolist() == [1, 1] and (f["worst_status"] == 0).all()
+    ok_force = arrays["input_force"][:, :, 0]
+    np.testing.assert_array_equal(f["peak_input_force"][:, 0], np.abs(ok_force).max(axis=1))
+    np.testing.assert_array_equal(
+        f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))

@@ -22,6 +22,7 @@ from ..model import Model
 from ..result import Forces, Motion
 from ..status import OK
 from .applied import with_couples_as_pairs
+from .constants import ForceConstants
 from .effects import EFFECTS, Context, applies
 from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
 from .virtual_work import Influence, along_input_directions
@@ -29,14 +30,16 @@ from .virtual_work import Influence, along_input_directions
 __all__ = ["compute_forces", "EFFECTS"]
 
 
-def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
+def compute_forces(model: Model, motion: Motion, units: dict,
+                   constants: ForceConstants | None = None) -> Forces:
     """Compute every named effect and the input force of a solved sweep.
 
     ``motion``: the sweep (positions, derivatives, kinematic status, Jacobian inverse);
-    ``units``: the scene's unit strings. Returns :class:`Forces` (variables in the contract's
+    ``units``: the scene's unit strings; ``constants``: the force tables' numbers when they
+    differ from the scene's (per step: a study's variants on one step axis). Returns :class:`Forces` (variables in the contract's
     names, the labels of the dimensions they add, and the status with no_leverage added).
     """
-    ctx = Context.of(model, motion, units)
+    ctx = Context.of(model, motion, units, constants)
     n_steps = ctx.n_steps
     Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)
     influence = Influence.of(model, motion.position, Xz, motion.s, motion.influence)
@@ -77,7 +80,7 @@ def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
     lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
-                                          motion.status, units, Xz)
+                                          motion.status, units, Xz, ctx.constants.size)
     variables["input_force"] = (("step", "driver"), input_force, unit)
     variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
     internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)

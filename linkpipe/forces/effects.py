@@ -15,14 +15,16 @@ import numpy as np
 from ..model import Model
 from ..result import Motion
 from .applied import Applied, add_at_body_point, body_point, center_frame, link_index
+from .constants import ForceConstants
 from .springs import SpringGeometry, TorsionSprings, couples_on_bodies, spring_law
 
 
 @dataclass(frozen=True)
 class Context:
     """A solved sweep as the effects see it: positions, velocities and accelerations
-    (S, n_points, 2; zeros where the scene needs none), the scene's units and effects, and
-    each mass with the frame of its centre ``(ia, ib, u, v, L)``."""
+    (S, n_points, 2; zeros where the scene needs none), the scene's units and effects,
+    each mass with the frame of its centre ``(ia, ib, u, v, L)`` and the force tables'
+    numbers (:class:`.constants.ForceConstants`, per step where a study varies them)."""
 
     model: Model
     motion: Motion
@@ -32,15 +34,18 @@ class Context:
     velocity: np.ndarray
     acceleration: np.ndarray
     masses: tuple
+    constants: ForceConstants
 
     @classmethod
-    def of(cls, model: Model, motion: Motion, units: dict) -> "Context":
+    def of(cls, model: Model, motion: Motion, units: dict,
+           constants: ForceConstants | None = None) -> "Context":
         X = motion.position
         zeros = np.zeros_like(X)
         masses = tuple((m, center_frame(model, m.link, m.center)) for m in model.scene.masses)
         return cls(model, motion, units, frozenset(model.scene.effects), X,
                    motion.velocity if motion.velocity is not None else zeros,
-                   motion.acceleration if motion.acceleration is not None else zeros, masses)
+                   motion.acceleration if motion.acceleration is not None else zeros, masses,
+                   constants if constants is not None else ForceConstants.of(model))
 
     @property
     def n_steps(self) -> int:
@@ -106,29 +111,29 @@ def damping(ctx: Context) -> Effect:
 
 def gravity(ctx: Context) -> Effect:
     """Each mass's weight ``m g`` at its centre; its potential energy."""
-    model, g = ctx.model, np.asarray(ctx.model.scene.gravity, dtype=float)
+    model, g, mass = ctx.model, ctx.constants.gravity, ctx.constants.mass
     bodies = {}
-    for m, frame in ctx.masses:
+    for i, (m, frame) in enumerate(ctx.masses):
         li = link_index(model, m.link)
         bodies.setdefault(li, ctx.zeros_points())
-        add_at_body_point(bodies[li], -m.mass * g, *frame)  # -Q_k: the weight on the body
+        add_at_body_point(bodies[li], -mass[..., i, None] * g, *frame)  # -Q_k: the weight on the body
     potential = np.zeros(ctx.n_steps)
-    for m, frame in ctx.masses:
+    for i, (m, frame) in enumerate(ctx.masses):
         G = body_point(ctx.position, *frame)
-        potential -= m.mass * (G[:, 0] * g[0] + G[:, 1] * g[1])
+        potential -= mass[..., i] * (G[:, 0] * g[..., 0] + G[:, 1] * g[..., 1])
     return Effect(Applied(-sum(bodies.values()), ctx.zeros_links()), bodies=bodies, variables={
         "gravity_energy": (("step",), potential, f"{ctx.units['force']}*{ctx.units['length']}")})
 
 
 def loads(ctx: Context) -> Effect:
     """Constant point forces (global frame) and couples on links (CCW positive)."""
-    model = ctx.model
+    model, c = ctx.model, ctx.constants
     point_forces, couples = ctx.zeros_points(), ctx.zeros_links()
-    for ld in model.scene.loads:
+    for k, ld in enumerate(model.scene.loads):
         if ld.point is not None:
-            point_forces[:, model.point_names.index(ld.point)] += np.asarray(ld.force, dtype=float)
+            point_forces[:, model.point_names.index(ld.point)] += c.load_force[..., k, :]
         else:
-            couples[:, link_index(model, ld.link)] += float(ld.torque)
+            couples[:, link_index(model, ld.link)] += c.load_torque[..., k]
     return Effect(Applied(point_forces, couples))
 
 
@@ -138,16 +143,17 @@ def inertia(ctx: Context) -> Effect:
     model, A = ctx.model, ctx.acceleration
     point_forces, couples, m_qdd = ctx.zeros_points(), ctx.zeros_links(), ctx.zeros_points()
     bodies = {}
-    for m, (ia, ib, u, v, L) in ctx.masses:
+    for i, (m, (ia, ib, u, v, L)) in enumerate(ctx.masses):
+        mass, inertia_ = ctx.constants.mass[..., i, None], ctx.constants.inertia[..., i]
         a_center = body_point(A, ia, ib, u, v, L)
-        add_at_body_point(point_forces, -m.mass * a_center, ia, ib, u, v, L)
+        add_at_body_point(point_forces, -mass * a_center, ia, ib, u, v, L)
         li = link_index(model, m.link)
-        couples[:, li] += -m.inertia * ctx.motion.link_angular_acceleration[:, li]
+        couples[:, li] += -inertia_ * ctx.motion.link_angular_acceleration[:, li]
         body_m_qdd = ctx.zeros_points()  # M_k Xdd of this body
-        add_at_body_point(body_m_qdd, m.mass * a_center, ia, ib, u, v, L)
+        add_at_body_point(body_m_qdd, mass * a_center, ia, ib, u, v, L)
         dd = A[:, ib] - A[:, ia]
-        body_m_qdd[:, ib] += m.inertia / L**2 * dd
-        body_m_qdd[:, ia] -= m.inertia / L**2 * dd
+        body_m_qdd[:, ib] += (inertia_ / L**2)[..., None] * dd
+        body_m_qdd[:, ia] -= (inertia_ / L**2)[..., None] * dd
         m_qdd += body_m_qdd
         bodies.setdefault(li, ctx.zeros_points())
         bodies[li] += body_m_qdd

@@ -1,5 +1,9 @@
 """Solve one batch of a study's variants and reduce it to the study file's rows.
 
+Two paths give the same rows: the vectorised one (:mod:`.vector`: variants that differ in
+force numbers only, all at once) and variant by variant (each variant's scene parsed and
+solved by :func:`linkpipe.solve`).
+
 :func:`solve_batch` is the one task every executor runs (in-process, or on Dask workers): it
 takes the study and a range of variants and returns their rows {variable: (V, ...)}. A
 variant whose scene cannot be built or assembled (a triangle that cannot close, a start that
@@ -16,6 +20,7 @@ from ..pipeline import solve
 from ..status import NO_ASSEMBLY
 from .metrics import BatchArrays, batch_metrics, transmission_pins
 from .reductions import references
+from .vector import variant_arrays
 
 
 def variant_scene(study, v: int):
@@ -37,9 +42,16 @@ def wanted_series(study) -> list[tuple[str, tuple]]:
 
 
 def solve_batch(study, lo: int, hi: int) -> dict[str, np.ndarray]:
-    """Rows ``{variable: (hi - lo, ...)}`` of variants ``lo .. hi - 1``."""
-    results = [solve_variant(study, v) for v in range(lo, hi)]
-    return batch_metrics(study, stack(study, results), transmission_pins(study.scene))
+    """Rows ``{variable: (hi - lo, ...)}`` of variants ``lo .. hi - 1``: all at once on the
+    vectorised path (:mod:`.vector`) where the study allows it, else variant by variant."""
+    if study.slots is not None:
+        status, arrays = variant_arrays(study, study.slots, lo, hi)
+        batch = BatchArrays(status, arrays.get("input_force"), arrays["position"],
+                            {(name, index): arrays[name][(slice(None), slice(None)) + index]
+                             for name, index in wanted_series(study)})
+    else:
+        batch = stack(study, [solve_variant(study, v) for v in range(lo, hi)])
+    return batch_metrics(study, batch, transmission_pins(study.scene))
 
 
 def stack(study, results) -> BatchArrays:

@@ -18,7 +18,8 @@ def study_table(study, path, seconds: float | None = None) -> str:
     lines = [f"{study.name}: {V:,} variants of {study.scene.name} ({len(study.parameters)} "
              f"parameter(s), {study.scene.n_steps} steps each), {V - failed:,} all ok, "
              f"{failed:,} with failed steps"
-             + (f"; {seconds:.2f} s ({V / seconds:,.0f} variants/s)" if seconds else "")]
+             + (f"; {seconds:.2f} s ({V / seconds:,.0f} variants/s)" if seconds else ""),
+             f"  solved {study.path_note}"]
     names = ["peak_input_force", "rms_input_force"] + [m.name for m in study.metrics]
     for name in names:
         data = np.asarray(f[name], dtype=float).reshape(V, -1)

@@ -98,7 +98,7 @@ def layout(study) -> tuple[dict, list, list]:
              "study_path": study.path, "study_toml": study.text,
              "base_scene_path": study.scene.path, "base_scene_toml": study.scene.text,
              "samples": study.samples, "seed": study.seed, "batch_size": study.batch_size,
-             "n_steps": study.scene.n_steps}
+             "n_steps": study.scene.n_steps, "solved": study.path_note}
     return attrs, coords, variables
 
 

@@ -12,6 +12,7 @@ there are none. Every mistake is a :class:`SceneError` naming the study file, th
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import tomllib
@@ -25,10 +26,11 @@ from ..fit import locate
 from ..scene import Scene, load_scene
 from ..scene.keys import KEYS, _is_number, _suggest
 from ..version import __version__
-from . import reductions
+from . import reductions, vector
 
-#: variants solved together (one task of an executor, one write to the HDF5)
-DEFAULT_BATCH = 1000
+#: variants solved together (one task of an executor, one write to the HDF5), at most, and
+#: the (variant, step) rows a batch holds at most when the study file gives no batch_size
+DEFAULT_BATCH, BATCH_ROWS = 1000, 100_000
 #: the names every study file stores: a metric may not take one
 RESERVED = ("variant", "parameter", "driver", "batch", "parameter_value", "peak_input_force",
             "rms_input_force", "input_force_range", "min_transmission_angle", "worst_status",
@@ -77,6 +79,8 @@ class Study:
     seed: int
     batch_size: int
     fingerprint: str
+    slots: tuple | None = None  # the vectorised path's places of the parameters (None: not)
+    path_note: str = ""  # which path solves the variants, and why
 
     @property
     def n_variants(self) -> int:
@@ -128,15 +132,20 @@ def load_study(path, catalog_of=None) -> Study:
     base = tomllib.loads(scene.text)
     base.pop("study", None)
     base.pop("fit", None)
+    default_batch = max(1, min(DEFAULT_BATCH, BATCH_ROWS // max(1, scene.n_steps)))
     samples, seed, batch = (_whole(path, raw, key, default, low) for key, default, low in
-                            (("samples", 1, 1), ("seed", 0, 0), ("batch_size", DEFAULT_BATCH, 1)))
+                            (("samples", 1, 1), ("seed", 0, 0), ("batch_size", default_batch, 1)))
     params = _parameters(path, raw, scene, base)
     catalog = (catalog_of or _catalog)(scene)
     metrics = _metrics(path, raw, catalog)
     values = variant_values(params, samples, seed)
     digest = hashlib.sha256("\0".join([__version__, text, scene.text, str(batch)]).encode())
-    return Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
-                 batch, digest.hexdigest())
+    study = Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
+                  batch, digest.hexdigest())
+    slots, why = vector.plan(study)
+    note = ("vectorised: stage 1 solved once, the force stage on all variants of a batch at once"
+            if slots is not None else f"variant by variant: {why}")
+    return dataclasses.replace(study, slots=None if slots is None else tuple(slots), path_note=note)
 
 
 def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:

@@ -1,7 +1,7 @@
 """Write a study's recording ``<name>_study.rrd`` from a :class:`linkpipe.study.view.StudyView`.
 
 Entities: ``study/vs/<parameter>/<metric>`` each metric against each parameter (one 2D
-scatter per pair, both axes scaled to the unit square, the ranges written at the corners;
+scatter per pair, both axes scaled to the unit square, y up, the ranges written at the corners;
 green: every step ok, red: some step failed), ``study/pareto/<a>/<b>`` every variant in grey
 and the Pareto set of the first two metrics as a line, and the best variant (by the first
 metric) as a whole recording of its own sweep under ``mechanism/**`` and ``plots/**`` on the
@@ -32,18 +32,22 @@ def _unit(x: np.ndarray) -> tuple[np.ndarray, float, float]:
     return ((x - lo) / (hi - lo) if hi > lo else np.where(finite, 0.5, np.nan)), lo, hi
 
 
-def _scatter(stream, entity: str, x, y, colours, xlabel: str, ylabel: str) -> None:
-    """Points (x, y) scaled to the unit square, with a frame and the ranges at its corners."""
+def _scatter(stream, entity: str, x, y, colours, xlabel: str, ylabel: str) -> np.ndarray:
+    """Points (x, y) scaled to the unit square (drawn y up: the view's y points down), with a
+    frame and the ranges at its corners; returns the drawn (V, 2) positions."""
     (ux, x0, x1), (uy, y0, y1) = _unit(np.asarray(x, float)), _unit(np.asarray(y, float))
-    ok = np.isfinite(ux) & np.isfinite(uy)
-    stream.log(f"{entity}/variants", rr.Points2D(np.stack([ux[ok], uy[ok]], axis=1),
-                                                 colors=colours[ok], radii=0.008), static=True)
+    drawn = np.stack([ux, 1.0 - uy], axis=1)
+    ok = np.isfinite(drawn).all(axis=1)
+    stream.log(f"{entity}/variants", rr.Points2D(drawn[ok], colors=colours[ok],
+                                                 radii=rr.components.Radius.ui_points(2.5)),
+               static=True)
     stream.log(f"{entity}/frame", rr.LineStrips2D([[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]],
                                                   colors=[GREY], radii=0.002), static=True)
     stream.log(f"{entity}/axes", rr.Points2D(
-        [[0, -0.06], [1, -0.06], [-0.02, 0], [-0.02, 1], [0.5, -0.12], [-0.02, 0.5]],
-        labels=[f"{x0:.4g}", f"{x1:.4g}", f"{y0:.4g}", f"{y1:.4g}", xlabel, ylabel],
-        radii=0.0, show_labels=True), static=True)
+        [[0, 1.07], [1, 1.07], [-0.12, 1], [-0.12, 0], [0.5, 1.18], [0.25, -0.1]],
+        labels=[f"{x0:.4g}", f"{x1:.4g}", f"{y0:.4g}", f"{y1:.4g}", xlabel, f"{ylabel} (up)"],
+        radii=0.0, show_labels=True, colors=[GREY]), static=True)
+    return drawn
 
 
 def write(view, path) -> None:
@@ -60,8 +64,6 @@ def write(view, path) -> None:
 
 def log_view(stream, view) -> None:
     colours = np.where((view.status == 0)[:, None], OK_COLOUR, FAILED_COLOUR).astype(np.uint8)
-    flip = rr.Transform3D(scale=[1.0, -1.0, 1.0])  # y up, as the mechanism
-    stream.log("study", flip, static=True)
     for p, x in view.parameters.items():
         for m, y in view.metrics.items():
             _scatter(stream, path_of("study", "vs", p, m), x, y, colours, p,
@@ -70,9 +72,7 @@ def log_view(stream, view) -> None:
     if a:
         entity = path_of("study", "pareto", a, b)
         grey = np.tile(np.array(GREY, np.uint8), (len(view.status), 1))
-        _scatter(stream, entity, view.metrics[a], view.metrics[b], grey, a, b)
-        ua, ub = _unit(view.metrics[a])[0], _unit(view.metrics[b])[0]
-        pts = np.stack([ua[front], ub[front]], axis=1)
+        pts = _scatter(stream, entity, view.metrics[a], view.metrics[b], grey, a, b)[front]
         stream.log(f"{entity}/front", rr.LineStrips2D([pts], colors=[style.colour(1)], radii=0.004),
                    static=True)
         stream.log(f"{entity}/front_points", rr.Points2D(
