@@ -32,6 +32,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
                           "library's own default)")
+    _fleet_options(run)
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")
     acc = sub.add_parser("accuracy", help="measure what accuracy costs in time for a scene")
@@ -42,6 +43,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit [fit] parameters to the scene's [[measurements]]")
     fit.add_argument("scene")
     fit.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _fleet_options(fit)
     study = sub.add_parser("study", help="solve the variants of a [study]: <name>_study.h5 and .rrd")
     study.add_argument("study", help="a study file (configs/studies/*.toml) or a scene with [study]")
     study.add_argument("--out", default="outputs", help="output folder (default: outputs)")
@@ -49,6 +51,16 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     study.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
     study.add_argument("--quiet", action="store_true", help="print only errors")
     return p
+
+
+def _fleet_options(p) -> None:
+    """--logs GLOB (a fleet: the scene over every log), --log-name, and where tasks run."""
+    p.add_argument("--logs", metavar="GLOB", help="a fleet: run the one scene over every log "
+                   "file the glob matches (its [[logs]] file replaced); one row per log in "
+                   "<name>_fleet.h5 (fit: <name>_fleet_fit.h5)")
+    p.add_argument("--log-name", metavar="NAME", help="the [[logs]] entry --logs replaces "
+                   "(needed when the scene has several)")
+    _executor_options(p)
 
 
 def _executor_options(p) -> None:
@@ -176,6 +188,8 @@ def _run(args) -> int:
         print(f"error: --out {out}: is a file, not a folder; name a folder (it is created if "
               "missing)", file=sys.stderr)
         return 2
+    if args.logs:
+        return _fleet("run", args, args.scenes)
     outcome = _Outcome()
     scenes = _load_all(args.scenes, outcome)
     if outcome.duplicate_names:
@@ -380,6 +394,8 @@ def _accuracy(args) -> int:
 def _fit(args) -> int:
     from tqdm import tqdm
 
+    if args.logs:
+        return _fleet("fit", args, [args.scene])
     from .fit import fit
     from .scene import load_scene
     from .stores import fit as fit_store
@@ -424,7 +440,49 @@ def fit_table(result) -> str:
     return "\n".join(lines)
 
 
+def _fleet(kind: str, args, scenes: list) -> int:
+    """``run`` / ``fit`` with ``--logs``: one scene over a glob of logs, one row per log."""
+    from tqdm import tqdm
+
+    from .executors import executor_name
+    from .fleet import COLUMNS, fleet_columns, fleet_table, run_fleet
+    from .result import units_of
+    from .scene import load_scene
+    from .stores import fleet as fleet_store
+
+    outcome = _Outcome()
+    if len(scenes) != 1:
+        print("error: --logs runs one scene over many logs: give one scene", file=sys.stderr)
+        return 2
+    with _reporting(scenes[0], outcome):
+        scene = load_scene(scenes[0])
+        bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
+        try:
+            paths, rows = run_fleet(kind, scene, args.logs, args.log_name,
+                                    executor_name(args.workers, args.scheduler), args.workers,
+                                    args.scheduler, progress=lambda i: bar.update(1))
+        finally:
+            bar.close()
+        labels, columns = fleet_columns(kind, scene, paths, rows)
+        force = units_of(scene)["force"]
+        units = {name: force if key == "force" else "1" if key == "1" else ""
+                 for name, (_, _, key) in COLUMNS[kind].items()}
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
+        fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
+                                 "logs_glob": args.logs, "command": kind},
+                          labels, columns, units)
+        print(fleet_table(kind, scene, labels, columns))
+        print(f"  wrote {path}")
+        failed = sum(1 for r in rows if len(r) == 1)
+        if failed:
+            outcome.code = max(outcome.code, 2 if failed == len(rows) else 0)
+    return outcome.code
+
+
 def _study(args) -> int:
+    from .executors import executor_name
     from .study import load_study, run_study
     from .study.report import study_table
 
@@ -432,8 +490,8 @@ def _study(args) -> int:
     with _reporting(args.study, outcome):
         t0 = time.perf_counter()
         study = load_study(args.study)
-        executor = "dask" if args.workers or args.scheduler else "in_process"
-        path = run_study(study, args.out, executor, args.workers, args.scheduler,
+        path = run_study(study, args.out, executor_name(args.workers, args.scheduler),
+                         args.workers, args.scheduler,
                          progress=not args.quiet)
         written = [str(path)]
         if not args.no_rrd:

@@ -178,9 +178,10 @@ def scene_with(scene: Scene, data: dict, params, x) -> Scene:
     return _Parser(trial, scene.text, scene.path).parse()
 
 
-def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
-    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc."""
-    data = tomllib.loads(scene.text)
+def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
+    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
+    ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
+    data = tomllib.loads(scene.text) if data is None else data
     params = parameters_of(scene, data)
     if not scene.measurements:
         raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "

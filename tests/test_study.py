@@ -105,6 +105,22 @@ def test_grid_product_and_seeded_draws(tmp_path):
     np.testing.assert_array_equal(values[:, 3], rng.uniform(0.999, 1.001, 18))
 
 
+def test_distributions_alone_give_samples_variants(tmp_path):
+    path = tmp_path / "tolerance.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\nsamples = 5\nseed = 9\n'
+                    '[study.parameters]\n"points.O2.y" = { uniform = [-1.0016, -0.9984] }\n')
+    study = load_study(path)
+    np.testing.assert_array_equal(study.values[:, 0], np.random.default_rng(9).uniform(
+        -1.0016, -0.9984, 5))
+    f = read_arrays(run_study(study, tmp_path))
+    for v in range(5):
+        data = tomllib.loads(GOAL.read_text())
+        data["points"]["O2"]["y"] = study.values[v, 0]
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        assert f["peak_input_force"][v, 0] == pytest.approx(
+            np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
+
+
 def test_a_variant_that_cannot_assemble_is_a_row(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'

@@ -1,66 +1,23 @@
 """Run a study: batches on an executor, rows streamed into ``<name>_study.h5`` as they finish.
 
-Executors (:data:`EXECUTORS`): ``in_process`` (the default: one batch after another here),
-``dask`` (``dask.distributed``: a ``LocalCluster`` of ``workers`` processes, or the cluster
+Executors (:data:`linkpipe.executors.EXECUTORS`): ``in_process`` (the default: one batch
+after another here), ``dask`` (a ``LocalCluster`` of ``workers`` processes, or the cluster
 whose scheduler is at ``scheduler``). Every executor runs the same task,
-:func:`linkpipe.study.batch.solve_batch`, and yields ``(batch, first variant, rows)`` in the
-order batches finish; the store writes them where they belong, so the file does not depend on
-the executor or on the order. A study run again after a kill resumes from its finished
+:func:`linkpipe.study.batch.solve_batch`, and yields the rows of each batch in the order
+batches finish; the store writes them where they belong, so the file does not depend on the
+executor or on the order. A study run again after a kill resumes from its finished
 batches (:mod:`linkpipe.stores.study`).
 """
 from __future__ import annotations
 
-import contextlib
-import logging
 import pathlib
 
 import numpy as np
 
+from ..executors import EXECUTORS
 from ..result import Variable, units_of
 from ..version import __version__
 from .batch import solve_batch
-
-
-def in_process(study, todo, workers=None, scheduler=None):
-    """Yield ``(batch, lo, rows)`` of each batch in ``todo`` ((batch, lo, hi)), solved here."""
-    for b, lo, hi in todo:
-        yield b, lo, solve_batch(study, lo, hi)
-
-
-@contextlib.contextmanager
-def dask_client(workers: int | None = None, scheduler: str | None = None):
-    """A ``dask.distributed.Client``: on the scheduler at ``scheduler``, else on a new
-    ``LocalCluster`` of ``workers`` single-threaded processes (closed on exit)."""
-    from dask.distributed import Client, LocalCluster
-
-    if scheduler:
-        client = Client(scheduler)
-        try:
-            yield client
-        finally:
-            client.close()
-        return
-    with LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
-            Client(cluster) as client:
-        yield client
-
-
-def on_dask(study, todo, workers=None, scheduler=None):
-    """Yield ``(batch, lo, rows)`` as the Dask cluster finishes each batch of ``todo``."""
-    from dask.distributed import as_completed
-
-    with dask_client(workers, scheduler) as client:
-        shared = client.scatter(study, broadcast=True)
-        futures = {client.submit(solve_batch, shared, lo, hi, pure=False): (b, lo)
-                   for b, lo, hi in todo}
-        for future in as_completed(futures):
-            b, lo = futures[future]
-            yield b, lo, future.result()
-            future.release()
-
-
-EXECUTORS = {"in_process": in_process, "dask": on_dask}
 
 
 def layout(study) -> tuple[dict, list, list]:
@@ -118,8 +75,10 @@ def run_study(study, out, executor: str = "in_process", workers=None, scheduler=
         done = store.done
         todo = [t for t in study.batches() if not done[t[0]]]
         bar = _bar(study, progress, sum(hi - lo for b, lo, hi in study.batches() if done[b]))
-        for n, (b, lo, rows) in enumerate(EXECUTORS[executor](study, todo, workers, scheduler), 1):
-            store.write_batch(b, lo, rows)
+        tasks = [(lo, hi) for b, lo, hi in todo]
+        finished = EXECUTORS[executor](solve_batch, study, tasks, workers, scheduler)
+        for n, (i, rows) in enumerate(finished, 1):
+            store.write_batch(todo[i][0], todo[i][1], rows)
             if bar is not None:
                 bar.update(len(rows["worst_status"]))
             if after_batch is not None:

@@ -233,7 +233,8 @@ def _variation(where, spec) -> tuple[str, tuple]:
 def variant_values(params, samples: int, seed: int) -> np.ndarray:
     """(V, n_parameters): the grids' full product, each point with ``samples`` joint draws."""
     grids = [np.linspace(*p.spec) for p in params if p.kind == "grid"]
-    points = np.array(list(itertools.product(*grids)), dtype=float).reshape(-1, len(grids))
+    product = list(itertools.product(*grids))  # one empty point when there are no grids
+    points = np.array(product, dtype=float).reshape(len(product), len(grids))
     draws = [p for p in params if p.kind != "grid"]
     per_point = samples if draws else 1
     V = points.shape[0] * per_point
