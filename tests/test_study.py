@@ -318,3 +318,46 @@ def test_force_parameters_take_the_vectorised_path_equal_to_one_by_one(tmp_path)
     np.testing.assert_array_equal(f["peak_input_force"][:, 0], np.abs(ok_force).max(axis=1))
     np.testing.assert_array_equal(
         f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))
+
+
+def test_pareto_set_is_every_undominated_variant():
+    from linkpipe.study.view import pareto_set
+
+    rng = np.random.default_rng(4)
+    a, b = rng.integers(0, 30, 400).astype(float), rng.integers(0, 30, 400).astype(float)
+    a[::17] = np.nan
+    front = set(pareto_set(a, b).tolist())
+    for i in np.flatnonzero(np.isfinite(a)):
+        beaten = np.isfinite(a) & (a <= a[i]) & (b <= b[i]) & ((a < a[i]) | (b < b[i]))
+        same = np.isfinite(a) & (a == a[i]) & (b == b[i])
+        # undominated: in the front, or an equal variant is (one of equal ones is kept)
+        assert (not beaten.any()) == (i in front or bool(front & set(np.flatnonzero(same))))
+
+
+def test_study_recording_draws_the_file(tmp_path):
+    """The .rrd: each metric against each parameter at the file's values (unit square, y up),
+    the Pareto set, and the best variant's own sweep."""
+    from test_rrd import Recording
+
+    from linkpipe.stores.rrd import study as study_rrd
+    from linkpipe.study.view import pareto_set, study_view
+
+    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
+    path = tmp_path / "forces.toml"
+    path.write_text(FORCE_STUDY)
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path / "out"))
+    study_rrd.write(study_view(study, f), tmp_path / "s.rrd")
+    rec = Recording(tmp_path / "s.rrd")
+    k, peak = study.values[:, 0], f["peak_ground"]
+    entity = "/study/vs/springs.left.k/peak_ground/variants"
+    xy = np.array(rec.static(entity, "Points2D:positions").tolist())
+    want = np.stack([(k - k.min()) / np.ptp(k), 1 - (peak - peak.min()) / np.ptp(peak)], axis=1)
+    np.testing.assert_allclose(xy, want.astype(np.float32), rtol=1e-6)
+    front = pareto_set(f["peak_input_force"][:, 0], f["input_force_range"][:, 0])
+    labels = rec.static("/study/pareto/peak_input_force.theta3a/input_force_range.theta3a/"
+                        "front_points", "Points2D:labels")
+    assert list(labels) == [f"variant {v}" for v in front]
+    assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
+    best = int(np.argmin(f["peak_input_force"][:, 0]))
+    assert f"best variant {best}" in " ".join(rec.view_titles())

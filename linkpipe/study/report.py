@@ -28,7 +28,9 @@ def study_table(study, path, seconds: float | None = None) -> str:
             label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or name in
                             ("peak_input_force", "rms_input_force") else "")
             if np.isfinite(col).any():
-                lines.append(f"  {label}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g}")
+                lines.append(f"  {label}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} (mean "
+                             f"{np.nanmean(col):.6g}, sd {np.nanstd(col):.3g}, 5-95 % "
+                             f"{np.nanpercentile(col, 5):.6g} .. {np.nanpercentile(col, 95):.6g})")
     key = (f["peak_input_force"][:, 0] if len(study.driver_names) and
            np.isfinite(f["peak_input_force"]).any() else
            f[study.metrics[0].name] if study.metrics else None)
@@ -37,7 +39,8 @@ def study_table(study, path, seconds: float | None = None) -> str:
         order = finite[np.argsort(key[finite], kind="stable")][:N_BEST]
         lines.append("  best (lowest " + ("peak_input_force" if key is not None and study.driver_names
                                            else study.metrics[0].name) + "):")
+        varied = [j for j in range(len(study.names)) if np.ptp(study.values[:, j]) > 0]
         for v in order:
-            values = ", ".join(f"{n} = {x:.6g}" for n, x in zip(study.names, study.values[v]))
+            values = ", ".join(f"{study.names[j]} = {study.values[v, j]:.6g}" for j in varied)
             lines.append(f"    variant {v}: {key[v]:.6g} at {values}")
     return "\n".join(lines)

@@ -122,7 +122,7 @@ def blueprint(view) -> rrb.Blueprint:
         tabs.append(rrb.Horizontal(
             rrb.Spatial2DView(origin="/", contents="mechanism/**",
                               name=f"best variant {v} (y up), runners-up thin"),
-            rrb.Vertical(rrb.TimeSeriesView(origin="plots", name="best variant's series"),
+            rrb.Vertical(rrb.TimeSeriesView(origin="plots/input_force", name="best variant's input force"),
                          rrb.TextDocumentView(origin="study/best", name="best variants")),
             name=f"best variant {v}"))
     return rrb.Blueprint(rrb.Tabs(*tabs), rrb.BlueprintPanel(state="collapsed"),
