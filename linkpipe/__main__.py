@@ -72,19 +72,16 @@ def _executor_options(p) -> None:
                        help="run batches on an existing Dask cluster (tcp://host:8786)")
 
 
-def _positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise ValueError(text)
-    return value
-
-
-def _threads(text: str) -> int:
+def _threads(text: str, low: int = 0) -> int:
     """``--threads``: a whole number >= 0 (argparse turns the ValueError into exit 2)."""
     value = int(text)
-    if value < 0:
+    if value < low:
         raise ValueError(text)
     return value
+
+
+def _positive(text: str) -> int:
+    return _threads(text, 1)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
@@ -445,10 +442,8 @@ def _fleet(kind: str, args, scenes: list) -> int:
     from tqdm import tqdm
 
     from .executors import executor_name
-    from .fleet import COLUMNS, fleet_columns, fleet_table, run_fleet
-    from .result import units_of
+    from .fleet import run_fleet, write_fleet
     from .scene import load_scene
-    from .stores import fleet as fleet_store
 
     outcome = _Outcome()
     if len(scenes) != 1:
@@ -463,21 +458,11 @@ def _fleet(kind: str, args, scenes: list) -> int:
                                     args.scheduler, progress=lambda i: bar.update(1))
         finally:
             bar.close()
-        labels, columns = fleet_columns(kind, scene, paths, rows)
-        force = units_of(scene)["force"]
-        units = {name: force if key == "force" else "1" if key == "1" else ""
-                 for name, (_, _, key) in COLUMNS[kind].items()}
-        out = pathlib.Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
-        fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
-                                 "logs_glob": args.logs, "command": kind},
-                          labels, columns, units)
-        print(fleet_table(kind, scene, labels, columns))
+        path, table = write_fleet(kind, scene, args.logs, paths, rows, pathlib.Path(args.out))
+        print(table)
         print(f"  wrote {path}")
-        failed = sum(1 for r in rows if len(r) == 1)
-        if failed:
-            outcome.code = max(outcome.code, 2 if failed == len(rows) else 0)
+        if all(len(r) == 1 for r in rows):  # no log could be taken: the scene's mistake
+            outcome.code = 2
     return outcome.code
 
 

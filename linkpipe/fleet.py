@@ -194,3 +194,20 @@ def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict) -> str:
         failed = columns["log_failed"][1][i]
         lines.append(f"  {name:<{width}}  " + (f"failed: {message}" if failed else ", ".join(cells)))
     return "\n".join(lines)
+
+
+def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tuple:
+    """Write ``<name>_fleet.h5`` (``fit``: ``<name>_fleet_fit.h5``) into the folder ``out``;
+    return (its path, the table to print)."""
+    from .result import units_of
+    from .stores import fleet as fleet_store
+
+    labels, columns = fleet_columns(kind, scene, paths, rows)
+    force = units_of(scene)["force"]
+    units = {name: force if key == "force" else "1" if key == "1" else ""
+             for name, (_, _, key) in COLUMNS[kind].items()}
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
+    fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
+                             "logs_glob": pattern, "command": kind}, labels, columns, units)
+    return path, fleet_table(kind, scene, labels, columns)

@@ -185,13 +185,21 @@ def test_killed_study_resumes_to_the_same_file(tmp_path):
 
 
 def test_dask_local_cluster_gives_the_same_file(tmp_path):
+    """--workers 2 (a LocalCluster of our own) and --scheduler (an existing cluster's address)."""
     pytest.importorskip("dask.distributed")
+    from dask.distributed import LocalCluster
+
     study = load_study(write_study(tmp_path, samples=1, batch=2))
     here = read_arrays(run_study(study, tmp_path / "here"))
     there = read_arrays(run_study(study, tmp_path / "dask", "dask", workers=2))
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=":0") as cluster:
+        remote = read_arrays(run_study(study, tmp_path / "remote", "dask",
+                                       scheduler=cluster.scheduler_address))
     for name in here:
         if name != "attrs":
             np.testing.assert_array_equal(there[name], here[name])
+            np.testing.assert_array_equal(remote[name], here[name])
 
 
 @pytest.mark.parametrize("parameters, metrics, table, key, words", [
@@ -361,3 +369,42 @@ def test_study_recording_draws_the_file(tmp_path):
     assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
     best = int(np.argmin(f["peak_input_force"][:, 0]))
     assert f"best variant {best}" in " ".join(rec.view_titles())
+
+
+def test_study_killed_by_sigkill_resumes_to_the_same_file(tmp_path):
+    """A real kill (SIGKILL, no clean-up) half-way: the partial file keeps the finished
+    batches, the same command resumes from them, and the file equals an uninterrupted one."""
+    import signal
+    import time
+
+    from linkpipe.stores.study import read_done
+
+    path = tmp_path / "pins.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\nsamples = 160\nseed = 4\n'
+                    'batch_size = 16\n[study.parameters]\n'
+                    '"points.O2.y" = { uniform = [-1.0016, -0.9984] }\n')
+    command = [sys.executable, "-m", "linkpipe", "study", str(path), "--no-rrd", "--quiet",
+               "--out"]
+    out = tmp_path / "cut"
+    proc = subprocess.Popen(command + [str(out)], cwd=ROOT)
+    final = out / "pins_study.h5"
+    done = None
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            done = read_done(final)
+        except OSError:  # the writer holds it mid-write: look again
+            done = None
+        if done is not None and 2 <= done.sum() < len(done) - 2:
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert done is not None and 0 < done.sum() < len(done), "the study was not caught half-way"
+    assert not final.exists() and partial_path(final).exists()
+    subprocess.run(command + [str(out)], cwd=ROOT, check=True)
+    subprocess.run(command + [str(tmp_path / "whole")], cwd=ROOT, check=True)
+    resumed, whole = read_arrays(final), read_arrays(tmp_path / "whole" / "pins_study.h5")
+    for name in whole:
+        if name != "attrs":
+            np.testing.assert_array_equal(resumed[name], whole[name], err_msg=name)

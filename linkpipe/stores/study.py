@@ -91,11 +91,12 @@ class StudyFile:
 
 
 def read_done(path) -> np.ndarray | None:
-    """``batch_done`` of a study's partial file, or None when there is none."""
+    """``batch_done`` of a study's partial file, or None when there is none: a look at a study
+    that may be running (no file lock taken; an OSError when caught mid-write)."""
     partial = partial_path(path)
     if not partial.exists():
         return None
-    with h5py.File(partial, "r") as f:
+    with h5py.File(partial, "r", locking=False) as f:
         return f["batch_done"][()].astype(bool)
 
 

@@ -74,9 +74,9 @@ def batch_metrics(study, arrays: BatchArrays, pins) -> dict[str, np.ndarray]:
         per_driver = f.transpose(0, 2, 1).reshape(V * D, S)  # one row per (variant, driver)
         for name, how in (("peak_input_force", "max"), ("rms_input_force", "rms")):
             x = np.abs(per_driver) if how == "max" else per_driver
-            out[name] = reductions._reduce(how, x, None).reshape(V, D)
-        out["input_force_range"] = (reductions._reduce("max", per_driver, None)
-                                    - reductions._reduce("min", per_driver, None)).reshape(V, D)
+            out[name] = reductions.reduce_steps(how, x, None).reshape(V, D)
+        out["input_force_range"] = (reductions.reduce_steps("max", per_driver, None)
+                                    - reductions.reduce_steps("min", per_driver, None)).reshape(V, D)
     else:
         for name in ("peak_input_force", "rms_input_force", "input_force_range"):
             out[name] = np.full((V, D), np.nan)

@@ -199,10 +199,10 @@ def evaluate(tree, series) -> np.ndarray:
     x = evaluate(args[0], series)
     if name == "abs":
         return np.abs(x)
-    return _reduce(name, x, args[1] if len(args) > 1 else None)
+    return reduce_steps(name, x, args[1] if len(args) > 1 else None)
 
 
-def _reduce(name: str, x: np.ndarray, q) -> np.ndarray:
+def reduce_steps(name: str, x: np.ndarray, q=None) -> np.ndarray:
     """One reduction over the step axis (1) of ``x`` (V, S), NaN steps left out."""
     with np.errstate(all="ignore"):
         return _reduce_rows(name, x, q)

@@ -165,7 +165,10 @@ def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:
         raise SceneError(path, "study", "base", f'no scene file "{base}"',
                          "give the base scene's path relative to the study file")
     scene_table = data.get("scene", {})
-    name = scene_table.get("name") if isinstance(scene_table, dict) else None
+    if not isinstance(scene_table, dict) or set(scene_table) - {"name"}:
+        raise SceneError(path, "scene", None, "a study file's [scene] holds its name only",
+                         'write [scene] name = "goal_spring"; the rest belongs in the base scene')
+    name = scene_table.get("name")
     if not isinstance(name, str) or not name.strip() or any(c in name for c in "/\\"):
         if name is not None:
             raise SceneError(path, "scene", "name", f"{name!r} cannot be a file name",
