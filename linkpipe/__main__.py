@@ -34,6 +34,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
                           "library's own default)")
+    _fleet_options(run)
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")
     acc = sub.add_parser("accuracy", help="measure what accuracy costs in time for a scene")
@@ -44,15 +45,45 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit [fit] parameters to the scene's [[measurements]]")
     fit.add_argument("scene")
     fit.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _fleet_options(fit)
+    study = sub.add_parser("study", help="solve the variants of a [study]: <name>_study.h5 and .rrd")
+    study.add_argument("study", help="a study file (configs/studies/*.toml) or a scene with [study]")
+    study.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _executor_options(study)
+    study.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
+    study.add_argument("--quiet", action="store_true", help="print only errors")
     return p
 
 
-def _threads(text: str) -> int:
+def _fleet_options(p) -> None:
+    """--logs GLOB (a fleet: the scene over every log), --log-name, and where tasks run."""
+    p.add_argument("--logs", metavar="GLOB", help="a fleet: run the one scene over every log "
+                   "file the glob matches (its [[logs]] file replaced); one row per log in "
+                   "<name>_fleet.h5 (fit: <name>_fleet_fit.h5)")
+    p.add_argument("--log-name", metavar="NAME", help="the [[logs]] entry --logs replaces "
+                   "(needed when the scene has several)")
+    _executor_options(p)
+
+
+def _executor_options(p) -> None:
+    """--workers / --scheduler: where batches run (default: in this process)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive, metavar="N",
+                       help="run batches on a local Dask cluster of N worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run batches on an existing Dask cluster (tcp://host:8786)")
+
+
+def _threads(text: str, low: int = 0) -> int:
     """``--threads``: a whole number >= 0 (argparse turns the ValueError into exit 2)."""
     value = int(text)
-    if value < 0:
+    if value < low:
         raise ValueError(text)
     return value
+
+
+def _positive(text: str) -> int:
+    return _threads(text, 1)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
@@ -60,7 +91,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     or its output could not be written, 2 bad input (scene, option), 130 stopped by Ctrl-C or
     SIGTERM. Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
-    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit}[args.command]
+    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
+               "study": _study}[args.command]
     previous = _signals_as_interrupts()
     try:
         return command(args)
@@ -163,6 +195,8 @@ def _run(args) -> int:
         print(f"error: --out {out}: is a file, not a folder; name a folder (it is created if "
               "missing)", file=sys.stderr)
         return 2
+    if args.logs:
+        return _fleet("run", args, args.scenes)
     outcome = _Outcome()
     scenes = _load_all(args.scenes, outcome)
     if outcome.duplicate_names:
@@ -387,6 +421,8 @@ def _accuracy(args) -> int:
 def _fit(args) -> int:
     from tqdm import tqdm
 
+    if args.logs:
+        return _fleet("fit", args, [args.scene])
     from .fit import fit
     from .scene import load_scene
     from .stores import fit as fit_store
@@ -429,6 +465,62 @@ def fit_table(result) -> str:
     for k, name in enumerate(b["names"]):
         lines.append(f"  measurement {name}: rms {b['rms'][k]:.4g} -> {a['rms'][k]:.4g} {b['units'][k]}")
     return "\n".join(lines)
+
+
+def _fleet(kind: str, args, scenes: list) -> int:
+    """``run`` / ``fit`` with ``--logs``: one scene over a glob of logs, one row per log."""
+    from tqdm import tqdm
+
+    from .executors import executor_name
+    from .fleet import run_fleet, write_fleet
+    from .scene import load_scene
+
+    outcome = _Outcome()
+    if len(scenes) != 1:
+        print("error: --logs runs one scene over many logs: give one scene", file=sys.stderr)
+        return 2
+    with _reporting(scenes[0], outcome):
+        scene = load_scene(scenes[0])
+        bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
+        try:
+            paths, rows = run_fleet(kind, scene, args.logs, args.log_name,
+                                    executor_name(args.workers, args.scheduler), args.workers,
+                                    args.scheduler, progress=lambda i: bar.update(1))
+        finally:
+            bar.close()
+        path, table = write_fleet(kind, scene, args.logs, paths, rows, pathlib.Path(args.out))
+        print(table)
+        print(f"  wrote {path}")
+        if all(len(r) == 1 for r in rows):  # no log could be taken: the scene's mistake
+            outcome.code = 2
+    return outcome.code
+
+
+def _study(args) -> int:
+    from .executors import executor_name
+    from .study import load_study, run_study
+    from .study.report import study_table
+
+    outcome = _Outcome()
+    with _reporting(args.study, outcome):
+        t0 = time.perf_counter()
+        study = load_study(args.study)
+        path = run_study(study, args.out, executor_name(args.workers, args.scheduler),
+                         args.workers, args.scheduler,
+                         progress=not args.quiet)
+        written = [str(path)]
+        if not args.no_rrd:
+            from .stores.rrd import study as study_rrd
+            from .stores.study import read_arrays
+            from .study.view import study_view
+
+            rrd_path = path.with_suffix(".rrd")
+            study_rrd.write(study_view(study, read_arrays(path)), rrd_path)
+            written.append(str(rrd_path))
+        if not args.quiet:
+            print(study_table(study, path, time.perf_counter() - t0))
+            print("  wrote " + ", ".join(written))
+    return outcome.code
 
 
 if __name__ == "__main__":

@@ -121,12 +121,16 @@ def _bounds_of(scene, bounds, name, value):
     return float(b[0]), float(b[1])
 
 
-def locate(scene: Scene, data: dict, address: str):
-    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``."""
+def locate(scene: Scene, data: dict, address: str, where=None):
+    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``.
+
+    ``where``: (file, table, key) a mistake is reported at (default: the scene's ``[fit]
+    parameters``; a study names its own file and ``[study.parameters]``)."""
     parts = address.split(".")
+    where = where or (scene.path, "fit", "parameters")
 
     def fail(message, hint=""):
-        return SceneError(scene.path, "fit", "parameters", f'"{address}": {message}', hint)
+        return SceneError(*where, f'"{address}": {message}', hint)
 
     table = parts[0]
     if table not in TABLES or table not in data:
@@ -174,9 +178,10 @@ def scene_with(scene: Scene, data: dict, params, x) -> Scene:
     return _Parser(trial, scene.text, scene.path).parse()
 
 
-def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
-    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc."""
-    data = tomllib.loads(scene.text)
+def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
+    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
+    ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
+    data = tomllib.loads(scene.text) if data is None else data
     params = parameters_of(scene, data)
     if not scene.measurements:
         raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "

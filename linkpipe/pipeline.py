@@ -179,9 +179,7 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
                                 cache=k.force_cache if kinematics is not None and not lagrange
                                 else None)
         seconds["forces"] = _time.perf_counter() - t0
-    status = assign([kinematic_status] + ([forces.status] if forces else []),
-                    k.sweep.residual, scene.solver.tol * model.size,
-                    forces.defined_arrays() if forces else [], finite=k.finite)
+    status = status_of(model, kinematic_status, k.sweep.residual, [], forces, finite=k.finite)
 
     value, drive = k.drive.value, k.drive
     time, time_note = _time_axis(scene, value)
@@ -202,6 +200,20 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
         kinematics=k)
     return _with_measurements(result) if scene.measurements else result
+
+
+def status_of(model, kinematic_status, residual, stored: list, forces, size=None,
+              finite: np.ndarray | None = None) -> np.ndarray:
+    """Every step's final status (S,): the stages' verdicts, the residual against the
+    tolerance, and whether everything ``stored`` (kinematic arrays, step axis first, None
+    where not computed) and the forces' arrays are finite (:func:`linkpipe.status.assign`).
+    ``size``: the length scale of the tolerance, float or (S,) (default ``model.size``);
+    ``finite`` (S,): rows of arrays checked before (:attr:`Kinematics.finite`)."""
+    if forces:
+        stored = stored + forces.defined_arrays()
+    return assign([kinematic_status] + ([forces.status] if forces else []), residual,
+                  model.scene.solver.tol * (model.size if size is None else size),
+                  [a for a in stored if a is not None], finite=finite)
 
 
 def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:

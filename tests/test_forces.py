@@ -442,3 +442,29 @@ def test_a_reused_stage_1_recomputes_only_the_effects_whose_inputs_changed(tmp_p
         for name in ("input_force", "spring_force", "power"):
             np.testing.assert_array_equal(lean.forces[name][1], full.forces[name][1], err_msg=name)
         np.testing.assert_array_equal(lean.status, full.status)
+
+
+def test_per_step_constants_are_cut_into_the_same_chunks(tmp_path):
+    """A study's constants with a step axis (a different mass and spring rate at every step):
+    the force stage in chunks of 7 steps equals the one-piece stage bit for bit, so each chunk
+    took its own rows of the constants (a chunk given the wrong rows would differ)."""
+    import dataclasses
+
+    from linkpipe.forces import compute_forces
+    from linkpipe.forces.constants import ForceConstants
+    from linkpipe.result import Motion
+
+    r = linkpipe.solve(scene_from(EVERY_EFFECT, tmp_path))
+    k, S = r.kinematics, r.n_steps
+    base = ForceConstants.of(r.model)
+    ramp = np.linspace(0.5, 2.0, S)[:, None]
+    per_step = dataclasses.replace(base, mass=base.mass * ramp, spring_k=base.spring_k * ramp)
+    motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=r.position,
+                    velocity=k.velocity, acceleration=k.acceleration, status=k.der["status"],
+                    influence=k.der["influence"], link_angular_acceleration=k.link_rates[1])
+    units = dict(force="N", length="m", time="s", mass="kg")
+    whole = compute_forces(r.model, motion, units, per_step)
+    chunked = compute_forces(r.model, motion, units, per_step, chunk=7)
+    assert not np.allclose(whole.variables["input_force"][1], r.forces["input_force"][1])
+    for name, (dims, data, unit) in whole.variables.items():
+        np.testing.assert_array_equal(chunked.variables[name][1], data, err_msg=name)

@@ -22,6 +22,7 @@ from ..model import Model
 from ..result import Forces, Motion
 from ..status import OK
 from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
+from .constants import ForceConstants
 from .effects import EFFECTS, Context, applies
 from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
 from .virtual_work import Influence, along_input_directions
@@ -41,12 +42,15 @@ LAGRANGE_VARIABLES = frozenset({"input_force_lagrange", "link_force", "slider_fo
                                 "joint_force", "ground_reaction"})
 
 
-def compute_forces(model: Model, motion: Motion, units: dict, chunk: int = FORCE_CHUNK,
+def compute_forces(model: Model, motion: Motion, units: dict,
+                   constants: ForceConstants | None = None, chunk: int = FORCE_CHUNK,
                    lagrange: bool = True, cache: dict | None = None) -> Forces:
     """Compute every named effect and the input force of a solved sweep, in chunks of steps.
 
     ``motion``: the sweep (positions, derivatives, kinematic status, influence coefficients);
-    ``units``: the scene's unit strings. Returns :class:`Forces` (variables in the contract's
+    ``units``: the scene's unit strings; ``constants``: the force tables' numbers when they
+    differ from the scene's (per step: a study's variants on one step axis; cut into the same
+    chunks). Returns :class:`Forces` (variables in the contract's
     names, the labels of the dimensions they add, and the status with no_leverage added).
     Every step's forces depend on that step alone, so each chunk is solved on its own and
     written into outputs allocated once; the per-joint ``*_unique`` flags (no self-stress
@@ -56,11 +60,15 @@ def compute_forces(model: Model, motion: Motion, units: dict, chunk: int = FORCE
     coefficients and every effect whose scene inputs did not change (:func:`_effect_terms`).
     """
     n_steps = motion.position.shape[0]
+    if cache is not None and constants is not None:
+        raise ValueError("a cache keys effects by the scene's tables: not with constants")
     if n_steps <= chunk:
-        return _forces_of(model, motion, units, lagrange, cache, (0, n_steps))
+        return _forces_of(model, motion, units, constants, lagrange, cache, (0, n_steps))
     out = None
     for lo in range(0, n_steps, chunk):
-        part = _forces_of(model, motion.rows(slice(lo, lo + chunk)), units, lagrange, cache,
+        rows = slice(lo, lo + chunk)
+        part = _forces_of(model, motion.rows(rows), units,
+                          None if constants is None else constants.rows(rows), lagrange, cache,
                           (lo, chunk))
         out = _gathered(out, part, n_steps)
         for name, (dims, data, unit) in part.variables.items():
@@ -114,10 +122,10 @@ def _effect_terms(ctx: Context, influence: Influence, cache: dict | None, chunk_
     return out
 
 
-def _forces_of(model: Model, motion: Motion, units: dict, lagrange: bool = True,
+def _forces_of(model: Model, motion: Motion, units: dict, constants=None, lagrange: bool = True,
                cache: dict | None = None, chunk_key=0) -> Forces:
     """The force stage on one chunk of steps (see :func:`compute_forces`)."""
-    ctx = Context.of(model, motion, units, lagrange)
+    ctx = Context.of(model, motion, units, constants, lagrange)
     n_steps = ctx.n_steps
     Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)
     if cache is not None and (chunk_key, "influence") in cache:
@@ -143,7 +151,7 @@ def _forces_of(model: Model, motion: Motion, units: dict, lagrange: bool = True,
 
     if not lagrange:
         status, unit = along_input_directions(model, influence, [input_force], motion.status,
-                                              units, Xz)
+                                              units, Xz, ctx.constants.size)
         variables["input_force"] = (("step", "driver"), input_force, unit)
         return Forces(variables=variables, coords=coords, status=status)
     return _with_lagrange(model, ctx, motion, units, influence, terms, input_force, variables,
@@ -173,7 +181,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
     lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
-                                          motion.status, units, Xz)
+                                          motion.status, units, Xz, ctx.constants.size)
     variables["input_force"] = (("step", "driver"), input_force, unit)
     variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
     internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)
