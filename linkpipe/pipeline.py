@@ -40,12 +40,37 @@ class Stages:
             ("accelerations",) if self.acceleration else ()) + (("forces",) if self.forces else ())
 
 
-#: memory a sweep may need per step and point: 2 coordinates x 8 bytes x 40 arrays, an upper
-#: bound of the measured peaks (about 31 such arrays for the 100k-step crank-rocker with every
-#: effect, 9 for the Jansen linkage's kinematics); the force stage stores as much again (the
-#: multipliers, pin and ground forces, per-effect loads) and never a dense Jacobian or inverse
-#: (its work on Phi_X goes term by term in chunks of steps: measured in tests/test_condition.py)
-BYTES_PER_POINT_STEP = 2 * 8 * 40
+#: what a run needs beside its stored arrays: the interpreter and libraries (~0.25 GB measured
+#: with numpy, scipy, pandas, h5py and rerun loaded), a recording of at most --rrd-max-steps
+#: rows, and one chunk's working set
+FIXED_BYTES = 600 * 2**20
+#: the stored arrays times this: the transients of the stages around them (each stage's own
+#: work goes in chunks of steps; measured peaks: benchmarks/bench_logs.py prints both)
+TRANSIENT_FACTOR = 1.3
+
+
+def bytes_per_step(scene: Scene) -> int:
+    """The bytes a run keeps per step, from the scene's counts alone (before any work): every
+    array the Result stores (docs/output-format.md) and what stage 1 hands to the force stage
+    (driver values in internal units, influence coefficients), 8 bytes a number."""
+    stages = Stages.of(scene)
+    P, L, nd = len(scene.points), len(scene.links), max(1, len(scene.drivers))
+    n_q = 2 * sum(not p.fixed for p in scene.points)
+    rates = (2 * P + L + 1) * (int(stages.velocity) + int(stages.acceleration))
+    numbers = 2 * P + L + 6 + 6 * nd + rates  # positions, angles, residuals, driver values
+    if stages.forces:
+        joints = sum(len(link.points) for link in scene.links)
+        fixed = sum(p.fixed for p in scene.points)
+        numbers += (n_q * nd + 2 * nd + len(scene.effects) + L + 2 * joints + 2 * fixed
+                    + 5 * len(scene.springs) + 3 * len(scene.torsion_springs)
+                    + len(scene.sliders) + 1)
+    return 8 * (numbers + 2 * len(scene.measurements))
+
+
+def memory_needed(scene: Scene) -> int:
+    """An upper bound of a run's peak memory in bytes (checked against measured peaks in
+    benchmarks/bench_logs.py)."""
+    return int(scene.n_steps * bytes_per_step(scene) * TRANSIENT_FACTOR) + FIXED_BYTES
 
 
 def available_memory() -> int | None:
@@ -63,9 +88,7 @@ def available_memory() -> int | None:
 def check_memory(scene: Scene) -> None:
     """SceneError when the sweep would need more memory than is available (before any work:
     a run that the kernel kills half-way writes nothing)."""
-    P = max(1, len(scene.points))
-    per_step = P * BYTES_PER_POINT_STEP * (2 if scene.effects else 1)
-    need = scene.n_steps * per_step
+    need = memory_needed(scene)
     avail = available_memory()
     if avail is not None and need > avail:
         first = scene.drivers[0] if scene.drivers else None
