@@ -408,3 +408,25 @@ def test_study_killed_by_sigkill_resumes_to_the_same_file(tmp_path):
     for name in whole:
         if name != "attrs":
             np.testing.assert_array_equal(resumed[name], whole[name], err_msg=name)
+
+
+def test_readme_example_best_variant_is_a_local_minimum_of_one_by_one_runs(tmp_path):
+    """configs/studies/basketball_goal.toml: the variant the study ranks best has the lowest
+    peak handle force among its grid neighbours, each solved on its own."""
+    study = load_study(ROOT / "configs" / "studies" / "basketball_goal.toml")
+    assert study.slots is not None  # spring rate and anchor: the vectorised path
+    f = read_arrays(run_study(study, tmp_path))
+    best = int(np.nanargmin(f["peak_handle"]))
+    k, y = study.values[best]
+
+    def peak(k, y):
+        data = tomllib.loads(GOAL.read_text())
+        data["springs"][0]["k"], data["points"]["S1"]["y"] = k, y
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        return np.abs(r.forces["input_force"][1][r.status == OK]).max()
+
+    assert peak(k, y) == pytest.approx(f["peak_handle"][best], rel=1e-12)
+    for dk, dy in ((20.0, 0.0), (-20.0, 0.0), (0.0, 0.05), (0.0, -0.05)):
+        if -0.95 <= y + dy <= -0.05 and 0.0 <= k + dk <= 3000.0:
+            assert peak(k + dk, y + dy) > f["peak_handle"][best]
+    load_study(ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml")  # loads
