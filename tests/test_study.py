@@ -430,3 +430,22 @@ def test_readme_example_best_variant_is_a_local_minimum_of_one_by_one_runs(tmp_p
         if -0.95 <= y + dy <= -0.05 and 0.0 <= k + dk <= 3000.0:
             assert peak(k + dk, y + dy) > f["peak_handle"][best]
     load_study(ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml")  # loads
+
+
+def test_min_transmission_angle_is_the_four_bar_closed_form(tmp_path):
+    """Crank-rocker (crank a, coupler b, rocker c, ground d): at the coupler-rocker pin
+    cos mu = (b^2 + c^2 - a^2 - d^2 + 2 a d cos theta) / (2 b c); the study's metric is the
+    smallest min(mu, 180 - mu) over the sweep, for each rocker length."""
+    base = ROOT / "configs" / "fourbar_crank_rocker.toml"
+    path = tmp_path / "rocker.toml"
+    path.write_text(f'[study]\nbase = "{base.as_posix()}"\n[study.parameters]\n'
+                    '"links.rocker.lengths.O4-B" = { from = 3.0, to = 3.2, steps = 3 }\n')
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    a, b, d = 1.0, 3.5, 4.0
+    theta = np.radians(np.arange(0.0, 361.0))
+    for v, c in enumerate(study.values[:, 0]):
+        mu = np.degrees(np.arccos((b * b + c * c - a * a - d * d + 2 * a * d * np.cos(theta))
+                                  / (2 * b * c)))
+        want = np.minimum(mu, 180.0 - mu).min()
+        assert f["min_transmission_angle"][v] == pytest.approx(want, abs=1e-9)
