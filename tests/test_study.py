@@ -367,6 +367,7 @@ def test_study_recording_draws_the_file(tmp_path):
                         "front_points", "Points2D:labels")
     assert list(labels) == [f"variant {v}" for v in front]
     assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
+    assert {"/study/spread/peak_ground", "/study/spread/energy"} <= rec.entities  # histograms
     best = int(np.argmin(f["peak_input_force"][:, 0]))
     assert f"best variant {best}" in " ".join(rec.view_titles())
 

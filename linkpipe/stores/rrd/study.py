@@ -8,7 +8,9 @@ lowest values to its highest plus its own range again), and the best variant (by
 metric) as a whole recording of its own sweep under ``mechanism/**`` and ``plots/**`` on the
 ``step`` timeline, with the next best variants' links under
 ``mechanism/runners_up/variant <v>``.
-``study/best`` is a text table of the best variants and their parameter values.
+``study/best`` is a text table of the best variants and their parameter values;
+``study/spread/<metric>`` each metric's histogram over the variants (a bar chart on the
+metric's own values: how tolerances spread it).
 """
 from __future__ import annotations
 
@@ -94,6 +96,11 @@ def log_view(stream, view) -> None:
         stream.log(f"{entity}/front_points", rr.Points2D(
             pts, colors=[style.colour(1)], radii=0.012, labels=[f"variant {v}" for v in front],
             show_labels=len(front) <= 12), static=True)
+    for m, (counts, centres, widths) in view.spread.items():
+        if len(counts):
+            stream.log(path_of("study", "spread", m), rr.BarChart(
+                counts, abscissa=centres, widths=widths.astype(np.float32),
+                color=style.colour(0)), static=True)
     lines = ["| rank | variant | " + " | ".join(view.parameters) + " | "
              + " | ".join(view.metrics) + " |",
              "|---" * (2 + len(view.parameters) + len(view.metrics)) + "|"]
@@ -125,7 +132,8 @@ def _runners_up(stream, best) -> None:
 
 
 def blueprint(view) -> rrb.Blueprint:
-    """Tabs: metrics against each parameter (a grid), the Pareto set, the best variant."""
+    """Tabs: metrics against each parameter (a grid), the Pareto set, each metric's spread,
+    the best variant."""
     scatter = [rrb.Spatial2DView(origin=path_of("study", "vs", p, m), name=f"{m} vs {p}")
                for p in view.parameters for m in view.metrics]
     tabs = [rrb.Grid(*scatter, name="metrics vs parameters")]
@@ -135,6 +143,10 @@ def blueprint(view) -> rrb.Blueprint:
             origin=path_of("study", "pareto", a, b),
             name=f"Pareto set: {a} and {b} (lower is better; framed on the set)",
             visual_bounds=rrb.VisualBounds2D(x_range=[-0.25, 1.1], y_range=[-0.2, 1.25])))
+    tabs.append(rrb.Grid(*[rrb.BarChartView(origin=path_of("study", "spread", m),
+                                            name=f"{m}: variants per bin")
+                           for m, h in view.spread.items() if len(h[0])],
+                         name="spread of each metric"))
     if view.best:
         v = view.best[0][0]
         tabs.append(rrb.Horizontal(
