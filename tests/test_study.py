@@ -230,6 +230,25 @@ def test_bad_study_file_is_one_message(tmp_path, parameters, metrics, table, key
     assert words in str(err.value)
 
 
+@pytest.mark.parametrize("text, table, key, words", [
+    ('[study]\nbase = "nowhere.toml"\n[study.parameters]\n"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study", "base", "no scene file"),
+    ('[study]\nbase = "{goal}"\nsampels = 3\n[study.parameters]\n"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study", "sampels", 'did you mean "samples"'),
+    ('[study]\nbase = "{goal}"\n', "study", "parameters", "missing or empty"),
+    ('[study]\nbase = "{goal}"\n[study.parameters]\n"drivers.theta3a.step" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study.parameters", "drivers.theta3a.step", "number of steps"),
+    ('[study]\nbase = "{goal}"\n[points]\n', "points", None, "[study] (and [scene] name) only"),
+])
+def test_bad_study_tables_are_one_message(tmp_path, text, table, key, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace("{goal}", GOAL.as_posix()))
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert (err.value.path, err.value.table, err.value.key) == (str(path), table, key)
+    assert words in str(err.value)
+
+
 def test_cli_bad_study_exits_2_without_traceback(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
