@@ -1,6 +1,7 @@
 """Decide which stages a scene needs, run them, time them; return a :class:`Result`."""
 from __future__ import annotations
 
+import contextlib
 import time as _time
 from dataclasses import dataclass, field
 
@@ -139,8 +140,11 @@ def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREA
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     # overflow and 0/0 are data here, not warnings: such steps are marked (status.assign)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
-            threadpool_limits(limits=threads, user_api="blas"):
+    # threads None: the pools as they are (no threadpoolctl call: finding the libraries costs
+    # milliseconds, a study's variant-by-variant path sets the pool once for a whole batch)
+    pools = (contextlib.nullcontext() if threads is None
+             else threadpool_limits(limits=threads, user_api="blas"))
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"), pools:
         return _solve(scene, progress, kinematics, wanted)
 
 

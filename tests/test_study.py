@@ -230,6 +230,25 @@ def test_bad_study_file_is_one_message(tmp_path, parameters, metrics, table, key
     assert words in str(err.value)
 
 
+@pytest.mark.parametrize("text, table, key, words", [
+    ('[study]\nbase = "nowhere.toml"\n[study.parameters]\n"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study", "base", "no scene file"),
+    ('[study]\nbase = "{goal}"\nsampels = 3\n[study.parameters]\n"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study", "sampels", 'did you mean "samples"'),
+    ('[study]\nbase = "{goal}"\n', "study", "parameters", "missing or empty"),
+    ('[study]\nbase = "{goal}"\n[study.parameters]\n"drivers.theta3a.step" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study.parameters", "drivers.theta3a.step", "number of steps"),
+    ('[study]\nbase = "{goal}"\n[points]\n', "points", None, "[study] (and [scene] name) only"),
+])
+def test_bad_study_tables_are_one_message(tmp_path, text, table, key, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace("{goal}", GOAL.as_posix()))
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert (err.value.path, err.value.table, err.value.key) == (str(path), table, key)
+    assert words in str(err.value)
+
+
 def test_cli_bad_study_exits_2_without_traceback(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
@@ -367,6 +386,7 @@ def test_study_recording_draws_the_file(tmp_path):
                         "front_points", "Points2D:labels")
     assert list(labels) == [f"variant {v}" for v in front]
     assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
+    assert {"/study/spread/peak_ground", "/study/spread/energy"} <= rec.entities  # histograms
     best = int(np.argmin(f["peak_input_force"][:, 0]))
     assert f"best variant {best}" in " ".join(rec.view_titles())
 
@@ -408,3 +428,44 @@ def test_study_killed_by_sigkill_resumes_to_the_same_file(tmp_path):
     for name in whole:
         if name != "attrs":
             np.testing.assert_array_equal(resumed[name], whole[name], err_msg=name)
+
+
+def test_readme_example_best_variant_is_a_local_minimum_of_one_by_one_runs(tmp_path):
+    """configs/studies/basketball_goal.toml: the variant the study ranks best has the lowest
+    peak handle force among its grid neighbours, each solved on its own."""
+    study = load_study(ROOT / "configs" / "studies" / "basketball_goal.toml")
+    assert study.slots is not None  # spring rate and anchor: the vectorised path
+    f = read_arrays(run_study(study, tmp_path))
+    best = int(np.nanargmin(f["peak_handle"]))
+    k, y = study.values[best]
+
+    def peak(k, y):
+        data = tomllib.loads(GOAL.read_text())
+        data["springs"][0]["k"], data["points"]["S1"]["y"] = k, y
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        return np.abs(r.forces["input_force"][1][r.status == OK]).max()
+
+    assert peak(k, y) == pytest.approx(f["peak_handle"][best], rel=1e-12)
+    for dk, dy in ((20.0, 0.0), (-20.0, 0.0), (0.0, 0.05), (0.0, -0.05)):
+        if -0.95 <= y + dy <= -0.05 and 0.0 <= k + dk <= 3000.0:
+            assert peak(k + dk, y + dy) > f["peak_handle"][best]
+    load_study(ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml")  # loads
+
+
+def test_min_transmission_angle_is_the_four_bar_closed_form(tmp_path):
+    """Crank-rocker (crank a, coupler b, rocker c, ground d): at the coupler-rocker pin
+    cos mu = (b^2 + c^2 - a^2 - d^2 + 2 a d cos theta) / (2 b c); the study's metric is the
+    smallest min(mu, 180 - mu) over the sweep, for each rocker length."""
+    base = ROOT / "configs" / "fourbar_crank_rocker.toml"
+    path = tmp_path / "rocker.toml"
+    path.write_text(f'[study]\nbase = "{base.as_posix()}"\n[study.parameters]\n'
+                    '"links.rocker.lengths.O4-B" = { from = 3.0, to = 3.2, steps = 3 }\n')
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    a, b, d = 1.0, 3.5, 4.0
+    theta = np.radians(np.arange(0.0, 361.0))
+    for v, c in enumerate(study.values[:, 0]):
+        mu = np.degrees(np.arccos((b * b + c * c - a * a - d * d + 2 * a * d * np.cos(theta))
+                                  / (2 * b * c)))
+        want = np.minimum(mu, 180.0 - mu).min()
+        assert f["min_transmission_angle"][v] == pytest.approx(want, abs=1e-9)

@@ -96,8 +96,11 @@ def read_done(path) -> np.ndarray | None:
     partial = partial_path(path)
     if not partial.exists():
         return None
-    with h5py.File(partial, "r", locking=False) as f:
-        return f["batch_done"][()].astype(bool)
+    try:
+        with h5py.File(partial, "r", locking=False) as f:
+            return f["batch_done"][()].astype(bool)
+    except (KeyError, ValueError) as exc:  # metadata half-written by the running study
+        raise OSError(f"{partial}: caught mid-write ({exc})") from None
 
 
 def read_arrays(path) -> dict[str, np.ndarray]:

@@ -13,10 +13,11 @@ study.
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import SceneError
 from ..fit import scene_with
-from ..pipeline import solve
+from ..pipeline import DEFAULT_THREADS, solve
 from ..status import NO_ASSEMBLY
 from .metrics import BatchArrays, batch_metrics, transmission_pins
 from .reductions import references
@@ -28,10 +29,11 @@ def variant_scene(study, v: int):
     return scene_with(study.scene, study.data, study.parameters, study.values[v])
 
 
-def solve_variant(study, v: int):
-    """The Result of variant ``v``, or None where its scene cannot be built or assembled."""
+def solve_variant(study, v: int, threads: int | None = DEFAULT_THREADS):
+    """The Result of variant ``v``, or None where its scene cannot be built or assembled
+    (``threads``: as :func:`linkpipe.solve`'s; None leaves the BLAS pool as it is)."""
     try:
-        return solve(variant_scene(study, v))
+        return solve(variant_scene(study, v), threads=threads)
     except SceneError:
         return None
 
@@ -43,15 +45,17 @@ def wanted_series(study) -> list[tuple[str, tuple]]:
 
 def solve_batch(study, lo: int, hi: int) -> dict[str, np.ndarray]:
     """Rows ``{variable: (hi - lo, ...)}`` of variants ``lo .. hi - 1``: all at once on the
-    vectorised path (:mod:`.vector`) where the study allows it, else variant by variant."""
-    if study.slots is not None:
-        status, arrays = variant_arrays(study, study.slots, lo, hi)
-        batch = BatchArrays(status, arrays.get("input_force"), arrays["position"],
-                            {(name, index): arrays[name][(slice(None), slice(None)) + index]
-                             for name, index in wanted_series(study)})
-    else:
-        batch = stack(study, [solve_variant(study, v) for v in range(lo, hi)])
-    return batch_metrics(study, batch, transmission_pins(study.scene))
+    vectorised path (:mod:`.vector`) where the study allows it, else variant by variant. The
+    BLAS pool is set once for the batch (as :func:`linkpipe.solve` sets it for a scene)."""
+    with threadpool_limits(limits=DEFAULT_THREADS, user_api="blas"):
+        if study.slots is not None:
+            status, arrays = variant_arrays(study, study.slots, lo, hi)
+            batch = BatchArrays(status, arrays.get("input_force"), arrays["position"],
+                                {(name, index): arrays[name][(slice(None), slice(None)) + index]
+                                 for name, index in wanted_series(study)})
+        else:
+            batch = stack(study, [solve_variant(study, v, None) for v in range(lo, hi)])
+        return batch_metrics(study, batch, transmission_pins(study.scene))
 
 
 def stack(study, results) -> BatchArrays:

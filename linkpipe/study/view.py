@@ -7,15 +7,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: best variants solved again for their motion in the recording
-N_MOTION = 3
+#: best variants solved again for their motion in the recording; bins of a metric's histogram
+N_MOTION, N_BINS = 3, 30
 
 
 @dataclass
 class StudyView:
     """``metrics`` {label: (V,)}; ``parameters`` {address: (V,)}; ``status`` (V,) worst
     status; ``pareto`` (labels of the two metrics, indices of the Pareto set ordered by the
-    first); ``best`` [(variant, Result)] by the first metric."""
+    first); ``best`` [(variant, Result)] by the first metric; ``spread`` each metric's
+    histogram over the variants (how tolerances spread it)."""
 
     name: str
     metrics: dict
@@ -24,6 +25,7 @@ class StudyView:
     status: np.ndarray
     pareto: tuple
     best: list
+    spread: dict  # {metric: (counts (n,), bin centres (n,), bin widths (n,))}
 
 
 def pareto_set(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -64,5 +66,14 @@ def study_view(study, columns: dict) -> StudyView:
             if result is not None:
                 best.append((int(v), result))
     params = {p: study.values[:, j] for j, p in enumerate(study.names)}
-    return StudyView(study.name, metrics, units, params,
-                     np.asarray(columns["worst_status"]), pareto, best)
+    return StudyView(study.name, metrics, units, params, np.asarray(columns["worst_status"]),
+                     pareto, best, {m: histogram(x) for m, x in metrics.items()})
+
+
+def histogram(x: np.ndarray, bins: int = N_BINS) -> tuple:
+    """(counts, bin centres, bin widths) of the finite values of x (empty without any)."""
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    counts, edges = np.histogram(x, bins=bins if np.ptp(x) > 0 else 1)
+    return counts.astype(float), 0.5 * (edges[1:] + edges[:-1]), np.diff(edges)
