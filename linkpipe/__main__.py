@@ -30,6 +30,10 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--rrd-max-steps", type=_threads, default=100_000, metavar="N",
                      help="the most steps a recording keeps; past it a uniform stride (the "
                           ".h5 keeps every step; 0: no limit; default 100,000)")
+    run.add_argument("--rrd-max-mb", type=_threads, default=50, metavar="MB",
+                     help="the largest recording in MB (10^6 bytes); a sweep whose recording "
+                          "would be larger keeps a uniform stride of steps (0: no limit; "
+                          "default 50)")
     run.add_argument("--threads", type=_threads, default=1, metavar="N",
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
@@ -208,13 +212,12 @@ def _run(args) -> int:
             bar = _progress_bar(scene, args)
             result = solve(scene, progress=bar.stage if bar else None,
                            threads=args.threads or None)
-            written, writer_seconds = _write(result, out, args, bar)
+            written, writer_seconds, kept = _write(result, out, args, bar)
             if bar:
                 bar.close()
             if not args.quiet:
                 total = time.perf_counter() - t0
-                print(summary(result, written, total, writer_seconds,
-                              None if args.no_rrd else args.rrd_max_steps))
+                print(summary(result, written, total, writer_seconds, kept))
                 if args.verbose:
                     print(stage_table({**result.seconds, **writer_seconds}, total,
                                       result.n_steps))
@@ -223,8 +226,9 @@ def _run(args) -> int:
     return outcome.code
 
 
-def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
-    """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each)."""
+def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float], str | None]:
+    """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each,
+    the steps the recording kept when not every one)."""
     out.mkdir(parents=True, exist_ok=True)
     from .stores import output_lock
 
@@ -232,8 +236,8 @@ def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, f
         return _write_locked(result, out, args, bar)
 
 
-def _write_locked(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
-    written, seconds = [], {}
+def _write_locked(result, out: pathlib.Path, args, bar):
+    written, seconds, kept = [], {}, None
     name = result.scene.name
     if not args.no_h5:
         from .stores import hdf5
@@ -251,12 +255,12 @@ def _write_locked(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict
             bar.stage("rrd")
         t0 = time.perf_counter()
         target = None if args.no_rrd else out / f"{name}.rrd"
-        rrd.write(result, target, spawn=args.spawn, connect=args.connect,
-                  max_steps=args.rrd_max_steps)
+        kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
+                         max_steps=args.rrd_max_steps, max_bytes=args.rrd_max_mb * 10**6)
         seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))
-    return written, seconds
+    return written, seconds, kept
 
 
 PROGRESS_MIN_STEPS = 20_000  # sweeps at least this long get a progress bar
@@ -293,7 +297,7 @@ def _progress_bar(scene, args):
 
 
 def summary(result, written=(), seconds_total=None, writer_seconds=None,
-            rrd_max_steps=None) -> str:
+            recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run``."""
     sc = result.scene
     lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
@@ -345,14 +349,8 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
         for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):
             lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
                          f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
-    if rrd_max_steps:
-        from .stores.rrd import stride_of
-
-        stride = stride_of(result.n_steps, rrd_max_steps)
-        if stride > 1:
-            kept = -(-result.n_steps // stride)
-            lines.append(f"  recording: every {stride}th step ({kept:,} of {result.n_steps:,}; "
-                         f"--rrd-max-steps {rrd_max_steps:,}); the .h5 keeps every step")
+    if recording_kept:
+        lines.append(f"  recording: {recording_kept}; the .h5 keeps every step")
     if written:
         lines.append("  wrote " + ", ".join(written))
     stage_seconds = {**result.seconds, **(writer_seconds or {})}
