@@ -1,0 +1,135 @@
+"""Every target of issue 16 (scale) with its measured figure and verdict, in one command:
+
+    .venv/bin/python benchmarks/bench_issue16.py            # about 5 minutes on 2 cores
+    .venv/bin/python benchmarks/bench_issue16.py --quick    # smaller sizes; verdicts indicative
+
+1. CLI end to end: ``python -m linkpipe run`` on the 360,001-step crank-rocker (positions,
+   velocities, accelerations, ``.h5``, ``--no-rrd``), wall time of the process minus that of a
+   2-step run of the same scene (imports and fixed costs cancel), best of 3 each; against
+   pylinkage + numba's warm kernel (``step_fast_with_kinematics``) in this process, best of 3.
+   Target: pylinkage's seconds / linkpipe's marginal seconds >= 2.
+2. Force stage memory: the basketball goal (springs, gravity, inertia) at 200k and 1M steps,
+   peak resident memory of each run (fresh process: solve + .h5). Target: 1M <= 1.5 x 200k.
+3. 10M-step kinematics (the crank-rocker, positions, velocities, accelerations): peak memory.
+   Target <= 2 GB. (--quick: 2M steps, the target scaled to 0.4 GB.)
+4. Chains of N four-bar loops, N = 8..64, 2k steps: benchmarks/bench_scale.py's exponents,
+   peak at N = 64 and threads verdicts (run as a subprocess; its own lines).
+5. Recordings: the 360k-step crank-rocker with every effect and the basketball goal at 200k
+   steps through ``run`` (defaults): file size. Target <= 50 MB each.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_memory import scene_text  # noqa: E402  (a shipped config with its step count set)
+from bench_sweep import pylinkage_available, pylinkage_run  # noqa: E402
+
+
+def verdict(ok: bool) -> str:
+    return "met" if ok else "MISSED"
+
+
+def write_scene(folder: pathlib.Path, config: str, steps: int, extra: str = "") -> pathlib.Path:
+    path = folder / f"{config}_{steps}.toml"
+    path.write_text(scene_text(config, steps, extra))
+    return path
+
+
+def cli_seconds(scene: pathlib.Path, out: pathlib.Path, *flags: str) -> float:
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "linkpipe", "run", str(scene), "--out", str(out),
+                    "--quiet", *flags], check=True, cwd=ROOT)
+    return time.perf_counter() - t0
+
+
+def cli_target(folder: pathlib.Path, steps: int) -> None:
+    big, small = (write_scene(folder, "fourbar_crank_rocker", n) for n in (steps, 2))
+    runs = {n: [] for n in ("big", "small")}
+    for _ in range(3):  # alternating, best of 3 each
+        runs["small"].append(cli_seconds(small, folder / "out", "--no-rrd"))
+        runs["big"].append(cli_seconds(big, folder / "out", "--no-rrd"))
+    marginal = min(runs["big"]) - min(runs["small"])
+    have = pylinkage_available()
+    if not have.startswith("pylinkage"):
+        print(f"1. CLI end to end, {steps:,} steps: {marginal:.3f} s marginal "
+              f"({min(runs['big']):.3f} - {min(runs['small']):.3f}); pylinkage {have}")
+        return
+    pylinkage_run(1000)  # JIT or cache load
+    peer = min(pylinkage_run(steps)[3] for _ in range(3))
+    ratio = peer / marginal
+    print(f"1. CLI end to end, {steps:,}-step crank-rocker, pos+vel+acc, .h5: {marginal:.3f} s "
+          f"marginal (run {min(runs['big']):.3f} s - 2-step run {min(runs['small']):.3f} s); "
+          f"pylinkage+numba warm kernel {peer:.3f} s ({have}): {ratio:.2f}x, target >= 2x: "
+          f"{verdict(ratio >= 2)}")
+
+
+def peak_mb(config: str, steps: int) -> float:
+    """Peak resident memory (MB) of solve + .h5 in a fresh process (bench_memory's child)."""
+    code = ("import sys, json, resource, pathlib, tempfile; sys.path[:0] = [{r!r}, {b!r}];"
+            "import linkpipe; from linkpipe.stores import hdf5; from bench_memory import scene_text;"
+            "d = pathlib.Path(tempfile.mkdtemp()); p = d / 's.toml';"
+            "p.write_text(scene_text({c!r}, {n}, '')); r = linkpipe.solve(str(p));"
+            "hdf5.write(r, d / 's.h5');"
+            "print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))").format(
+        r=str(ROOT), b=str(ROOT / "benchmarks"), c=config, n=steps)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def memory_targets(quick: bool) -> None:
+    small, large = (40_000, 200_000) if quick else (200_000, 1_000_000)
+    a, b = peak_mb("basketball_goal", small), peak_mb("basketball_goal", large)
+    print(f"2. force stage memory, basketball goal (springs, gravity, inertia): {small:,} steps "
+          f"{a:.0f} MB, {large:,} steps {b:.0f} MB: {b / a:.2f}x, target <= 1.5x: "
+          f"{verdict(b / a <= 1.5)}")
+    steps, limit = (2_000_000, 0.4) if quick else (10_000_000, 2.0)
+    peak = peak_mb("fourbar_crank_rocker", steps) / 1024
+    print(f"3. {steps:,}-step kinematics (crank-rocker, pos+vel+acc, .h5): peak {peak:.2f} GB, "
+          f"target <= {limit} GB: {verdict(peak <= limit)}")
+
+
+def recording_targets(folder: pathlib.Path, quick: bool) -> None:
+    cases = [("fourbar_crank_rocker", 36_000 if quick else 360_000, "EFFECTS"),
+             ("basketball_goal", 20_000 if quick else 200_000, "")]
+    for config, steps, extra in cases:
+        scene = write_scene(folder, config, steps, extra)
+        out = folder / f"rrd_{config}"
+        cli_seconds(scene, out, "--no-h5")
+        size = max(p.stat().st_size for p in out.glob("*.rrd")) / 1e6
+        print(f"5. recording of {config} ({steps:,} steps{', every effect' if extra else ''}): "
+              f"{size:.1f} MB, target <= 50 MB: {verdict(size <= 50)}")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--quick", action="store_true")
+    args = p.parse_args(argv)
+    folder = pathlib.Path(tempfile.mkdtemp(prefix="linkpipe_issue16_"))
+    print(f"issue 16 targets, {time.strftime('%Y-%m-%d %H:%M')}{' (--quick)' if args.quick else ''}")
+    cli_target(folder, 36_001 if args.quick else 360_001)
+    memory_targets(args.quick)
+    print("4. chains of N loops (benchmarks/bench_scale.py):")
+    scale = [sys.executable, str(ROOT / "benchmarks" / "bench_scale.py"), "--repeats", "1" if args.quick else "2"]
+    if args.quick:
+        scale += ["--loops", "8", "16", "32"]
+    lines = subprocess.run(scale, capture_output=True, text=True, check=True).stdout.splitlines()
+    for line in lines:
+        if re.match(r"- ", line):
+            print("   " + line)
+    recording_targets(folder, args.quick)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
