@@ -427,21 +427,32 @@ def test_a_reused_stage_1_recomputes_only_the_effects_whose_inputs_changed(tmp_p
     """A fit's trials: one stage 1, force parameters changed one at a time. Each trial's input
     force equals a fresh full solve of the same scene bit for bit, and the cache kept with the
     stage 1 grows by exactly the effects that read the changed table (springs -> springs and
-    damping; a mass -> gravity and inertia; back to the start -> nothing new)."""
+    damping; a mass -> gravity and inertia; back to the start -> nothing new); many values of
+    one parameter keep at most CACHED_VALUES per effect (bounded memory)."""
+    from linkpipe.forces import CACHED_VALUES
+
     base = scene_from(EVERY_EFFECT, tmp_path, "base")
     reuse = linkpipe.solve(base).kinematics
     wanted = frozenset({"input_force", "spring_force"})
-    variants = [(EVERY_EFFECT, 6), (EVERY_EFFECT.replace("k = 120.0", "k = 150.0"), 2),
+
+    def values():
+        return sum(len(v) for v in reuse.force_cache.values() if isinstance(v, dict))
+
+    variants = [(EVERY_EFFECT, 5), (EVERY_EFFECT.replace("k = 120.0", "k = 150.0"), 2),
                 (EVERY_EFFECT.replace("mass = 2.0", "mass = 2.5"), 2), (EVERY_EFFECT, 0)]
     for i, (text, new_entries) in enumerate(variants):
         scene = scene_from(text, tmp_path, f"v{i}")
-        before = len(reuse.force_cache)
+        before = values()
         lean = linkpipe.solve(scene, kinematics=reuse, wanted=wanted)
-        assert len(reuse.force_cache) - before == new_entries, i
+        assert values() - before == new_entries, i
         full = linkpipe.solve(scene)
         for name in ("input_force", "spring_force", "power"):
             np.testing.assert_array_equal(lean.forces[name][1], full.forces[name][1], err_msg=name)
         np.testing.assert_array_equal(lean.status, full.status)
+    for k in range(10):
+        scene = scene_from(EVERY_EFFECT.replace("k = 120.0", f"k = {200.0 + k}"), tmp_path, f"k{k}")
+        linkpipe.solve(scene, kinematics=reuse, wanted=wanted)
+    assert max(len(v) for v in reuse.force_cache.values() if isinstance(v, dict)) == CACHED_VALUES
 
 
 def test_per_step_constants_are_cut_into_the_same_chunks(tmp_path):

@@ -102,23 +102,32 @@ EFFECT_INPUTS = {"springs": ("springs", "torsion_springs", "effects"), "damping"
                  "gravity": ("masses", "gravity"), "loads": ("loads",), "inertia": ("masses",)}
 
 
+#: the values of one effect kept per chunk in a fit's cache, most recent first: a
+#: finite-difference Jacobian moves one parameter at a time from the current point, so the
+#: current point's value and the moved one are all it asks for again (bounded memory)
+CACHED_VALUES = 3
+
+
 def _effect_terms(ctx: Context, influence: Influence, cache: dict | None, chunk_key) -> dict:
     """{effect: (generalized force (S, nd), variables, coords, Effect or None)} of every effect
     the scene names. With ``cache`` (virtual work only: a fit's trials on one stage 1), an
-    effect whose scene inputs (:data:`EFFECT_INPUTS`) equal those of an earlier call on the
-    same chunk is taken from it, its Effect left out (None)."""
+    effect whose scene inputs (:data:`EFFECT_INPUTS`) equal those of one of the last
+    :data:`CACHED_VALUES` calls on the same chunk is taken from it, its Effect left out (None)."""
     scene, out = ctx.model.scene, {}
     for name, effect_of in EFFECTS.items():
         if name not in ctx.effects or not applies(name, ctx):
             continue
-        key = (chunk_key, name, repr([getattr(scene, a) for a in EFFECT_INPUTS[name]]))
-        if cache is not None and key in cache:
-            out[name] = cache[key]
+        inputs = repr([getattr(scene, a) for a in EFFECT_INPUTS[name]])
+        kept = cache.setdefault((chunk_key, name), {}) if cache is not None else None
+        if kept is not None and inputs in kept:
+            out[name] = kept[inputs] = kept.pop(inputs)  # now the most recent
             continue
         effect = effect_of(ctx)
         out[name] = (influence.generalized(effect.applied), effect.variables, effect.coords, effect)
-        if cache is not None:
-            cache[key] = out[name][:3] + (None,)
+        if kept is not None:
+            kept[inputs] = out[name][:3] + (None,)
+            while len(kept) > CACHED_VALUES:
+                kept.pop(next(iter(kept)))  # the least recently used
     return out
 
 
