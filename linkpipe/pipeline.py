@@ -283,15 +283,18 @@ def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
     if A is not None:
         out["acceleration_residual"] = np.full(S, np.nan)
         good &= np.isfinite(A).all(axis=(1, 2))
-    if good.any():
-        J = model.jacobian(X[good], s[good])
-        qd = model.q_of(V[good])
-        out["velocity_residual"][good] = np.abs(np.einsum("sij,sj->si", J, qd) + model.phi_t(
-            X[good], s[good], s_dot[good])).max(axis=1)
+    idx = np.flatnonzero(good)
+    chunk = kin.dense_chunk(model)  # dense (chunk, m, n) Jacobians: bounded, large mechanisms too
+    for lo in range(0, len(idx), chunk):
+        i = idx[lo:lo + chunk]
+        J = model.jacobian(X[i], s[i])
+        qd = model.q_of(V[i])
+        out["velocity_residual"][i] = np.abs(np.einsum("sij,sj->si", J, qd) + model.phi_t(
+            X[i], s[i], s_dot[i])).max(axis=1)
         if A is not None:
-            g = model.gamma(X[good], V[good], s[good], s_dot[good], s_ddot[good])
-            out["acceleration_residual"][good] = np.abs(
-                np.einsum("sij,sj->si", J, model.q_of(A[good])) - g).max(axis=1)
+            g = model.gamma(X[i], V[i], s[i], s_dot[i], s_ddot[i])
+            out["acceleration_residual"][i] = np.abs(
+                np.einsum("sij,sj->si", J, model.q_of(A[i])) - g).max(axis=1)
     return out
 
 

@@ -81,8 +81,21 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
 
 
 def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool):
-    """:func:`derivatives` on dense Jacobians (the independent check of the accuracy ladder)."""
-    return derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration, dense=True)
+    """:func:`derivatives` on dense Jacobians (the independent check of the accuracy ladder),
+    in chunks of steps whose (chunk, m, n) Jacobians and inverses stay small
+    (:func:`dense_chunk`)."""
+    return derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration, dense=True,
+                       chunk=dense_chunk(model))
+
+
+#: doubles per dense (chunk, m, n) stack of Jacobians (32 MB): large mechanisms' dense work goes
+#: in chunks of steps small enough for this, never as one (steps, m, n) array
+DENSE_CHUNK_ENTRIES = 4_000_000
+
+
+def dense_chunk(model: Model) -> int:
+    """Steps per chunk of dense Jacobian work: CHUNK, or fewer where n_rows x n_q is large."""
+    return max(1, min(CHUNK, DENSE_CHUNK_ENTRIES // max(1, model.n_rows * model.n_q)))
 
 
 def _engine_factors(eng, with_inverse: bool, rcond: float):
