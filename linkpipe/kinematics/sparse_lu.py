@@ -73,11 +73,18 @@ class StepLU:
         self.n = n
         self.CT = sp.csr_matrix(eng.CT)  # (nnz, n_features): most entries 1-2 terms
         self.angle = eng.angle
-        # the pattern in compressed-column form, its columns in COLAMD order (once)
-        pattern = sp.csc_matrix((np.arange(1.0, len(eng.rows) + 1), (eng.rows, eng.cols)),
-                                shape=(m, n))
+        # the pattern in compressed-column form (data: each entry's number), its columns in
+        # COLAMD order, computed once from a factorisation of the pattern with generic values
+        # (the engine found it structurally regular; natural order should that one be singular)
+        slot = np.arange(1.0, len(eng.rows) + 1)
+        pattern = sp.csc_matrix((slot, (eng.rows, eng.cols)), shape=(m, n))
         pattern.sort_indices()
-        self.perm_c = splu(pattern, permc_spec="COLAMD").perm_c.copy()
+        generic = pattern.copy()
+        generic.data = np.random.default_rng(0).uniform(1.0, 2.0, generic.nnz)
+        try:
+            self.perm_c = splu(generic, permc_spec="COLAMD").perm_c.copy()
+        except RuntimeError:
+            self.perm_c = np.arange(n)
         # column k of the factorised matrix is column order[k] of J
         order = np.empty(n, dtype=np.intp)
         order[self.perm_c] = np.arange(n)
