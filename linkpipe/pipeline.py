@@ -85,13 +85,24 @@ def preflight(scene: Scene):
     assembles at the first driver value (SceneError otherwise): what ``check`` reports."""
     check_memory(scene)
     model = build_model(scene)
-    mob = check_mobility(model)
+    mob = _mobility(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
     present = np.flatnonzero(np.isfinite(s).all(axis=1))  # not every logged value is missing
     if len(present):
         kin.start_state(model, s[present[0]], scene.solver.tol * model.size,
                         scene.solver.max_iter)
     return model, mob
+
+
+def _mobility(model):
+    """:func:`check_mobility`; on a large mechanism (from ``kinematics.SPARSE_FROM`` unknowns)
+    with one BLAS thread whatever ``threads`` says: its dense SVD and least squares of a few
+    hundred unknowns gain nothing from threads and, multi-threaded on a busy machine, were
+    measured to stall for up to a second (docs/performance.md)."""
+    if model.n_q < kin.SPARSE_FROM:
+        return check_mobility(model)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return check_mobility(model)
 
 
 #: BLAS threads while a scene is solved: its solves are many small systems (stacks of 2x2 to
@@ -188,7 +199,7 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Resu
 
 def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:
     """Positions, velocities, accelerations, condition and influence coefficients."""
-    mobility = check_mobility(model)
+    mobility = _mobility(model)
     tell("positions")
     t0 = _time.perf_counter()
     drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)

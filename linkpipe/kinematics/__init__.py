@@ -125,9 +125,9 @@ from .rates import (dense_chunk, dense_derivatives, derivatives, driver_motion, 
                           link_angles_unwrapped, link_rates)
 from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
-from .sparse_lu import linear_algebra_used  # noqa: E402
+from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
 __all__ = ["solve_sweep", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
-           "dense_chunk"]
+           "dense_chunk", "SPARSE_FROM"]
