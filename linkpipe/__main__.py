@@ -25,13 +25,20 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
     run.add_argument("--connect", metavar="ADDR", help="also stream to a running viewer (rerun+http://...)")
     run.add_argument("--quiet", action="store_true", help="print only errors")
+    run.add_argument("-v", "--verbose", action="store_true",
+                     help="also print a table of where the time went, stage by stage")
     run.add_argument("--rrd-max-steps", type=_threads, default=100_000, metavar="N",
                      help="the most steps a recording keeps; past it a uniform stride (the "
                           ".h5 keeps every step; 0: no limit; default 100,000)")
+    run.add_argument("--rrd-max-mb", type=_threads, default=50, metavar="MB",
+                     help="the largest recording in MB (10^6 bytes); a sweep whose recording "
+                          "would be larger keeps a uniform stride of steps (0: no limit; "
+                          "default 50)")
     run.add_argument("--threads", type=_threads, default=1, metavar="N",
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
                           "library's own default)")
+    _fleet_options(run)
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")
     acc = sub.add_parser("accuracy", help="measure what accuracy costs in time for a scene")
@@ -42,15 +49,45 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     fit = sub.add_parser("fit", help="fit [fit] parameters to the scene's [[measurements]]")
     fit.add_argument("scene")
     fit.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _fleet_options(fit)
+    study = sub.add_parser("study", help="solve the variants of a [study]: <name>_study.h5 and .rrd")
+    study.add_argument("study", help="a study file (configs/studies/*.toml) or a scene with [study]")
+    study.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _executor_options(study)
+    study.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
+    study.add_argument("--quiet", action="store_true", help="print only errors")
     return p
 
 
-def _threads(text: str) -> int:
+def _fleet_options(p) -> None:
+    """--logs GLOB (a fleet: the scene over every log), --log-name, and where tasks run."""
+    p.add_argument("--logs", metavar="GLOB", help="a fleet: run the one scene over every log "
+                   "file the glob matches (its [[logs]] file replaced); one row per log in "
+                   "<name>_fleet.h5 (fit: <name>_fleet_fit.h5)")
+    p.add_argument("--log-name", metavar="NAME", help="the [[logs]] entry --logs replaces "
+                   "(needed when the scene has several)")
+    _executor_options(p)
+
+
+def _executor_options(p) -> None:
+    """--workers / --scheduler: where batches run (default: in this process)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive, metavar="N",
+                       help="run batches on a local Dask cluster of N worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="run batches on an existing Dask cluster (tcp://host:8786)")
+
+
+def _threads(text: str, low: int = 0) -> int:
     """``--threads``: a whole number >= 0 (argparse turns the ValueError into exit 2)."""
     value = int(text)
-    if value < 0:
+    if value < low:
         raise ValueError(text)
     return value
+
+
+def _positive(text: str) -> int:
+    return _threads(text, 1)
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
@@ -58,7 +95,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     or its output could not be written, 2 bad input (scene, option), 130 stopped by Ctrl-C or
     SIGTERM. Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
-    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit}[args.command]
+    command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
+               "study": _study}[args.command]
     previous = _signals_as_interrupts()
     try:
         return command(args)
@@ -70,6 +108,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        sys.unraisablehook = sys.__unraisablehook__
 
 
 class _Terminated(KeyboardInterrupt):
@@ -90,6 +129,13 @@ def _signals_as_interrupts() -> dict:
         interrupt()
         raise _Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
+    def unraisable(info, default=sys.unraisablehook):
+        # a signal that lands in a finaliser or weakref callback is swallowed there by Python
+        # ("Exception ignored in ..."); interrupt() has marked it, the next write stops the run
+        if not isinstance(info.exc_value, KeyboardInterrupt):
+            default(info)
+
+    sys.unraisablehook = unraisable
     return {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
 
 
@@ -153,6 +199,8 @@ def _run(args) -> int:
         print(f"error: --out {out}: is a file, not a folder; name a folder (it is created if "
               "missing)", file=sys.stderr)
         return 2
+    if args.logs:
+        return _fleet("run", args, args.scenes)
     outcome = _Outcome()
     scenes = _load_all(args.scenes, outcome)
     if outcome.duplicate_names:
@@ -164,19 +212,23 @@ def _run(args) -> int:
             bar = _progress_bar(scene, args)
             result = solve(scene, progress=bar.stage if bar else None,
                            threads=args.threads or None)
-            written, writer_seconds = _write(result, out, args, bar)
+            written, writer_seconds, kept = _write(result, out, args, bar)
             if bar:
                 bar.close()
             if not args.quiet:
-                print(summary(result, written, time.perf_counter() - t0, writer_seconds,
-                              None if args.no_rrd else args.rrd_max_steps))
+                total = time.perf_counter() - t0
+                print(summary(result, written, total, writer_seconds, kept))
+                if args.verbose:
+                    print(stage_table({**result.seconds, **writer_seconds}, total,
+                                      result.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
         print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
     return outcome.code
 
 
-def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
-    """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each)."""
+def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float], str | None]:
+    """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each,
+    the steps the recording kept when not every one)."""
     out.mkdir(parents=True, exist_ok=True)
     from .stores import output_lock
 
@@ -184,8 +236,8 @@ def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, f
         return _write_locked(result, out, args, bar)
 
 
-def _write_locked(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float]]:
-    written, seconds = [], {}
+def _write_locked(result, out: pathlib.Path, args, bar):
+    written, seconds, kept = [], {}, None
     name = result.scene.name
     if not args.no_h5:
         from .stores import hdf5
@@ -203,12 +255,12 @@ def _write_locked(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict
             bar.stage("rrd")
         t0 = time.perf_counter()
         target = None if args.no_rrd else out / f"{name}.rrd"
-        rrd.write(result, target, spawn=args.spawn, connect=args.connect,
-                  max_steps=args.rrd_max_steps)
+        kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
+                         max_steps=args.rrd_max_steps, max_bytes=args.rrd_max_mb * 10**6)
         seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))
-    return written, seconds
+    return written, seconds, kept
 
 
 PROGRESS_MIN_STEPS = 20_000  # sweeps at least this long get a progress bar
@@ -245,7 +297,7 @@ def _progress_bar(scene, args):
 
 
 def summary(result, written=(), seconds_total=None, writer_seconds=None,
-            rrd_max_steps=None) -> str:
+            recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run``."""
     sc = result.scene
     lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
@@ -297,14 +349,8 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
         for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):
             lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
                          f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
-    if rrd_max_steps:
-        from .stores.rrd import stride_of
-
-        stride = stride_of(result.n_steps, rrd_max_steps)
-        if stride > 1:
-            kept = -(-result.n_steps // stride)
-            lines.append(f"  recording: every {stride}th step ({kept:,} of {result.n_steps:,}; "
-                         f"--rrd-max-steps {rrd_max_steps:,}); the .h5 keeps every step")
+    if recording_kept:
+        lines.append(f"  recording: {recording_kept}; the .h5 keeps every step")
     if written:
         lines.append("  wrote " + ", ".join(written))
     stage_seconds = {**result.seconds, **(writer_seconds or {})}
@@ -312,6 +358,20 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
     if seconds_total is not None:
         secs += f"; total {seconds_total:.3f}"
     lines.append(f"  seconds: {secs}")
+    return "\n".join(lines)
+
+
+def stage_table(seconds: dict, total: float, n_steps: int) -> str:
+    """The time of each stage, its share of the scene's total and its rate in steps per second;
+    "other" is what no stage timed: first imports of the writers (h5py, rerun), the memory
+    check, statuses, the Result."""
+    rows = dict(seconds)
+    rows["other"] = max(total - sum(seconds.values()), 0.0)
+    lines = [f"  {'stage':<14}{'seconds':>9}{'share':>8}{'steps/s':>12}"]
+    for stage, sec in rows.items():
+        rate = f"{n_steps / sec:,.0f}" if sec > 0 and stage != "other" else ""
+        lines.append(f"  {stage:<14}{sec:>9.3f}{sec / total if total else 0:>8.0%}{rate:>12}")
+    lines.append(f"  {'total':<14}{total:>9.3f}{'100%':>8}{n_steps / total if total else 0:>12,.0f}")
     return "\n".join(lines)
 
 
@@ -359,6 +419,8 @@ def _accuracy(args) -> int:
 def _fit(args) -> int:
     from tqdm import tqdm
 
+    if args.logs:
+        return _fleet("fit", args, [args.scene])
     from .fit import fit
     from .scene import load_scene
     from .stores import fit as fit_store
@@ -401,6 +463,62 @@ def fit_table(result) -> str:
     for k, name in enumerate(b["names"]):
         lines.append(f"  measurement {name}: rms {b['rms'][k]:.4g} -> {a['rms'][k]:.4g} {b['units'][k]}")
     return "\n".join(lines)
+
+
+def _fleet(kind: str, args, scenes: list) -> int:
+    """``run`` / ``fit`` with ``--logs``: one scene over a glob of logs, one row per log."""
+    from tqdm import tqdm
+
+    from .executors import executor_name
+    from .fleet import run_fleet, write_fleet
+    from .scene import load_scene
+
+    outcome = _Outcome()
+    if len(scenes) != 1:
+        print("error: --logs runs one scene over many logs: give one scene", file=sys.stderr)
+        return 2
+    with _reporting(scenes[0], outcome):
+        scene = load_scene(scenes[0])
+        bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
+        try:
+            paths, rows = run_fleet(kind, scene, args.logs, args.log_name,
+                                    executor_name(args.workers, args.scheduler), args.workers,
+                                    args.scheduler, progress=lambda i: bar.update(1))
+        finally:
+            bar.close()
+        path, table = write_fleet(kind, scene, args.logs, paths, rows, pathlib.Path(args.out))
+        print(table)
+        print(f"  wrote {path}")
+        if all(len(r) == 1 for r in rows):  # no log could be taken: the scene's mistake
+            outcome.code = 2
+    return outcome.code
+
+
+def _study(args) -> int:
+    from .executors import executor_name
+    from .study import load_study, run_study
+    from .study.report import study_table
+
+    outcome = _Outcome()
+    with _reporting(args.study, outcome):
+        t0 = time.perf_counter()
+        study = load_study(args.study)
+        path = run_study(study, args.out, executor_name(args.workers, args.scheduler),
+                         args.workers, args.scheduler,
+                         progress=not args.quiet)
+        written = [str(path)]
+        if not args.no_rrd:
+            from .stores.rrd import study as study_rrd
+            from .stores.study import read_arrays
+            from .study.view import study_view
+
+            rrd_path = path.with_suffix(".rrd")
+            study_rrd.write(study_view(study, read_arrays(path)), rrd_path)
+            written.append(str(rrd_path))
+        if not args.quiet:
+            print(study_table(study, path, time.perf_counter() - t0))
+            print("  wrote " + ", ".join(written))
+    return outcome.code
 
 
 if __name__ == "__main__":

@@ -121,12 +121,16 @@ def _bounds_of(scene, bounds, name, value):
     return float(b[0]), float(b[1])
 
 
-def locate(scene: Scene, data: dict, address: str):
-    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``."""
+def locate(scene: Scene, data: dict, address: str, where=None):
+    """Return (path, value) of a numeric value addressed ``table.entry.key[.index]``.
+
+    ``where``: (file, table, key) a mistake is reported at (default: the scene's ``[fit]
+    parameters``; a study names its own file and ``[study.parameters]``)."""
     parts = address.split(".")
+    where = where or (scene.path, "fit", "parameters")
 
     def fail(message, hint=""):
-        return SceneError(scene.path, "fit", "parameters", f'"{address}": {message}', hint)
+        return SceneError(*where, f'"{address}": {message}', hint)
 
     table = parts[0]
     if table not in TABLES or table not in data:
@@ -174,16 +178,17 @@ def scene_with(scene: Scene, data: dict, params, x) -> Scene:
     return _Parser(trial, scene.text, scene.path).parse()
 
 
-def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
-    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc."""
-    data = tomllib.loads(scene.text)
+def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
+    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
+    ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
+    data = tomllib.loads(scene.text) if data is None else data
     params = parameters_of(scene, data)
     if not scene.measurements:
         raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "
                          "[[measurements]]", "add [[measurements]] with log, of and sigma")
     x0 = np.array([p.initial for p in params])
     force_only = all(p.force_only for p in params)
-    counter = {"stage1": 0}
+    counter = {"stage1": 0, "wanted": frozenset(m.of[0] for m in scene.measurements)}
     before = _solve_counted(scene_with(scene, data, params, x0), None, counter)
     reuse = before.kinematics if force_only else None
     mask = np.isfinite(before.measurements["residual"])
@@ -219,7 +224,7 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200) -> FitResult:
 def _solve_counted(scene, reuse, counter):
     if reuse is None:
         counter["stage1"] += 1
-    return solve(scene, kinematics=reuse)
+    return solve(scene, kinematics=reuse, wanted=counter["wanted"])
 
 
 def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):

@@ -1,8 +1,9 @@
 """Decide which stages a scene needs, run them, time them; return a :class:`Result`."""
 from __future__ import annotations
 
+import contextlib
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -12,7 +13,7 @@ from .model import build_model, check_mobility
 from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
 from .result import Motion, Result, units_of
-from .status import NO_INPUT, OK, assign, counts
+from .status import NO_INPUT, OK, assign, counts, finite_rows
 from .errors import SceneError
 from .scene import Scene, load_scene
 
@@ -40,12 +41,37 @@ class Stages:
             ("accelerations",) if self.acceleration else ()) + (("forces",) if self.forces else ())
 
 
-#: memory a sweep may need per step and point: 2 coordinates x 8 bytes x 40 arrays, an upper
-#: bound of the measured peaks (about 31 such arrays for the 100k-step crank-rocker with every
-#: effect, 9 for the Jansen linkage's kinematics); the force stage stores as much again (the
-#: multipliers, pin and ground forces, per-effect loads) and never a dense Jacobian or inverse
-#: (its work on Phi_X goes term by term in chunks of steps: measured in tests/test_condition.py)
-BYTES_PER_POINT_STEP = 2 * 8 * 40
+#: what a run needs beside its stored arrays: the interpreter and libraries (~0.25 GB measured
+#: with numpy, scipy, pandas, h5py and rerun loaded), a recording of at most --rrd-max-steps
+#: rows, and one chunk's working set
+FIXED_BYTES = 600 * 2**20
+#: the stored arrays times this: the transients of the stages around them (each stage's own
+#: work goes in chunks of steps; measured peaks: benchmarks/bench_logs.py prints both)
+TRANSIENT_FACTOR = 1.3
+
+
+def bytes_per_step(scene: Scene) -> int:
+    """The bytes a run keeps per step, from the scene's counts alone (before any work): every
+    array the Result stores (docs/output-format.md) and what stage 1 hands to the force stage
+    (driver values in internal units, influence coefficients), 8 bytes a number."""
+    stages = Stages.of(scene)
+    P, L, nd = len(scene.points), len(scene.links), max(1, len(scene.drivers))
+    n_q = 2 * sum(not p.fixed for p in scene.points)
+    rates = (2 * P + L + 1) * (int(stages.velocity) + int(stages.acceleration))
+    numbers = 2 * P + L + 6 + 6 * nd + rates  # positions, angles, residuals, driver values
+    if stages.forces:
+        joints = sum(len(link.points) for link in scene.links)
+        fixed = sum(p.fixed for p in scene.points)
+        numbers += (n_q * nd + 2 * nd + len(scene.effects) + L + 2 * joints + 2 * fixed
+                    + 5 * len(scene.springs) + 3 * len(scene.torsion_springs)
+                    + len(scene.sliders) + 1)
+    return 8 * (numbers + 2 * len(scene.measurements))
+
+
+def memory_needed(scene: Scene) -> int:
+    """An upper bound of a run's peak memory in bytes (checked against measured peaks in
+    benchmarks/bench_logs.py)."""
+    return int(scene.n_steps * bytes_per_step(scene) * TRANSIENT_FACTOR) + FIXED_BYTES
 
 
 def available_memory() -> int | None:
@@ -63,9 +89,7 @@ def available_memory() -> int | None:
 def check_memory(scene: Scene) -> None:
     """SceneError when the sweep would need more memory than is available (before any work:
     a run that the kernel kills half-way writes nothing)."""
-    P = max(1, len(scene.points))
-    per_step = P * BYTES_PER_POINT_STEP * (2 if scene.effects else 1)
-    need = scene.n_steps * per_step
+    need = memory_needed(scene)
     avail = available_memory()
     if avail is not None and need > avail:
         first = scene.drivers[0] if scene.drivers else None
@@ -112,21 +136,27 @@ DEFAULT_THREADS = 1
 
 
 def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREADS,
-          kinematics: Kinematics | None = None) -> Result:
+          kinematics: Kinematics | None = None, wanted: frozenset | None = None) -> Result:
     """Run every stage the scene calls for and return the result (failed steps are data).
 
     ``progress``: an optional callable ``progress(stage_name)`` told as each stage starts
     (the CLI drives a tqdm bar with it on long sweeps). ``threads``: the BLAS thread pool's
     size while solving (threadpoolctl; None leaves the library's own). ``kinematics``: the
     ``Result.kinematics`` of a scene with the same geometry and drivers (only force parameters
-    differ): stage 1 is reused, not solved again. The Result is built once, here.
+    differ): stage 1 is reused, not solved again. ``wanted``: the names of the variables the
+    caller will read (None: every one the scene calls for); the Lagrange multipliers and the
+    forces only they give are solved only when one of them is wanted (a fit's trials read its
+    measurements alone). The Result is built once, here.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     # overflow and 0/0 are data here, not warnings: such steps are marked (status.assign)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"), \
-            threadpool_limits(limits=threads, user_api="blas"):
-        return _solve(scene, progress, kinematics)
+    # threads None: the pools as they are (no threadpoolctl call: finding the libraries costs
+    # milliseconds, a study's variant-by-variant path sets the pool once for a whole batch)
+    pools = (contextlib.nullcontext() if threads is None
+             else threadpool_limits(limits=threads, user_api="blas"))
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"), pools:
+        return _solve(scene, progress, kinematics, wanted)
 
 
 @dataclass(frozen=True)
@@ -145,9 +175,24 @@ class Kinematics:
     velocity: np.ndarray | None
     acceleration: np.ndarray | None
     link_rates: tuple
+    #: what the force stage may keep between calls on this stage 1 without the Lagrange side
+    #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
+    force_cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def finite(self) -> np.ndarray:
+        """(S,) True where every stored kinematic array is finite (computed once: a fit's
+        trials reuse it)."""
+        if "finite" not in self.force_cache:
+            stored = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
+                      *self.link_rates]
+            self.force_cache["finite"] = finite_rows([a for a in stored if a is not None],
+                                                     len(self.s))
+        return self.force_cache["finite"]
 
 
-def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Result:
+def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
+           wanted: frozenset | None = None) -> Result:
     stages = Stages.of(scene)
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
@@ -160,21 +205,19 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Resu
     kinematic_status = der["status"]
     forces = None
     if stages.forces:
-        from .forces import compute_forces
+        from .forces import LAGRANGE_VARIABLES, compute_forces
 
         tell("forces")
         t0 = _time.perf_counter()
         motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=X, velocity=k.velocity,
                         acceleration=k.acceleration, status=kinematic_status,
                         influence=der["influence"], link_angular_acceleration=k.link_rates[1])
-        forces = compute_forces(model, motion, units_of(scene))
+        lagrange = wanted is None or bool(wanted & LAGRANGE_VARIABLES)
+        forces = compute_forces(model, motion, units_of(scene), lagrange=lagrange,
+                                cache=k.force_cache if kinematics is not None and not lagrange
+                                else None)
         seconds["forces"] = _time.perf_counter() - t0
-    stored = [X, k.link_angle, k.velocity, k.acceleration, *k.link_rates]
-    if forces:
-        stored += forces.defined_arrays()
-    status = assign([kinematic_status] + ([forces.status] if forces else []),
-                    k.sweep.residual, scene.solver.tol * model.size,
-                    [a for a in stored if a is not None])
+    status = status_of(model, kinematic_status, k.sweep.residual, [], forces, finite=k.finite)
 
     value, drive = k.drive.value, k.drive
     time, time_note = _time_axis(scene, value)
@@ -195,6 +238,20 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None) -> Resu
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
         kinematics=k)
     return _with_measurements(result) if scene.measurements else result
+
+
+def status_of(model, kinematic_status, residual, stored: list, forces, size=None,
+              finite: np.ndarray | None = None) -> np.ndarray:
+    """Every step's final status (S,): the stages' verdicts, the residual against the
+    tolerance, and whether everything ``stored`` (kinematic arrays, step axis first, None
+    where not computed) and the forces' arrays are finite (:func:`linkpipe.status.assign`).
+    ``size``: the length scale of the tolerance, float or (S,) (default ``model.size``);
+    ``finite`` (S,): rows of arrays checked before (:attr:`Kinematics.finite`)."""
+    if forces:
+        stored = stored + forces.defined_arrays()
+    return assign([kinematic_status] + ([forces.status] if forces else []), residual,
+                  model.scene.solver.tol * (model.size if size is None else size),
+                  [a for a in stored if a is not None], finite=finite)
 
 
 def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:
@@ -218,7 +275,7 @@ def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinemat
 
     tell("jacobian")
     t0 = _time.perf_counter()
-    Xz = np.where(np.isfinite(X), X, 0.0)
+    Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
     der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                           velocity=sweep.velocity, acceleration=sweep.acceleration,
                           need_influence=stages.forces)

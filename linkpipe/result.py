@@ -56,6 +56,12 @@ class Motion:
     influence: np.ndarray
     link_angular_acceleration: np.ndarray | None
 
+    def rows(self, steps: slice) -> "Motion":
+        """The same motion at a slice of its steps (views, no copies)."""
+        return Motion(*(None if a is None else a[steps] for a in (
+            self.s, self.s_dot, self.s_ddot, self.position, self.velocity, self.acceleration,
+            self.status, self.influence, self.link_angular_acceleration)))
+
 
 @dataclass(frozen=True)
 class Forces:

@@ -50,30 +50,40 @@ def counts(status: np.ndarray) -> dict[str, int]:
     return {FLAG_MEANINGS[c]: int(n) for c, n in enumerate(found) if n}
 
 
-def assign(stage_statuses, residual: np.ndarray, tol_abs: float, stored) -> np.ndarray:
+def assign(stage_statuses, residual: np.ndarray, tol_abs: float, stored,
+           finite: np.ndarray | None = None) -> np.ndarray:
     """The one place a step's final status is decided (int8, (S,)).
 
     The most severe verdict of the stages (:func:`worst`); then an ok step whose position
     residual is above the tolerance that was asked for (``tol_abs``, a length) is
     not_converged; then an ok step where anything ``stored`` (arrays, step axis first) is not
-    finite is non_finite (:func:`ok_only_if_finite`)."""
+    finite, or ``finite`` (S,) is False (rows of arrays checked before), is non_finite
+    (:func:`ok_only_if_finite`)."""
     status = worst(*stage_statuses)
     with np.errstate(invalid="ignore"):
         loose = (status == OK) & ~(np.asarray(residual) <= tol_abs)
     status = np.where(loose, NOT_CONVERGED, status).astype(np.int8)
-    return ok_only_if_finite(status, stored)
+    return ok_only_if_finite(status, stored, finite)
 
 
-def ok_only_if_finite(status: np.ndarray, arrays) -> np.ndarray:
-    """Return ``status`` with NON_FINITE at every ok step where one of ``arrays`` (each with the
-    step axis first) holds an inf or NaN: a step is ok only if everything stored at it is finite."""
-    status = np.asarray(status)
-    ok = status == OK
+def finite_rows(arrays, n_steps: int) -> np.ndarray:
+    """(S,) True where every float array of ``arrays`` (step axis first) is finite."""
+    ok = np.ones(n_steps, dtype=bool)
     for a in arrays:
         a = np.asarray(a)
-        if a.dtype.kind != "f" or not ok.any():
+        if a.dtype.kind != "f":
             continue
         with np.errstate(invalid="ignore"):
-            finite = np.isfinite(a.reshape(a.shape[0], -1)).all(axis=1)
+            ok &= np.isfinite(a.reshape(a.shape[0], -1)).all(axis=1)
+    return ok
+
+
+def ok_only_if_finite(status: np.ndarray, arrays, finite: np.ndarray | None = None) -> np.ndarray:
+    """Return ``status`` with NON_FINITE at every ok step where one of ``arrays`` (each with the
+    step axis first) holds an inf or NaN, or ``finite`` is False: a step is ok only if
+    everything stored at it is finite."""
+    status = np.asarray(status)
+    ok = finite_rows(arrays, len(status)) if (status == OK).any() else np.ones(len(status), bool)
+    if finite is not None:
         ok &= finite
     return np.where((status == OK) & ~ok, NON_FINITE, status).astype(np.int8)

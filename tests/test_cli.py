@@ -179,3 +179,21 @@ def test_threads_option_is_checked(tmp_path, capsys):
     assert stop.value.code == 2
     assert "--threads" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+def test_verbose_prints_where_the_time_went(tmp_path, capsys):
+    """``-v``: one row per timed stage (the same stages as the .h5's seconds_* attributes),
+    "other" for the rest, and a total equal to their sum (rounded to the printed ms)."""
+    import h5py
+
+    from linkpipe.__main__ import main as cli
+
+    assert cli(["run", str(CONFIGS / "basketball_goal.toml"), "--out", str(tmp_path), "-v",
+                "--no-rrd"]) == 0
+    out = capsys.readouterr().out
+    table = out[out.index("  stage "):].splitlines()
+    rows = {line.split()[0]: float(line.split()[1]) for line in table[1:]}
+    with h5py.File(tmp_path / "basketball_goal.h5") as f:
+        stages = [k[len("seconds_"):] for k in f.attrs if k.startswith("seconds_")]
+    assert list(rows) == stages + ["hdf5", "other", "total"]
+    assert abs(sum(v for k, v in rows.items() if k != "total") - rows["total"]) <= 0.0005 * len(rows)

@@ -380,3 +380,91 @@ def test_a_load_at_a_shared_pin_is_what_its_pin_forces_sum_to():
     np.testing.assert_allclose(on_rocker, f[:, 1:] * u_r, atol=1e-9)
     np.testing.assert_allclose(on_coupler + on_rocker, np.broadcast_to(W, on_coupler.shape), atol=1e-9)
     np.testing.assert_allclose(F[:, J.index("A@crank")] + F[:, J.index("A@coupler")], 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("config", ["basketball_goal", "hard/double_parallelogram",
+                                    "hard/basketball_goal_extended", "hard/cylinder_full_stroke",
+                                    "dump_truck", "shear_press"])
+def test_force_stage_in_chunks_equals_one_piece(config, monkeypatch):
+    """Each step's forces depend on that step alone: the stage run in chunks of 7 steps (a
+    prime, so chunks cut the sweep anywhere, failed steps and redundant flags included) gives
+    the one-piece stage's arrays bit for bit, and the same flags and statuses."""
+    import linkpipe.forces as forces
+
+    scene = linkpipe.load_scene(CONFIGS / f"{config}.toml")
+    whole = linkpipe.solve(scene)
+    real = forces.compute_forces
+    monkeypatch.setattr(forces, "compute_forces",
+                        lambda model, motion, units, **kw: real(model, motion, units, chunk=7, **kw))
+    chunked = linkpipe.solve(scene)
+    assert len(whole.status) > 7 and whole.forces
+    assert list(chunked.forces) == list(whole.forces)
+    for name, (dims, data, unit) in whole.forces.items():
+        other = chunked.forces[name]
+        assert other[0] == dims and other[2] == unit, name
+        np.testing.assert_array_equal(other[1], data, err_msg=name)
+    np.testing.assert_array_equal(chunked.status, whole.status)
+
+
+@pytest.mark.parametrize("config", ["basketball_goal", "hard/double_parallelogram",
+                                    "hard/cylinder_full_stroke", "dump_truck"])
+def test_a_caller_that_wants_no_lagrange_variable_skips_the_multipliers(config):
+    """``wanted`` without any multiplier variable: the same input force and statuses bit for
+    bit (virtual work does not use the multipliers), and none of the multipliers' variables."""
+    from linkpipe.forces import LAGRANGE_VARIABLES
+
+    scene = linkpipe.load_scene(CONFIGS / f"{config}.toml")
+    whole = linkpipe.solve(scene)
+    lean = linkpipe.solve(scene, wanted=frozenset({"input_force"}))
+    np.testing.assert_array_equal(lean.forces["input_force"][1], whole.forces["input_force"][1])
+    np.testing.assert_array_equal(lean.status, whole.status)
+    assert LAGRANGE_VARIABLES & set(whole.forces) and not LAGRANGE_VARIABLES & set(lean.forces)
+    both = linkpipe.solve(scene, wanted=frozenset({"input_force", "joint_force"}))
+    np.testing.assert_array_equal(both.forces["joint_force"][1], whole.forces["joint_force"][1])
+
+
+def test_a_reused_stage_1_recomputes_only_the_effects_whose_inputs_changed(tmp_path):
+    """A fit's trials: one stage 1, force parameters changed one at a time. Each trial's input
+    force equals a fresh full solve of the same scene bit for bit, and the cache kept with the
+    stage 1 grows by exactly the effects that read the changed table (springs -> springs and
+    damping; a mass -> gravity and inertia; back to the start -> nothing new)."""
+    base = scene_from(EVERY_EFFECT, tmp_path, "base")
+    reuse = linkpipe.solve(base).kinematics
+    wanted = frozenset({"input_force", "spring_force"})
+    variants = [(EVERY_EFFECT, 6), (EVERY_EFFECT.replace("k = 120.0", "k = 150.0"), 2),
+                (EVERY_EFFECT.replace("mass = 2.0", "mass = 2.5"), 2), (EVERY_EFFECT, 0)]
+    for i, (text, new_entries) in enumerate(variants):
+        scene = scene_from(text, tmp_path, f"v{i}")
+        before = len(reuse.force_cache)
+        lean = linkpipe.solve(scene, kinematics=reuse, wanted=wanted)
+        assert len(reuse.force_cache) - before == new_entries, i
+        full = linkpipe.solve(scene)
+        for name in ("input_force", "spring_force", "power"):
+            np.testing.assert_array_equal(lean.forces[name][1], full.forces[name][1], err_msg=name)
+        np.testing.assert_array_equal(lean.status, full.status)
+
+
+def test_per_step_constants_are_cut_into_the_same_chunks(tmp_path):
+    """A study's constants with a step axis (a different mass and spring rate at every step):
+    the force stage in chunks of 7 steps equals the one-piece stage bit for bit, so each chunk
+    took its own rows of the constants (a chunk given the wrong rows would differ)."""
+    import dataclasses
+
+    from linkpipe.forces import compute_forces
+    from linkpipe.forces.constants import ForceConstants
+    from linkpipe.result import Motion
+
+    r = linkpipe.solve(scene_from(EVERY_EFFECT, tmp_path))
+    k, S = r.kinematics, r.n_steps
+    base = ForceConstants.of(r.model)
+    ramp = np.linspace(0.5, 2.0, S)[:, None]
+    per_step = dataclasses.replace(base, mass=base.mass * ramp, spring_k=base.spring_k * ramp)
+    motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=r.position,
+                    velocity=k.velocity, acceleration=k.acceleration, status=k.der["status"],
+                    influence=k.der["influence"], link_angular_acceleration=k.link_rates[1])
+    units = dict(force="N", length="m", time="s", mass="kg")
+    whole = compute_forces(r.model, motion, units, per_step)
+    chunked = compute_forces(r.model, motion, units, per_step, chunk=7)
+    assert not np.allclose(whole.variables["input_force"][1], r.forces["input_force"][1])
+    for name, (dims, data, unit) in whole.variables.items():
+        np.testing.assert_array_equal(chunked.variables[name][1], data, err_msg=name)

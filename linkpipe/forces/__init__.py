@@ -22,6 +22,7 @@ from ..model import Model
 from ..result import Forces, Motion
 from ..status import OK
 from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
+from .constants import ForceConstants
 from .effects import EFFECTS, Context, applies
 from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
 from .virtual_work import Influence, along_input_directions
@@ -29,30 +30,143 @@ from .virtual_work import Influence, along_input_directions
 __all__ = ["compute_forces", "EFFECTS"]
 
 
-def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
-    """Compute every named effect and the input force of a solved sweep.
+#: steps per chunk of the force stage: each chunk's temporaries (a few dozen (chunk, P, 2)
+#: arrays) stay in cache and the stage's peak memory is its outputs plus one chunk's work, not
+#: a multiple of the sweep (benchmarks/bench_logs.py measures both)
+FORCE_CHUNK = 16384
 
-    ``motion``: the sweep (positions, derivatives, kinematic status, Jacobian inverse);
-    ``units``: the scene's unit strings. Returns :class:`Forces` (variables in the contract's
+
+#: the variables only the Lagrange multipliers give (an independent solve: skipped when a caller
+#: such as a fit's trial needs none of them)
+LAGRANGE_VARIABLES = frozenset({"input_force_lagrange", "link_force", "slider_force",
+                                "joint_force", "ground_reaction"})
+
+
+def compute_forces(model: Model, motion: Motion, units: dict,
+                   constants: ForceConstants | None = None, chunk: int = FORCE_CHUNK,
+                   lagrange: bool = True, cache: dict | None = None) -> Forces:
+    """Compute every named effect and the input force of a solved sweep, in chunks of steps.
+
+    ``motion``: the sweep (positions, derivatives, kinematic status, influence coefficients);
+    ``units``: the scene's unit strings; ``constants``: the force tables' numbers when they
+    differ from the scene's (per step: a study's variants on one step axis; cut into the same
+    chunks). Returns :class:`Forces` (variables in the contract's
     names, the labels of the dimensions they add, and the status with no_leverage added).
+    Every step's forces depend on that step alone, so each chunk is solved on its own and
+    written into outputs allocated once; the per-joint ``*_unique`` flags (no self-stress
+    reaches that force at any ok step) are the minimum over the chunks. ``lagrange=False``
+    leaves out the multipliers and what they give (:data:`LAGRANGE_VARIABLES`); then a
+    ``cache`` dict kept with one stage 1 across calls (a fit's trials) saves the influence
+    coefficients and every effect whose scene inputs did not change (:func:`_effect_terms`).
     """
-    ctx = Context.of(model, motion, units)
-    n_steps = ctx.n_steps
-    Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)
-    influence = Influence.of(model, motion.position, Xz, motion.s, motion.influence)
-    variables: dict = {}
-    coords: dict = {}
+    n_steps = motion.position.shape[0]
+    if cache is not None and constants is not None:
+        raise ValueError("a cache keys effects by the scene's tables: not with constants")
+    if n_steps <= chunk:
+        return _forces_of(model, motion, units, constants, lagrange, cache, (0, n_steps))
+    out = None
+    for lo in range(0, n_steps, chunk):
+        rows = slice(lo, lo + chunk)
+        part = _forces_of(model, motion.rows(rows), units,
+                          None if constants is None else constants.rows(rows), lagrange, cache,
+                          (lo, chunk))
+        out = _gathered(out, part, n_steps)
+        for name, (dims, data, unit) in part.variables.items():
+            if dims[:1] == ("step",):
+                out.variables[name][1][lo:lo + len(part.status)] = data
+        out.status[lo:lo + len(part.status)] = part.status
+    return out
 
-    # 1. the effects; the Lagrange side's Q - M qdd and each body's M_k Xdd - Q_k beside them
-    applied, bodies = {}, {}
-    lagrange_points, lagrange_couples = ctx.zeros_points(), ctx.zeros_links()
+
+def _gathered(out: Forces | None, part: Forces, n_steps: int) -> Forces:
+    """The whole sweep's Forces, allocated from the first chunk (step-first variables of
+    ``n_steps`` rows, filled by the caller); later chunks add their flags (minimum)."""
+    if out is None:
+        variables = {name: (dims, np.empty((n_steps,) + data.shape[1:], data.dtype)
+                            if dims[:1] == ("step",) else data.copy(), unit)
+                     for name, (dims, data, unit) in part.variables.items()}
+        return Forces(variables=variables, coords=dict(part.coords),
+                      status=np.empty(n_steps, part.status.dtype), undefined=part.undefined)
+    for name, (dims, data, unit) in part.variables.items():
+        if dims[:1] == ("step",):
+            continue
+        if name in out.variables:
+            np.minimum(out.variables[name][1], data, out=out.variables[name][1])
+        else:
+            out.variables[name] = (dims, data.copy(), unit)
+    return out
+
+
+#: the scene entries each effect reads: an effect is computed again only when these change
+EFFECT_INPUTS = {"springs": ("springs", "torsion_springs", "effects"), "damping": ("springs",),
+                 "gravity": ("masses", "gravity"), "loads": ("loads",), "inertia": ("masses",)}
+
+
+def _effect_terms(ctx: Context, influence: Influence, cache: dict | None, chunk_key) -> dict:
+    """{effect: (generalized force (S, nd), variables, coords, Effect or None)} of every effect
+    the scene names. With ``cache`` (virtual work only: a fit's trials on one stage 1), an
+    effect whose scene inputs (:data:`EFFECT_INPUTS`) equal those of an earlier call on the
+    same chunk is taken from it, its Effect left out (None)."""
+    scene, out = ctx.model.scene, {}
     for name, effect_of in EFFECTS.items():
         if name not in ctx.effects or not applies(name, ctx):
             continue
+        key = (chunk_key, name, repr([getattr(scene, a) for a in EFFECT_INPUTS[name]]))
+        if cache is not None and key in cache:
+            out[name] = cache[key]
+            continue
         effect = effect_of(ctx)
-        applied[name] = effect.applied
-        variables.update(effect.variables)
-        coords.update(effect.coords)
+        out[name] = (influence.generalized(effect.applied), effect.variables, effect.coords, effect)
+        if cache is not None:
+            cache[key] = out[name][:3] + (None,)
+    return out
+
+
+def _forces_of(model: Model, motion: Motion, units: dict, constants=None, lagrange: bool = True,
+               cache: dict | None = None, chunk_key=0) -> Forces:
+    """The force stage on one chunk of steps (see :func:`compute_forces`)."""
+    ctx = Context.of(model, motion, units, constants, lagrange)
+    n_steps = ctx.n_steps
+    Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)
+    if cache is not None and (chunk_key, "influence") in cache:
+        influence = cache[(chunk_key, "influence")]
+    else:
+        influence = Influence.of(model, motion.position, Xz, motion.s, motion.influence)
+        if cache is not None:
+            cache[(chunk_key, "influence")] = influence
+    terms = _effect_terms(ctx, influence, None if lagrange else cache, chunk_key)
+    variables: dict = {}
+    coords: dict = {}
+    for _, names, labels, _ in terms.values():
+        variables.update(names)
+        coords.update(labels)
+
+    # virtual work: F_j = -sum(Q . dq/ds_j), and each effect's power
+    input_force = (-sum(t[0] for t in terms.values()) if terms
+                   else np.zeros((n_steps, model.n_drivers)))
+    variables["power"] = (("step", "effect"), np.stack(
+        [(t[0] * motion.s_dot).sum(axis=1) for t in terms.values()], axis=1)
+        if terms else np.zeros((n_steps, 0)), f"{units['force']}*{units['length']}/{units['time']}")
+    coords["effect"] = list(terms)
+
+    if not lagrange:
+        status, unit = along_input_directions(model, influence, [input_force], motion.status,
+                                              units, Xz, ctx.constants.size)
+        variables["input_force"] = (("step", "driver"), input_force, unit)
+        return Forces(variables=variables, coords=coords, status=status)
+    return _with_lagrange(model, ctx, motion, units, influence, terms, input_force, variables,
+                          coords, Xz)
+
+
+def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, variables, coords,
+                   Xz) -> Forces:
+    """The Lagrange side: ``J^T lambda = Q - M qdd`` (an independent solve), the input force
+    from it, internal forces and every pin's reaction."""
+    n_steps = ctx.n_steps
+    # each body's M_k Xdd - Q_k, and Q - M qdd (inertia enters through the mass matrix)
+    bodies, applied = {}, {name: t[3].applied for name, t in terms.items()}
+    lagrange_points, lagrange_couples = ctx.zeros_points(), ctx.zeros_links()
+    for _, _, _, effect in terms.values():
         if effect.lagrange is None:
             lagrange_points += effect.applied.point_forces
             lagrange_couples += effect.applied.couples
@@ -61,23 +175,13 @@ def compute_forces(model: Model, motion: Motion, units: dict) -> Forces:
         for li, body in effect.bodies.items():
             merge_bodies(bodies.setdefault(li, {}), body)
 
-    # 2. virtual work: F_j = -sum(Q . dq/ds_j), and each effect's power
-    generalized = {name: influence.generalized(a) for name, a in applied.items()}
-    input_force = (-sum(generalized.values()) if generalized
-                   else np.zeros((n_steps, model.n_drivers)))
-    variables["power"] = (("step", "effect"), np.stack(
-        [(generalized[e] * motion.s_dot).sum(axis=1) for e in applied], axis=1)
-        if applied else np.zeros((n_steps, 0)), f"{units['force']}*{units['length']}/{units['time']}")
-    coords["effect"] = list(applied)
-
-    # 3. Lagrange multipliers: J^T lambda = Q - M qdd (an independent solve)
     ok = motion.status == OK
     q_minus_m_qdd = with_couples_as_pairs(model, lagrange_points, lagrange_couples, Xz)
     generalized_q = q_minus_m_qdd[:, model.moving].reshape(n_steps, -1)
     lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
-                                          motion.status, units, Xz)
+                                          motion.status, units, Xz, ctx.constants.size)
     variables["input_force"] = (("step", "driver"), input_force, unit)
     variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
     internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)

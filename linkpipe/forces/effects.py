@@ -16,14 +16,16 @@ from ..model import Model
 from ..result import Motion
 from .applied import (Applied, add_at_body_point, add_body, body_point, body_point_loads, center_frame,
                       link_index, merge_bodies)
+from .constants import ForceConstants
 from .springs import SpringGeometry, TorsionSprings, couples_on_bodies, spring_law
 
 
 @dataclass(frozen=True)
 class Context:
     """A solved sweep as the effects see it: positions, velocities and accelerations
-    (S, n_points, 2; zeros where the scene needs none), the scene's units and effects, and
-    each mass with the frame of its centre ``(ia, ib, u, v, L)``."""
+    (S, n_points, 2; zeros where the scene needs none), the scene's units and effects,
+    each mass with the frame of its centre ``(ia, ib, u, v, L)`` and the force tables'
+    numbers (:class:`.constants.ForceConstants`, per step where a study varies them)."""
 
     model: Model
     motion: Motion
@@ -33,15 +35,20 @@ class Context:
     velocity: np.ndarray
     acceleration: np.ndarray
     masses: tuple
+    constants: ForceConstants
+    #: whether the Lagrange side (``lagrange``, ``bodies`` of each Effect) is wanted
+    lagrange: bool = True
 
     @classmethod
-    def of(cls, model: Model, motion: Motion, units: dict) -> "Context":
+    def of(cls, model: Model, motion: Motion, units: dict,
+           constants: ForceConstants | None = None, lagrange: bool = True) -> "Context":
         X = motion.position
-        zeros = np.zeros_like(X)
+        V, A = motion.velocity, motion.acceleration
+        zeros = np.zeros_like(X) if V is None or A is None else None
         masses = tuple((m, center_frame(model, m.link, m.center)) for m in model.scene.masses)
         return cls(model, motion, units, frozenset(model.scene.effects), X,
-                   motion.velocity if motion.velocity is not None else zeros,
-                   motion.acceleration if motion.acceleration is not None else zeros, masses)
+                   V if V is not None else zeros, A if A is not None else zeros, masses,
+                   constants if constants is not None else ForceConstants.of(model), lagrange)
 
     @property
     def n_steps(self) -> int:
@@ -107,15 +114,15 @@ def damping(ctx: Context) -> Effect:
 
 def gravity(ctx: Context) -> Effect:
     """Each mass's weight ``m g`` at its centre; its potential energy."""
-    model, g = ctx.model, np.asarray(ctx.model.scene.gravity, dtype=float)
+    model, g, mass = ctx.model, ctx.constants.gravity, ctx.constants.mass
     bodies = {}
-    for m, frame in ctx.masses:  # -Q_k: the weight on the body
+    for i, (m, frame) in enumerate(ctx.masses):  # -Q_k: the weight on the body
         merge_bodies(bodies.setdefault(link_index(model, m.link), {}),
-                     body_point_loads(-m.mass * g, *frame, ctx.n_steps))
+                     body_point_loads(-mass[..., i, None] * g, *frame, ctx.n_steps))
     potential = np.zeros(ctx.n_steps)
-    for m, frame in ctx.masses:
+    for i, (m, frame) in enumerate(ctx.masses):
         G = body_point(ctx.position, *frame)
-        potential -= m.mass * (G[:, 0] * g[0] + G[:, 1] * g[1])
+        potential -= mass[..., i] * (G[:, 0] * g[..., 0] + G[:, 1] * g[..., 1])
     weight = ctx.zeros_points()
     for body in bodies.values():
         add_body(weight, body, -1.0)
@@ -125,13 +132,13 @@ def gravity(ctx: Context) -> Effect:
 
 def loads(ctx: Context) -> Effect:
     """Constant point forces (global frame) and couples on links (CCW positive)."""
-    model = ctx.model
+    model, c = ctx.model, ctx.constants
     point_forces, couples = ctx.zeros_points(), ctx.zeros_links()
-    for ld in model.scene.loads:
+    for k, ld in enumerate(model.scene.loads):
         if ld.point is not None:
-            point_forces[:, model.point_names.index(ld.point)] += np.asarray(ld.force, dtype=float)
+            point_forces[:, model.point_names.index(ld.point)] += c.load_force[..., k, :]
         else:
-            couples[:, link_index(model, ld.link)] += float(ld.torque)
+            couples[:, link_index(model, ld.link)] += c.load_torque[..., k]
     return Effect(Applied(point_forces, couples))
 
 
@@ -141,18 +148,22 @@ def inertia(ctx: Context) -> Effect:
     model, A = ctx.model, ctx.acceleration
     point_forces, couples, m_qdd = ctx.zeros_points(), ctx.zeros_links(), ctx.zeros_points()
     bodies = {}
-    for m, (ia, ib, u, v, L) in ctx.masses:
+    for i, (m, (ia, ib, u, v, L)) in enumerate(ctx.masses):
+        mass, inertia_ = ctx.constants.mass[..., i, None], ctx.constants.inertia[..., i]
         a_center = body_point(A, ia, ib, u, v, L)
-        add_at_body_point(point_forces, -m.mass * a_center, ia, ib, u, v, L)
+        add_at_body_point(point_forces, -mass * a_center, ia, ib, u, v, L)
         li = link_index(model, m.link)
-        couples[:, li] += -m.inertia * ctx.motion.link_angular_acceleration[:, li]
-        body_m_qdd = body_point_loads(m.mass * a_center, ia, ib, u, v, L, ctx.n_steps)  # M_k Xdd
+        couples[:, li] += -inertia_ * ctx.motion.link_angular_acceleration[:, li]
+        if not ctx.lagrange:
+            continue
+        body_m_qdd = body_point_loads(mass * a_center, ia, ib, u, v, L, ctx.n_steps)  # M_k Xdd
         dd = A[:, ib] - A[:, ia]
-        body_m_qdd[ib] += m.inertia / L**2 * dd
-        body_m_qdd[ia] -= m.inertia / L**2 * dd
+        body_m_qdd[ib] += (inertia_ / L**2)[..., None] * dd
+        body_m_qdd[ia] -= (inertia_ / L**2)[..., None] * dd
         add_body(m_qdd, body_m_qdd)
         merge_bodies(bodies.setdefault(li, {}), body_m_qdd)
-    return Effect(Applied(point_forces, couples), lagrange=-m_qdd, bodies=bodies)
+    return Effect(Applied(point_forces, couples), lagrange=-m_qdd if ctx.lagrange else None,
+                  bodies=bodies)
 
 
 def applies(name: str, ctx: Context) -> bool:

@@ -19,7 +19,7 @@ from .applied import Applied, couple_as_body, link_index, merge_bodies, scatter_
 @dataclass(frozen=True)
 class SpringGeometry:
     """Every spring's end points, length (S, n_springs), unit vector a->b (S, n_springs, 2),
-    free length and preload (n_springs,) and stiffness."""
+    free length, preload and stiffness (n_springs,) or (S, n_springs)."""
 
     ia: np.ndarray
     ib: np.ndarray
@@ -31,23 +31,25 @@ class SpringGeometry:
 
     @classmethod
     def of(cls, ctx) -> "SpringGeometry":
-        model, springs = ctx.model, ctx.model.scene.springs
+        """From the context's positions and force constants (``ctx.constants``: per spring,
+        or per step and spring)."""
+        model, springs, c = ctx.model, ctx.model.scene.springs, ctx.constants
         names = model.point_names
         ia = np.array([names.index(sp.between[0]) for sp in springs], dtype=np.intp)
         ib = np.array([names.index(sp.between[1]) for sp in springs], dtype=np.intp)
         d = ctx.position[:, ib] - ctx.position[:, ia]
         length = np.hypot(d[..., 0], d[..., 1])
-        start_len = np.hypot(*(model.start_position[ib] - model.start_position[ia]).T)
-        free = np.array([sp.free_length if sp.free_length is not None else start_len[i]
-                         for i, sp in enumerate(springs)])
-        preload = np.array([0.0 if sp.free_length is not None or sp.preload is None else sp.preload
-                            for sp in springs])
+        d0 = c.start_position[..., ib, :] - c.start_position[..., ia, :]
+        start_len = np.hypot(d0[..., 0], d0[..., 1])
+        given = np.array([sp.free_length is not None for sp in springs], dtype=bool)
+        free = np.where(given, c.spring_free_length, start_len)
+        preload = np.where(given | np.isnan(c.spring_preload), 0.0, c.spring_preload)
         unit = d / np.where(length > 0, length, np.nan)[..., None]
-        return cls(ia, ib, length, unit, free, preload, np.array([sp.k for sp in springs], dtype=float))
+        return cls(ia, ib, length, unit, free, preload, c.spring_k)
 
     def damping_force(self, ctx) -> np.ndarray:
         """(S, n_springs) the damper's force, c times the rate of lengthening."""
-        c = np.array([sp.damping for sp in ctx.model.scene.springs], dtype=float)
+        c = ctx.constants.spring_damping
         rate = np.einsum("skj,skj->sk", ctx.velocity[:, self.ib] - ctx.velocity[:, self.ia], self.unit)
         return c * rate
 
@@ -75,10 +77,9 @@ def spring_law(geo: SpringGeometry, springs) -> tuple[np.ndarray, np.ndarray, np
     extension = geo.length - np.where(geo.k > 0, geo.free_length - geo.preload / k_pos, geo.free_length)
     for j, sp in enumerate(springs):
         if sp.kind in ("tension_only", "compression_only"):
-            t = tension[:, j]
+            t, kj = tension[:, j], geo.k[..., j]
             active = t > 0 if sp.kind == "tension_only" else t < 0
-            one_sided = (0.5 * geo.k[j] * extension[:, j] ** 2 if geo.k[j] > 0
-                         else t * stretch[:, j])
+            one_sided = np.where(kj > 0, 0.5 * kj * extension[:, j] ** 2, t * stretch[:, j])
             tension[:, j] = np.where(active, t, 0.0)
             energy[:, j] = np.where(active, one_sided, 0.0)
         elif sp.kind == "gas":

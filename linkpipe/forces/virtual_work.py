@@ -43,11 +43,12 @@ class Influence:
 
 
 def along_input_directions(model: Model, influence: Influence, forces: list, status, units: dict,
-                           X: np.ndarray):
+                           X: np.ndarray, size=None):
     """Divide each driver's generalized forces by its input point's leverage ``n . dr_H/ds``
     where the scene gives ``input`` (``n`` global, or turning with ``input.link``: positions X
     (S, P, 2)); a step where that leverage vanishes gets NO_LEVERAGE (and NaN); any step not ok
-    gets NaN. Returns (status, unit of the input force)."""
+    gets NaN. ``size``: the mechanism's length scale, float or (S,) (default ``model.size``).
+    Returns (status, unit of the input force)."""
     force_unit, length_unit = units["force"], units["length"]
     status = status.copy()
     unit_by_driver = []
@@ -58,7 +59,7 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
         n = input_direction(model, driver.input, X)  # (S, 2)
         ip = model.point_names.index(driver.input.point)
         leverage = influence.points[:, ip, 0, j] * n[:, 0] + influence.points[:, ip, 1, j] * n[:, 1]
-        scale = model.size if driver.kind == "angle" else 1.0  # length/rad, or length/length
+        scale = (model.size if size is None else size) if driver.kind == "angle" else 1.0  # length/rad, or length/length
         flat = np.abs(leverage) < LEVERAGE_RTOL * scale
         status[flat & (status == OK)] = NO_LEVERAGE
         safe = np.where(flat, np.nan, leverage)

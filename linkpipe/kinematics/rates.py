@@ -27,8 +27,9 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     (pseudo-inverse under redundant constraints). Per step: the condition ``|J|_1 |J^-1|_1``
     (sigma_1/sigma_n when redundant; estimated beyond ESTIMATE_FROM unknowns, exact near the
     threshold) flags SINGULAR steps (their derivatives NaN); ``qd = J^-1 (-Phi_t)``,
-    ``qdd = J^-1 gamma`` (or the given ``velocity`` / ``acceleration``, e.g. the dyads', checked
-    by their residuals); with ``need_influence`` the influence coefficients
+    ``qdd = J^-1 gamma`` (or the given ``velocity`` / ``acceleration`` (S, P, 2), e.g. the
+    dyads', checked by their residuals and completed in place: NaN at every step not ok, zero
+    at fixed points, so a sweep's rates are not held twice); with ``need_influence`` the influence coefficients
     ``dq/ds = -J^-1 Phi_s`` over the driver rows (what the force stage needs of the inverse).
 
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
@@ -42,8 +43,9 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     status = status.copy()
     condition = np.full(S, np.nan)
     influence = np.full((S, model.n_q, model.n_drivers), np.nan) if need_influence else None
-    V = np.full((S, model.n_points, 2), np.nan)
-    A = np.full((S, model.n_points, 2), np.nan) if need_acceleration else None
+    V = velocity if velocity is not None else np.full((S, model.n_points, 2), np.nan)
+    A = (acceleration if acceleration is not None else np.full((S, model.n_points, 2), np.nan)
+         ) if need_acceleration else None
     vres = np.full(S, np.nan)
     ares = np.full(S, np.nan) if need_acceleration else None
     for lo in range(0, S, chunk):
@@ -68,12 +70,17 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         qd = solve(phit) if velocity is None else model.q_of(velocity[gi]).T
         vres[gi] = np.abs(times_jacobian(qd) - phit.T).max(axis=0)
         Vg = model.velocities(qd.T)
-        V[gi] = Vg
+        if velocity is None:
+            V[gi] = Vg
         if need_acceleration:
             g = model.gamma(Xg, Vg, sg, s_dot[gi], s_ddot[gi])  # (g, m)
             qdd = solve(g) if acceleration is None else model.q_of(acceleration[gi]).T
             ares[gi] = np.abs(times_jacobian(qdd) - g.T).max(axis=0)
-            A[gi] = model.velocities(qdd.T)
+            if acceleration is None:
+                A[gi] = model.velocities(qdd.T)
+    for given, out in ((velocity, V), (acceleration, A)):
+        if given is not None and out is not None:
+            out[status != OK] = np.nan
     V[:, model.fixed] = 0.0
     if A is not None:
         A[:, model.fixed] = 0.0
@@ -227,16 +234,23 @@ def link_angles_unwrapped(model: Model, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def link_rates(model: Model, X, V, A=None):
-    """Return angular velocity (S, n_links) and, with A, angular acceleration of every link."""
-    d = X[:, model.link_b] - X[:, model.link_a]
-    dv = V[:, model.link_b] - V[:, model.link_a]
-    n2 = np.einsum("slj,slj->sl", d, d)
-    w = (d[..., 0] * dv[..., 1] - d[..., 1] * dv[..., 0]) / n2
-    if A is None:
-        return w, None
-    da = A[:, model.link_b] - A[:, model.link_a]
-    al = (d[..., 0] * da[..., 1] - d[..., 1] * da[..., 0]) / n2 - 2 * w * np.einsum("slj,slj->sl", d, dv) / n2
+def link_rates(model: Model, X, V, A=None, chunk: int = CHUNK):
+    """Return angular velocity (S, n_links) and, with A, angular acceleration of every link,
+    in chunks of steps (each chunk's temporaries stay in cache; only the outputs are whole)."""
+    S, n_links = X.shape[0], len(model.link_a)
+    w = np.empty((S, n_links))
+    al = np.empty((S, n_links)) if A is not None else None
+    for lo in range(0, S, chunk):
+        rows = slice(lo, lo + chunk)
+        d = X[rows, model.link_b] - X[rows, model.link_a]
+        dv = V[rows, model.link_b] - V[rows, model.link_a]
+        n2 = np.einsum("slj,slj->sl", d, d)
+        wc = w[rows]
+        np.divide(d[..., 0] * dv[..., 1] - d[..., 1] * dv[..., 0], n2, out=wc)
+        if al is not None:
+            da = A[rows, model.link_b] - A[rows, model.link_a]
+            al[rows] = ((d[..., 0] * da[..., 1] - d[..., 1] * da[..., 0]) / n2
+                        - 2 * wc * np.einsum("slj,slj->sl", d, dv) / n2)
     return w, al
 
 

@@ -237,10 +237,7 @@ def build_model(scene: Scene) -> Model:
     index = {n: i for i, n in enumerate(names)}
     X0 = np.array([[p.x, p.y] for p in scene.points], dtype=float)
     fixed = np.array([p.fixed for p in scene.points], dtype=bool)
-    span = X0.max(axis=0) - X0.min(axis=0) if len(X0) else np.zeros(2)
-    size = float(np.hypot(*span))
-    lens = [float(np.hypot(*(X0[index[l.points[1]]] - X0[index[l.points[0]]]))) for l in scene.links]
-    size = max([size] + lens) or 1.0
+    size = mechanism_size(scene, X0)
 
     def ints(x):
         return np.asarray(x, dtype=np.intp).reshape(-1)
@@ -269,6 +266,20 @@ def build_model(scene: Scene) -> Model:
         moving=np.flatnonzero(~fixed), size=size, **arrays, link_a=ia, link_b=ib,
         dist_link=ints(dist["link"]), loc_link=ints(loc["link"]), rows=eq.rows_of(**arrays),
     )
+
+
+def mechanism_size(scene: Scene, X0: np.ndarray):
+    """The mechanism's length scale: the diagonal of its drawn points' bounding box, or its
+    longest link (first two points) where longer; 1 when both are 0. ``X0`` (P, 2) -> float,
+    or (R, P, 2) -> (R,) (a study's variants, each with its own drawing)."""
+    index = {n: i for i, n in enumerate(scene.point_names)}
+    span = (X0.max(axis=-2) - X0.min(axis=-2)) if X0.shape[-2] else np.zeros(X0.shape[:-2] + (2,))
+    size = np.hypot(span[..., 0], span[..., 1])
+    for link in scene.links:
+        d = X0[..., index[link.points[1]], :] - X0[..., index[link.points[0]], :]
+        size = np.maximum(size, np.hypot(d[..., 0], d[..., 1]))
+    size = np.where(size > 0, size, 1.0)
+    return float(size) if size.ndim == 0 else size
 
 
 def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray):

@@ -41,6 +41,17 @@ APPLICATION_ID = "linkpipe"
 
 #: the most steps a recording keeps; past it a uniform stride (the HDF5 keeps every step)
 MAX_STEPS = 100_000
+#: the largest recording written (issue 16: larger ones load slowly or not at all in the viewer);
+#: a sweep whose recording would be larger keeps a uniform stride of steps
+MAX_BYTES = 50_000_000
+#: sweeps up to this many steps are recorded whole without measuring their size: no scene
+#: records 5 kB a step (measured: 0.5 kB for a four-bar's kinematics, 0.9 kB with every
+#: effect, 0.9 kB for the basketball goal)
+UNMEASURED_STEPS = 10_000
+#: the part of the size cap the plan fills
+SIZE_MARGIN = 0.9
+#: the samples of steps recorded into memory to measure a recording's fixed and per-step bytes
+SAMPLE_STEPS = (250, 1000)
 
 
 def stride_of(n_steps: int, max_steps: int | None = MAX_STEPS) -> int:
@@ -50,24 +61,57 @@ def stride_of(n_steps: int, max_steps: int | None = MAX_STEPS) -> int:
     return -(-n_steps // max_steps)
 
 
+def recorded_bytes(result) -> int:
+    """The bytes of ``result``'s recording, recorded into memory (the encoding a file gets)."""
+    stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"size-{uuid.uuid4().hex}")
+    memory = stream.memory_recording()
+    log_result(stream, result)
+    return len(memory.drain_as_bytes())
+
+
+def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES):
+    """Return (stride, why): the uniform stride of steps a recording keeps and, when it is
+    more than 1, why ("--rrd-max-steps N" or the size cap). The size of a long sweep's
+    recording is measured on two evenly spaced samples of its steps (:data:`SAMPLE_STEPS`):
+    their difference gives the bytes per step, the rest is fixed; the stride keeps the whole
+    recording within ``max_bytes`` (0/None: no size cap)."""
+    n = result.n_steps
+    stride, why = stride_of(n, max_steps), f"--rrd-max-steps {max_steps:,}" if max_steps else ""
+    if max_bytes and n > UNMEASURED_STEPS:
+        (k0, b0), (k1, b1) = [(len(rows), recorded_bytes(result.strided(rows))) for rows in
+                              (np.unique(np.linspace(0, n - 1, k).round().astype(int))
+                               for k in SAMPLE_STEPS)]
+        per_step = max(b1 - b0, 0) / (k1 - k0)
+        fixed = max(b0 - per_step * k0, 0.0)
+        # 10 % kept free: denser steps compress a little worse than the samples (measured:
+        # a recording planned for 1 MB from the samples came out at 1.06 MB)
+        room = max(SIZE_MARGIN * max_bytes - fixed, per_step)  # at least one step
+        by_size = int(np.ceil(n * per_step / room)) if per_step > 0 else 1
+        if by_size > stride:
+            stride, why = by_size, f"{max_bytes / 1e6:,.0f} MB at most"
+    return stride, why
+
+
 def write(result, path, spawn: bool = False, connect: str | None = None,
-          max_steps: int | None = MAX_STEPS) -> None:
+          max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES) -> str | None:
     """Write the recording of ``result`` to ``path`` (``None``: no file) and optionally stream it.
 
     ``spawn=True`` starts a Rerun viewer and streams to it; ``connect`` streams to a running
     viewer at that address (``rerun+http://host:port/proxy``). The file is written to a
-    temporary name and renamed into place when complete. A sweep longer than ``max_steps`` is
-    recorded at a uniform stride of steps (:func:`stride_of`), said in a static ``info`` text
-    entity; the step timeline keeps the sweep's own step numbers.
+    temporary name and renamed into place when complete. A sweep longer than ``max_steps``, or
+    whose recording would exceed ``max_bytes``, is recorded at a uniform stride of steps
+    (:func:`plan`), said in a static ``info`` text entity; the step timeline keeps the sweep's
+    own step numbers. Returns what was kept ("every 4th step (91 of 361; ...)"), or None
+    when every step was.
     """
     if path is None and not spawn and not connect:
-        return
-    stride = stride_of(result.n_steps, max_steps)
-    info = None
+        return None
+    stride, why = plan(result, max_steps, max_bytes)
+    info = kept = None
     if stride > 1:
         rows = np.arange(0, result.n_steps, stride)
-        info = (f"This recording keeps every {stride}th step ({len(rows):,} of "
-                f"{result.n_steps:,}, --rrd-max-steps {max_steps:,}); the .h5 keeps every step.")
+        kept = f"every {stride}th step ({len(rows):,} of {result.n_steps:,}; {why})"
+        info = f"This recording keeps {kept}; the .h5 keeps every step."
         result = result.strided(rows)
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
@@ -91,6 +135,7 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
             log_result(stream, result)
     if spawn or connect:
         stream.disconnect()
+    return kept
 
 
 def log_result(stream: rr.RecordingStream, result) -> None:

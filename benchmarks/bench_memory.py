@@ -1,0 +1,81 @@
+"""The memory estimate against measured peaks (issue 16): each case in a fresh process runs
+``linkpipe.solve`` and writes the ``.h5``, then prints the process's peak resident memory next
+to ``pipeline.memory_needed`` (the upper bound ``run`` and ``check`` refuse a sweep by).
+
+    .venv/bin/python benchmarks/bench_memory.py            # about a minute
+    .venv/bin/python benchmarks/bench_memory.py --scale 0.1   # a tenth of the steps
+
+Cases: the crank-rocker's kinematics (positions, velocities, accelerations) at 2M steps; the
+same with every effect at 1M; the basketball goal with springs, gravity and inertia at 1M;
+Jansen's linkage (general Newton path, 8 links) at 200k. Verdict per case: the estimate must be
+at least the peak (an estimate below it could let the kernel kill a run half-way) and is
+reported as a ratio (how much it over-asks).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import re
+import resource
+import subprocess
+import sys
+import tempfile
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+CASES = {  # name: (config, steps, extra TOML)
+    "crank_rocker kinematics": ("fourbar_crank_rocker", 2_000_000, ""),
+    "crank_rocker every effect": ("fourbar_crank_rocker", 1_000_000, "EFFECTS"),
+    "basketball goal": ("basketball_goal", 1_000_000, ""),
+    "jansen (newton)": ("jansen", 200_000, ""),
+}
+
+
+def scene_text(config: str, steps: int, extra: str) -> str:
+    text = (ROOT / "configs" / f"{config}.toml").read_text()
+    text = re.sub(r"^(steps|step) = [\d.]+", f"steps = {steps}", text, count=1, flags=re.M)
+    if extra == "EFFECTS":
+        from bench_sweep import EFFECTS
+        text += EFFECTS
+    return text
+
+
+def child(name: str, scale: float) -> None:
+    import linkpipe
+    from linkpipe.pipeline import memory_needed
+    from linkpipe.stores import hdf5
+    config, steps, extra = CASES[name]
+    folder = pathlib.Path(tempfile.mkdtemp())
+    path = folder / "s.toml"
+    path.write_text(scene_text(config, int(steps * scale), extra))
+    scene = linkpipe.load_scene(str(path))
+    result = linkpipe.solve(scene)
+    hdf5.write(result, folder / "s.h5")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    print(json.dumps(dict(steps=scene.n_steps, peak=peak, estimate=memory_needed(scene),
+                          message=result.message)))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--scale", type=float, default=1.0)
+    p.add_argument("--child")
+    args = p.parse_args(argv)
+    if args.child:
+        return child(args.child, args.scale) or 0
+    print(f"{'case':<28}{'steps':>11}{'peak MB':>10}{'estimate MB':>13}{'ratio':>7}  verdict")
+    for name in CASES:
+        out = subprocess.run([sys.executable, __file__, "--child", name, "--scale", str(args.scale)],
+                             capture_output=True, text=True, check=True)
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+        ratio = r["estimate"] / r["peak"]
+        print(f"{name:<28}{r['steps']:>11,}{r['peak'] / 2**20:>10.0f}{r['estimate'] / 2**20:>13.0f}"
+              f"{ratio:>7.2f}  {'upper bound' if ratio >= 1 else 'BELOW THE PEAK'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,168 @@
+"""Design studies at scale (issue 17's targets), each case in a fresh process, printed with
+verdicts (not a test: timings on a shared machine are noisy):
+
+    .venv/bin/python benchmarks/bench_study.py              # every case (a few minutes)
+    .venv/bin/python benchmarks/bench_study.py --quick      # 10,000 variants only
+
+The base is the basketball goal with every effect on (springs with damping, gravity, inertia,
+a load at the handle and a couple on the upper link; 25 steps). Its variants vary the left
+spring's rate, the spring anchor S1 (x and y), the backboard's mass and the handle load:
+force numbers only, so the study takes the vectorised path (stage 1 once, the force stage on
+all variants of a batch at once).
+
+1. 10,000 variants in-process: seconds (target <= 5 s).
+2. 100,000 variants in-process, streamed to the .h5: seconds and the process's peak memory
+   (targets <= 60 s, <= 2 GB).
+3. 100,000 variants on a Dask LocalCluster of 1 and of 2 worker processes: scaling efficiency
+   t1 / (2 t2) (target >= 80 %). Beside it, the machine's own: the same 20 batches in one
+   process, then in each of two processes at once (no Dask): what two processes can gain on
+   this machine at this moment (the cores are shared with other jobs).
+4. For comparison, the variant-by-variant path: 500 variants of +-0.5 mm pin tolerances (the
+   pins move: every variant is its own scene).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import subprocess
+import sys
+import tempfile
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+GOAL = ROOT / "configs" / "basketball_goal.toml"
+
+EVERY_EFFECT_TABLES = """
+[[loads]]
+name = "hand"
+point = "H"
+force = [0.0, -5.0]
+
+[[loads]]
+name = "twist"
+link = "upper"
+torque = 1.5
+"""
+
+FORCES = """[study]
+base = "goal_every_effect.toml"
+seed = 1
+samples = {samples}
+
+[study.parameters]
+"springs.left.k" = {{ from = 0.0, to = 600.0, steps = {steps} }}
+"points.S1.y" = {{ from = -0.95, to = -0.05, steps = 10 }}
+"points.S1.x" = {{ uniform = [-0.3, 0.3] }}
+"masses.backboard.mass" = {{ normal = [1.554, 0.02] }}
+"loads.hand.force.1" = {{ uniform = [-8.0, -2.0] }}
+
+[study.metrics]
+peak_handle = "max(abs(input_force.theta3a))"
+p95_spring = "percentile(spring_force.left, 95)"
+"""
+
+PINS = """[study]
+base = "goal_every_effect.toml"
+seed = 2
+samples = 500
+
+[study.parameters]
+"points.O2.y" = { uniform = [-1.00164, -0.99836] }
+"points.O4.y" = { uniform = [-2.00164, -1.99836] }
+"links.upper.lengths.O2-B" = { uniform = [1.99836, 2.00164] }
+"""
+
+RUN = """
+import json, resource, sys, time
+sys.path.insert(0, {root!r})
+from linkpipe.study import load_study, run_study
+t0 = time.perf_counter()
+study = load_study({path!r})
+path = run_study(study, {out!r}, {executor!r}, workers={workers})
+seconds = time.perf_counter() - t0
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps(dict(seconds=seconds, peak_mb=peak, variants=study.n_variants,
+                      path=study.path_note)))
+"""
+
+
+def setup(folder: pathlib.Path) -> None:
+    text = GOAL.read_text().replace(
+        'effects = ["springs", "gravity", "inertia"]',
+        'effects = ["springs", "gravity", "inertia", "damping", "loads"]').replace(
+        "free_length = 0.5833\n", "free_length = 0.5833\ndamping = 0.3\n")
+    (folder / "goal_every_effect.toml").write_text(text + EVERY_EFFECT_TABLES)
+
+
+def case(folder: pathlib.Path, name: str, text: str, executor="in_process", workers=None) -> dict:
+    """Run one study in a fresh process; return its seconds, peak memory and path."""
+    path = folder / f"{name}.toml"
+    path.write_text(text)
+    out = folder / f"out_{name}_{executor}_{workers}"
+    code = RUN.format(root=str(ROOT), path=str(path), out=str(out), executor=executor,
+                      workers=workers)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+CEILING = """
+import sys, time
+sys.path.insert(0, {root!r})
+from linkpipe.study import load_study
+from linkpipe.study.batch import solve_batch
+study = load_study({path!r})
+solve_batch(study, 0, 1000)
+t0 = time.perf_counter()
+for i in range(20):
+    solve_batch(study, 0, 1000)
+print(time.perf_counter() - t0)
+"""
+
+
+def machine_ceiling(folder: pathlib.Path) -> float:
+    """Two processes' efficiency on this machine now: one process's time for 20 batches over
+    the slower of two running at once."""
+    code = CEILING.format(root=str(ROOT), path=str(folder / "v100k.toml"))
+
+    def start():
+        return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+
+    alone = float(start().communicate()[0])
+    pair = [start(), start()]
+    return alone / max(float(p.communicate()[0]) for p in pair)
+
+
+def verdict(ok: bool) -> str:
+    return "met" if ok else "MISSED"
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="the 10,000-variant case only")
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = pathlib.Path(tmp)
+        setup(folder)
+        r = case(folder, "v10k", FORCES.format(samples=10, steps=100))
+        print(f"10,000 variants in-process: {r['seconds']:.2f} s (target <= 5 s: "
+              f"{verdict(r['seconds'] <= 5)}); {r['variants'] / r['seconds']:,.0f} variants/s; "
+              f"peak {r['peak_mb']:.0f} MB; {r['path'][:40]}")
+        if args.quick:
+            return
+        text = FORCES.format(samples=100, steps=100)
+        r = case(folder, "v100k", text)
+        print(f"100,000 variants in-process, streamed: {r['seconds']:.2f} s (target <= 60 s: "
+              f"{verdict(r['seconds'] <= 60)}); peak {r['peak_mb']:.0f} MB (target <= 2048: "
+              f"{verdict(r['peak_mb'] <= 2048)})")
+        t = {n: case(folder, "v100k", text, "dask", n)["seconds"] for n in (1, 2)}
+        eff = t[1] / (2 * t[2])
+        print(f"100,000 variants on Dask: 1 worker {t[1]:.2f} s, 2 workers {t[2]:.2f} s; "
+              f"scaling efficiency {100 * eff:.0f} % (target >= 80 %: {verdict(eff >= 0.8)}); "
+              f"the machine's own two-process efficiency now: {100 * machine_ceiling(folder):.0f} %")
+        r = case(folder, "pins", PINS)
+        print(f"variant by variant (pin tolerances, {r['variants']} variants): "
+              f"{r['seconds']:.2f} s, {r['variants'] / r['seconds']:,.0f} variants/s")
+
+
+if __name__ == "__main__":
+    main()

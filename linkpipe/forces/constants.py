@@ -1,0 +1,66 @@
+"""The numbers of a scene's force tables as arrays, optionally one row per step.
+
+A scene's own constants have no step axis (``ForceConstants.of``). A study that varies only
+these numbers (and anchor points no constraint uses) solves stage 1 once and puts its variants
+on one long step axis (variant, step): each constant then has a leading step axis, one row per
+(variant, step), and every effect broadcasts it like the positions (``linkpipe.study.vector``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ForceConstants:
+    """``spring_k``, ``spring_free_length`` (NaN where the scene gives none: the start length),
+    ``spring_preload`` (NaN where none), ``spring_damping``: (n_springs,) or (S, n_springs);
+    ``mass``, ``inertia``: (n_masses,) or (S, n_masses); ``gravity`` (2,) or (S, 2) (zeros when
+    the scene has none); ``load_force`` (n_loads, 2) or (S, n_loads, 2) (zeros for a couple);
+    ``load_torque`` (n_loads,) or (S, n_loads); ``start_position`` (n_points, 2) or
+    (S, n_points, 2), the drawn positions (a spring's start length); ``size`` the
+    mechanism's length scale, a float or (S,) (the leverage an input must have)."""
+
+    spring_k: np.ndarray
+    spring_free_length: np.ndarray
+    spring_preload: np.ndarray
+    spring_damping: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    gravity: np.ndarray
+    load_force: np.ndarray
+    load_torque: np.ndarray
+    start_position: np.ndarray
+    size: float | np.ndarray
+
+    @classmethod
+    def of(cls, model) -> "ForceConstants":
+        """The scene's own constants (no step axis)."""
+        sc = model.scene
+
+        def col(values):
+            return np.array([np.nan if x is None else x for x in values], dtype=float)
+
+        return cls(
+            spring_k=col(sp.k for sp in sc.springs),
+            spring_free_length=col(sp.free_length for sp in sc.springs),
+            spring_preload=col(sp.preload for sp in sc.springs),
+            spring_damping=col(sp.damping for sp in sc.springs),
+            mass=col(m.mass for m in sc.masses), inertia=col(m.inertia for m in sc.masses),
+            gravity=np.asarray(sc.gravity if sc.gravity is not None else (0.0, 0.0), dtype=float),
+            load_force=np.array([ld.force if ld.point is not None else (0.0, 0.0)
+                                 for ld in sc.loads], dtype=float).reshape(-1, 2),
+            load_torque=col(ld.torque if ld.point is None else 0.0 for ld in sc.loads),
+            start_position=model.start_position, size=model.size)
+
+    #: each field's number of axes without a step axis
+    BASE_NDIM = {"spring_k": 1, "spring_free_length": 1, "spring_preload": 1,
+                 "spring_damping": 1, "mass": 1, "inertia": 1, "gravity": 1, "load_force": 2,
+                 "load_torque": 1, "start_position": 2, "size": 0}
+
+    def rows(self, steps: slice) -> "ForceConstants":
+        """The constants at a slice of the steps (fields without a step axis as they are)."""
+        return ForceConstants(**{
+            name: value[steps] if np.ndim(value) == base + 1 else value
+            for name, base in self.BASE_NDIM.items() for value in (getattr(self, name),)})

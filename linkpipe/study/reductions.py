@@ -1,0 +1,248 @@
+"""User-named reductions of stored variables (``[study.metrics]``), parsed, never eval'd.
+
+A reduction is a small expression: numbers, ``+ - * /``, parentheses, the functions ``max``,
+``min``, ``mean``, ``rms`` and ``percentile(x, q)`` (a series to one number), ``abs`` (either),
+and references to one stored series ``<variable>[.<label>...]``: a variable of the output
+contract with the step axis first and one label per further dimension (``input_force.crank``,
+``spring_force.left``, ``position.P.x``, ``joint_force.B@upper.y``, ``gravity_energy``). The
+whole expression must reduce to one number per variant: every series sits inside a reduction.
+
+A tiny recursive-descent parser builds a tree of tuples; :func:`resolve` checks every name
+against the variables a solved base scene stores (a name that is not there is a
+:class:`SceneError` naming the study file, ``[study.metrics]`` and the metric), and
+:func:`evaluate` computes it on arrays with a leading variant axis, over the ok steps only.
+
+Grammar::
+
+    expr  := term (("+" | "-") term)*
+    term  := unary (("*" | "/") unary)*
+    unary := "-" unary | atom
+    atom  := NUMBER | FUNC "(" expr ["," NUMBER] ")" | REF | "(" expr ")"
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..errors import SceneError
+from ..scene.keys import _suggest
+
+REDUCE = ("max", "min", "mean", "rms", "percentile")
+FUNCTIONS = REDUCE + ("abs",)
+_TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
+                    r"|(?P<name>[A-Za-z_][\w@]*(?:\.[\w@]+)*)|(?P<op>[-+*/(),]))")
+
+
+class ReductionError(ValueError):
+    """A malformed reduction (turned into a SceneError naming the file, table and key)."""
+
+
+def tokens(text: str) -> list[tuple[str, str]]:
+    """Return the tokens ``[(kind, text)]`` of ``text`` (kind: num, name, op)."""
+    out, pos, text = [], 0, text.rstrip()
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        if not m or m.end() == pos:
+            raise ReductionError(f"unexpected {text[pos:].strip()[:12]!r} at character {pos + 1}")
+        kind = m.lastgroup
+        out.append((kind, m.group(kind)))
+        pos = m.end()
+    return out
+
+
+class _Parser:
+    def __init__(self, text: str):
+        self.toks, self.i = tokens(text), 0
+
+    def peek(self):
+        return self.toks[self.i] if self.i < len(self.toks) else ("end", "")
+
+    def take(self, want: str | None = None):
+        tok = self.peek()
+        if want is not None and tok[1] != want:
+            raise ReductionError(f"expected {want!r}, found {tok[1] or 'the end'!r}")
+        self.i += 1
+        return tok
+
+    def expr(self):
+        node = self.term()
+        while self.peek()[1] in ("+", "-"):
+            node = ("bin", self.take()[1], node, self.term())
+        return node
+
+    def term(self):
+        node = self.unary()
+        while self.peek()[1] in ("*", "/"):
+            node = ("bin", self.take()[1], node, self.unary())
+        return node
+
+    def unary(self):
+        if self.peek()[1] == "-":
+            self.take()
+            return ("neg", self.unary())
+        return self.atom()
+
+    def atom(self):
+        kind, text = self.take()
+        if kind == "num":
+            return ("num", float(text))
+        if text == "(":
+            node = self.expr()
+            self.take(")")
+            return node
+        if kind != "name":
+            raise ReductionError(f"unexpected {text or 'end'!r}")
+        if self.peek()[1] != "(":
+            return ("ref", text)
+        if text not in FUNCTIONS:
+            raise ReductionError(f"unknown function {text!r} ({_suggest(text, FUNCTIONS)})")
+        self.take("(")
+        args = [self.expr()]
+        if text == "percentile":
+            self.take(",")
+            q = self.unary()
+            if q[0] != "num" and not (q[0] == "neg" and q[1][0] == "num"):
+                raise ReductionError("percentile(x, q): q must be a number")
+            args.append(q)
+        self.take(")")
+        return ("call", text, args)
+
+
+def parse(text: str):
+    """Return the tree of a reduction (ReductionError when it is not one)."""
+    if not isinstance(text, str) or not text.strip():
+        raise ReductionError("expected a reduction such as \"max(abs(input_force.crank))\"")
+    p = _Parser(text)
+    node = p.expr()
+    if p.peek()[0] != "end":
+        raise ReductionError(f"unexpected {p.peek()[1]!r} after a complete expression")
+    return node
+
+
+def resolve(node, catalog: dict):
+    """Return ``(tree, kind)``: references resolved to ``("ref", variable, index, text)`` and
+    the tree's kind ("series" or "scalar"). ``catalog``: {variable: (dims, {dim: labels})} of
+    the stored variables (step axis first)."""
+    tag = node[0]
+    if tag == "num":
+        return node, "scalar"
+    if tag == "ref":
+        return _reference(node[1], catalog), "series"
+    if tag == "neg":
+        inner, kind = resolve(node[1], catalog)
+        return ("neg", inner), kind
+    if tag == "bin":
+        (a, ka), (b, kb) = resolve(node[2], catalog), resolve(node[3], catalog)
+        return ("bin", node[1], a, b), "series" if "series" in (ka, kb) else "scalar"
+    name, args = node[1], node[2]
+    inner, kind = resolve(args[0], catalog)
+    if name == "abs":
+        return ("call", name, [inner]), kind
+    if kind != "series":
+        raise ReductionError(f"{name}() reduces a stored series over the steps; it got a number")
+    q = args[1] if len(args) > 1 else None
+    if q is not None:
+        value = q[1] if q[0] == "num" else -q[1][1]
+        if not 0 <= value <= 100:
+            raise ReductionError(f"percentile q must be within 0..100, got {value:g}")
+        q = value
+    return ("call", name, [inner] + ([q] if q is not None else [])), "scalar"
+
+
+def _reference(text: str, catalog: dict):
+    parts = text.split(".")
+    var, labels = parts[0], parts[1:]
+    if var not in catalog:
+        raise ReductionError(f"{var!r} is not a variable this scene stores "
+                             f"({_suggest(var, sorted(catalog))})")
+    dims, coords = catalog[var]
+    rest = dims[1:]
+    if len(labels) != len(rest):
+        want = ".".join(f"<{d}>" for d in rest)
+        raise ReductionError(f"{text!r} names no single series: write {var}{'.' if rest else ''}"
+                             f"{want} (one label for each of {', '.join(rest) or 'no'} dimension)")
+    index = []
+    for dim, label in zip(rest, labels):
+        names = [str(x) for x in coords[dim]]
+        if label not in names:
+            raise ReductionError(f"{text!r}: no {dim} {label!r} ({_suggest(label, names)})")
+        index.append(names.index(label))
+    return ("ref", var, tuple(index), text)
+
+
+def references(tree) -> list[tuple[str, tuple]]:
+    """Every ``(variable, index)`` a resolved tree reads."""
+    if tree[0] == "ref":
+        return [(tree[1], tree[2])]
+    if tree[0] == "num":
+        return []
+    children = tree[1:] if tree[0] == "neg" else tree[2:] if tree[0] == "bin" else tree[2][:1]
+    return [r for c in children for r in references(c)]
+
+
+def evaluate(tree, series) -> np.ndarray:
+    """The reduction's value per variant ``(V,)``. ``series(variable, index)`` returns that
+    series ``(V, S)`` with NaN at the steps that are not ok (reductions skip them; a variant
+    with no ok step gives NaN)."""
+    tag = tree[0]
+    if tag == "num":
+        return np.float64(tree[1])
+    if tag == "ref":
+        return series(tree[1], tree[2])
+    if tag == "neg":
+        return -evaluate(tree[1], series)
+    if tag == "bin":
+        a, b = evaluate(tree[2], series), evaluate(tree[3], series)
+        return {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.divide}[tree[1]](a, b)
+    name, args = tree[1], tree[2]
+    x = evaluate(args[0], series)
+    if name == "abs":
+        return np.abs(x)
+    return reduce_steps(name, x, args[1] if len(args) > 1 else None)
+
+
+def reduce_steps(name: str, x: np.ndarray, q=None) -> np.ndarray:
+    """One reduction over the step axis (1) of ``x`` (V, S), NaN steps left out."""
+    with np.errstate(all="ignore"):
+        return _reduce_rows(name, x, q)
+
+
+def _reduce_rows(name: str, x: np.ndarray, q) -> np.ndarray:
+    present = ~np.isnan(x)
+    n = present.sum(axis=1)
+    filled = np.where(present, x, 0.0)
+    if name == "max":
+        out = np.where(present, x, -np.inf).max(axis=1)
+    elif name == "min":
+        out = np.where(present, x, np.inf).min(axis=1)
+    elif name == "mean":
+        out = filled.sum(axis=1) / n
+    elif name == "rms":
+        out = np.sqrt((filled * filled).sum(axis=1) / n)
+    else:  # numpy's "linear" percentile, row by row without a loop: NaN sorts last
+        ordered = np.sort(x, axis=1)
+        pos = q / 100.0 * np.maximum(n - 1, 0)
+        lo = np.floor(pos).astype(np.intp)
+        hi = np.minimum(lo + 1, np.maximum(n - 1, 0))
+        rows = np.arange(x.shape[0])
+        a, b, t = ordered[rows, lo], ordered[rows, hi], pos - lo
+        out = np.where(t >= 0.5, b - (b - a) * (1 - t), a + (b - a) * t)
+    return np.where(n > 0, out, np.nan)
+
+
+def compile_metric(path, name: str, text, catalog: dict):
+    """Parse and resolve one ``[study.metrics]`` entry; SceneError naming file, table, key."""
+    try:
+        tree, kind = resolve(parse(text), catalog)
+    except ReductionError as exc:
+        raise SceneError(path, "study.metrics", name, f"{exc}",
+                         'write e.g. peak = "max(abs(input_force.<driver>))"; reductions: '
+                         + ", ".join(FUNCTIONS)) from None
+    if kind != "scalar":
+        raise SceneError(path, "study.metrics", name, "gives a series, not one number per "
+                         "variant", f'wrap it in a reduction: "max({text})"')
+    if not references(tree):
+        raise SceneError(path, "study.metrics", name, "names no stored variable",
+                         'reduce a variable the scene stores, e.g. "max(abs(input_force.<driver>))"')
+    return tree

@@ -1,0 +1,46 @@
+"""What ``linkpipe study`` prints: the variants, how many failed, the best ones."""
+from __future__ import annotations
+
+import numpy as np
+
+#: variants listed under "best"
+N_BEST = 3
+
+
+def study_table(study, path, seconds: float | None = None) -> str:
+    """The summary of a written study file: counts, each metric's range and the variants with
+    the lowest peak input force (first driver), or the first metric without forces."""
+    from ..stores.study import read_arrays
+
+    f = read_arrays(path)
+    V = study.n_variants
+    failed = int((f["worst_status"] != 0).sum())
+    lines = [f"{study.name}: {V:,} variants of {study.scene.name} ({len(study.parameters)} "
+             f"parameter(s), {study.scene.n_steps} steps each), {V - failed:,} all ok, "
+             f"{failed:,} with failed steps"
+             + (f"; {seconds:.2f} s ({V / seconds:,.0f} variants/s)" if seconds else ""),
+             f"  solved {study.path_note}"]
+    names = ["peak_input_force", "rms_input_force"] + [m.name for m in study.metrics]
+    for name in names:
+        data = np.asarray(f[name], dtype=float).reshape(V, -1)
+        for j in range(data.shape[1]):
+            col = data[:, j]
+            label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or name in
+                            ("peak_input_force", "rms_input_force") else "")
+            if np.isfinite(col).any():
+                lines.append(f"  {label}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} (mean "
+                             f"{np.nanmean(col):.6g}, sd {np.nanstd(col):.3g}, 5-95 % "
+                             f"{np.nanpercentile(col, 5):.6g} .. {np.nanpercentile(col, 95):.6g})")
+    key = (f["peak_input_force"][:, 0] if len(study.driver_names) and
+           np.isfinite(f["peak_input_force"]).any() else
+           f[study.metrics[0].name] if study.metrics else None)
+    if key is not None and np.isfinite(key).any():
+        finite = np.flatnonzero(np.isfinite(key))
+        order = finite[np.argsort(key[finite], kind="stable")][:N_BEST]
+        lines.append("  best (lowest " + ("peak_input_force" if key is not None and study.driver_names
+                                           else study.metrics[0].name) + "):")
+        varied = [j for j in range(len(study.names)) if np.ptp(study.values[:, j]) > 0]
+        for v in order:
+            values = ", ".join(f"{study.names[j]} = {study.values[v, j]:.6g}" for j in varied)
+            lines.append(f"    variant {v}: {key[v]:.6g} at {values}")
+    return "\n".join(lines)

@@ -1,0 +1,283 @@
+"""``[study]``: read and check a study, and lay out its variants (no solving beyond the base).
+
+A study is a ``[study]`` table in a scene, or a study file whose ``[study] base`` names the
+scene to vary (a path relative to the study file). Parameters are addressed as ``[fit]``
+addresses them (:func:`linkpipe.fit.locate`); each is a grid ``{ from, to, steps }`` or a
+distribution ``{ normal = [mean, sd] }`` / ``{ uniform = [low, high] }``. The grids form
+their full product (the first parameter varies slowest); each grid point gets ``samples``
+joint draws of the distributions (``numpy.random.default_rng(seed)``, one column per
+distribution in the order written, drawn for all variants at once), or one variant when
+there are none. Every mistake is a :class:`SceneError` naming the study file, the table
+(``study``, ``study.parameters``, ``study.metrics``) and the key.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from ..fit import locate
+from ..scene import Scene, load_scene
+from ..scene.keys import KEYS, _is_number, _suggest
+from ..version import __version__
+from . import reductions, vector
+
+#: variants solved together (one task of an executor, one write to the HDF5), at most, and
+#: the (variant, step) rows a batch holds at most when the study file gives no batch_size
+DEFAULT_BATCH, BATCH_ROWS = 1000, 100_000
+#: the names every study file stores: a metric may not take one
+RESERVED = ("variant", "parameter", "driver", "batch", "parameter_value", "peak_input_force",
+            "rms_input_force", "input_force_range", "min_transmission_angle", "worst_status",
+            "first_failed_step", "batch_done")
+#: parameters that would change the number of steps (variants share one step axis)
+_STEP_KEYS = ("steps", "step")
+
+
+@dataclass(frozen=True)
+class StudyParameter:
+    """One varied value: its address, path into the scene's TOML data, its value in the base
+    scene, and how it varies: ``kind`` "grid" (``spec`` = (from, to, steps)), "normal"
+    (mean, sd) or "uniform" (low, high)."""
+
+    address: str
+    path: tuple
+    initial: float
+    kind: str
+    spec: tuple
+
+
+@dataclass(frozen=True)
+class Metric:
+    name: str
+    text: str
+    tree: tuple
+
+
+@dataclass(frozen=True)
+class Study:
+    """A checked study. ``values`` (V, n_parameters): every variant's parameter values;
+    ``scene``: the base scene; ``data``: its TOML data without ``[study]`` and ``[fit]``;
+    ``catalog``: {variable: (dims, {dim: labels})} of what a variant stores (from the base
+    scene solved once); ``fingerprint``: what a resumed run must match."""
+
+    path: str
+    name: str
+    text: str
+    scene: Scene
+    data: dict
+    parameters: tuple[StudyParameter, ...]
+    values: np.ndarray
+    metrics: tuple[Metric, ...]
+    catalog: dict
+    samples: int
+    seed: int
+    batch_size: int
+    fingerprint: str
+    slots: tuple | None = None  # the vectorised path's places of the parameters (None: not)
+    path_note: str = ""  # which path solves the variants, and why
+
+    @property
+    def n_variants(self) -> int:
+        return self.values.shape[0]
+
+    @property
+    def names(self) -> list[str]:
+        return [p.address for p in self.parameters]
+
+    @property
+    def driver_names(self) -> tuple[str, ...]:
+        return tuple(d.name for d in self.scene.drivers)
+
+    def batches(self) -> list[tuple[int, int, int]]:
+        """``(batch, first variant, end)`` of every batch."""
+        V, n = self.n_variants, self.batch_size
+        return [(b, lo, min(V, lo + n)) for b, lo in enumerate(range(0, V, n))]
+
+
+def _read(path: str) -> tuple[str, dict]:
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneError(path, "", None, "no such study file",
+                         "check the path (studies live in configs/studies/*.toml)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(path, "", None, f"cannot read the file ({exc})",
+                         "give the path of a UTF-8 .toml file") from None
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "", None, f"not valid TOML: {exc}", "fix the syntax there") from None
+
+
+def load_study(path, catalog_of=None) -> Study:
+    """Read and check the study at ``path`` (a study file or a scene with ``[study]``).
+
+    ``catalog_of(scene)``: the stored variables of the base scene (default: solve it once)."""
+    path = str(path)
+    text, data = _read(path)
+    raw = data.get("study")
+    if not isinstance(raw, dict):
+        raise SceneError(path, "study", None, "no [study] table" if raw is None else
+                         "expected a table [study]", "add [study] with base and [study.parameters]")
+    unknown = sorted(set(raw) - set(KEYS["study"]))
+    if unknown:
+        raise SceneError(path, "study", unknown[0], "unknown key", _suggest(unknown[0], KEYS["study"]))
+    scene, name = _base_scene(path, data, raw)
+    base = tomllib.loads(scene.text)
+    base.pop("study", None)
+    base.pop("fit", None)
+    default_batch = max(1, min(DEFAULT_BATCH, BATCH_ROWS // max(1, scene.n_steps)))
+    samples, seed, batch = (_whole(path, raw, key, default, low) for key, default, low in
+                            (("samples", 1, 1), ("seed", 0, 0), ("batch_size", default_batch, 1)))
+    params = _parameters(path, raw, scene, base)
+    catalog = (catalog_of or _catalog)(scene)
+    metrics = _metrics(path, raw, catalog)
+    values = variant_values(params, samples, seed)
+    digest = hashlib.sha256("\0".join([__version__, text, scene.text, str(batch)]).encode())
+    study = Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
+                  batch, digest.hexdigest())
+    slots, why = vector.plan(study)
+    note = ("vectorised: stage 1 solved once, the force stage on all variants of a batch at once"
+            if slots is not None else f"variant by variant: {why}")
+    return dataclasses.replace(study, slots=None if slots is None else tuple(slots), path_note=note)
+
+
+def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:
+    """The scene to vary and the study's name."""
+    if "base" not in raw:  # a scene with its own [study]
+        scene = load_scene(path)
+        return scene, scene.name
+    extra = sorted(set(data) - {"study", "scene"})
+    if extra:
+        raise SceneError(path, extra[0], None, "a study file holds [study] (and [scene] name) "
+                         "only", "put scene tables in the base scene")
+    if not isinstance(raw["base"], str):
+        raise SceneError(path, "study", "base", "expected a string (a path)",
+                         'write base = "../basketball_goal.toml"')
+    base = Path(path).parent / raw["base"]
+    if not base.is_file():
+        raise SceneError(path, "study", "base", f'no scene file "{base}"',
+                         "give the base scene's path relative to the study file")
+    scene_table = data.get("scene", {})
+    if not isinstance(scene_table, dict) or set(scene_table) - {"name"}:
+        raise SceneError(path, "scene", None, "a study file's [scene] holds its name only",
+                         'write [scene] name = "goal_spring"; the rest belongs in the base scene')
+    name = scene_table.get("name")
+    if not isinstance(name, str) or not name.strip() or any(c in name for c in "/\\"):
+        if name is not None:
+            raise SceneError(path, "scene", "name", f"{name!r} cannot be a file name",
+                             'write e.g. name = "goal_spring"')
+        name = Path(path).stem
+    return load_scene(str(base)), name
+
+
+def _whole(path, raw, key, default, low) -> int:
+    value = raw.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise SceneError(path, "study", key, f"expected a whole number >= {low}, got {value!r}",
+                         f"write e.g. {key} = {KEYS['study'][key]}")
+    return value
+
+
+def _parameters(path, raw, scene: Scene, base: dict) -> tuple[StudyParameter, ...]:
+    table = raw.get("parameters")
+    if not isinstance(table, dict) or not table:
+        raise SceneError(path, "study", "parameters", "missing or empty: a study varies at "
+                         "least one parameter", 'add [study.parameters] with e.g. '
+                         '"springs.left.k" = { from = 2.0, to = 6.0, steps = 9 }')
+    out = []
+    for address, spec in table.items():
+        where = (path, "study.parameters", address)
+        p_path, value = locate(scene, base, address, where)
+        if p_path[0] in ("time",) or p_path[-1] in _STEP_KEYS:
+            raise SceneError(*where, "would change the number of steps; the variants of a "
+                             "study share one step axis", "vary another value")
+        kind, numbers = _variation(where, spec)
+        out.append(StudyParameter(address, p_path, float(value), kind, numbers))
+    return tuple(out)
+
+
+def _variation(where, spec) -> tuple[str, tuple]:
+    """("grid", (from, to, steps)) or ("normal" | "uniform", (a, b)) of one parameter."""
+    hint = ("write { from = 2.0, to = 6.0, steps = 9 }, { normal = [mean, sd] } or "
+            "{ uniform = [low, high] }")
+    if not isinstance(spec, dict):
+        raise SceneError(*where, f"expected a table, got {spec!r}", hint)
+    keys = set(spec)
+    if keys == {"from", "to", "steps"}:
+        lo, hi, n = spec["from"], spec["to"], spec["steps"]
+        if not (_is_number(lo) and _is_number(hi)) or isinstance(n, bool) or not isinstance(n, int):
+            raise SceneError(*where, "from and to must be numbers, steps a whole number", hint)
+        if n < 1 or (n > 1 and lo == hi):
+            raise SceneError(*where, f"an empty range (from {lo}, to {hi}, steps {n})",
+                             "give steps >= 1, and from != to when steps > 1")
+        return "grid", (float(lo), float(hi), n)
+    if len(keys) == 1 and keys <= {"normal", "uniform"}:
+        kind = keys.pop()
+        pair = spec[kind]
+        if not (isinstance(pair, list) and len(pair) == 2 and all(map(_is_number, pair))):
+            raise SceneError(*where, f"{kind} needs two numbers, got {pair!r}", hint)
+        a, b = map(float, pair)
+        if (kind == "normal" and not b > 0) or (kind == "uniform" and not a < b):
+            raise SceneError(*where, f"an empty range ({kind} = {pair})",
+                             "normal = [mean, sd] with sd > 0; uniform = [low, high] with low < high")
+        return kind, (a, b)
+    bad = sorted(keys - {"from", "to", "steps", "normal", "uniform"})
+    raise SceneError(*where, f"unknown key {bad[0]!r}" if bad else f"keys {sorted(keys)} do not "
+                     "make a grid or one distribution", hint)
+
+
+def variant_values(params, samples: int, seed: int) -> np.ndarray:
+    """(V, n_parameters): the grids' full product, each point with ``samples`` joint draws."""
+    grids = [np.linspace(*p.spec) for p in params if p.kind == "grid"]
+    product = list(itertools.product(*grids))  # one empty point when there are no grids
+    points = np.array(product, dtype=float).reshape(len(product), len(grids))
+    draws = [p for p in params if p.kind != "grid"]
+    per_point = samples if draws else 1
+    V = points.shape[0] * per_point
+    rng = np.random.default_rng(seed)
+    out = np.empty((V, len(params)))
+    g = 0
+    for j, p in enumerate(params):
+        if p.kind == "grid":
+            out[:, j] = np.repeat(points[:, g], per_point)
+            g += 1
+        elif p.kind == "normal":
+            out[:, j] = rng.normal(p.spec[0], p.spec[1], V)
+        else:
+            out[:, j] = rng.uniform(p.spec[0], p.spec[1], V)
+    return out
+
+
+def _catalog(scene: Scene) -> dict:
+    from ..pipeline import solve
+
+    return catalog_of_result(solve(scene))
+
+
+def catalog_of_result(result) -> dict:
+    """{variable: (dims, {dim: labels})} of a result's step-first variables."""
+    labels = {c.name: [str(x) for x in c.data] for c in result.coordinates()}
+    return {v.name: (v.dims, {d: labels.get(d, []) for d in v.dims[1:]})
+            for v in result.variables() if v.dims[:1] == ("step",)}
+
+
+def _metrics(path, raw, catalog) -> tuple[Metric, ...]:
+    table = raw.get("metrics", {})
+    if not isinstance(table, dict):
+        raise SceneError(path, "study", "metrics", "expected a table of named reductions",
+                         'write [study.metrics] with peak = "max(abs(input_force.<driver>))"')
+    out = []
+    for name, text in table.items():
+        if not name.isidentifier() or name in RESERVED:
+            raise SceneError(path, "study.metrics", name, "cannot name a metric (a variable "
+                             "of the study file needs a plain name of its own)",
+                             "use letters, digits and _; not " + ", ".join(RESERVED))
+        out.append(Metric(name, text, reductions.compile_metric(path, name, text, catalog)))
+    return tuple(out)

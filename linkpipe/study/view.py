@@ -1,0 +1,79 @@
+"""What a study's recording shows, computed here (stores only draw it): each metric against
+each parameter, the Pareto set of two metrics, and the best variants solved again for their
+motion."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: best variants solved again for their motion in the recording; bins of a metric's histogram
+N_MOTION, N_BINS = 3, 30
+
+
+@dataclass
+class StudyView:
+    """``metrics`` {label: (V,)}; ``parameters`` {address: (V,)}; ``status`` (V,) worst
+    status; ``pareto`` (labels of the two metrics, indices of the Pareto set ordered by the
+    first); ``best`` [(variant, Result)] by the first metric; ``spread`` each metric's
+    histogram over the variants (how tolerances spread it)."""
+
+    name: str
+    metrics: dict
+    units: dict
+    parameters: dict
+    status: np.ndarray
+    pareto: tuple
+    best: list
+    spread: dict  # {metric: (counts (n,), bin centres (n,), bin widths (n,))}
+
+
+def pareto_set(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Indices of the variants no other variant beats in both ``a`` and ``b`` (lower is
+    better; NaN rows left out), ordered by ``a`` (ties by ``b``)."""
+    idx = np.flatnonzero(np.isfinite(a) & np.isfinite(b))
+    order = idx[np.lexsort((b[idx], a[idx]))]
+    best_b = np.minimum.accumulate(b[order]) if len(order) else b[order]
+    keep = np.ones(len(order), dtype=bool)
+    keep[1:] = b[order][1:] < best_b[:-1]  # strictly lower b than every variant before it
+    return order[keep]
+
+
+def study_view(study, columns: dict) -> StudyView:
+    """The view of a finished study's file (``columns``: its arrays, as read back)."""
+    from .batch import solve_variant
+
+    force = study.scene.units.get("force", "force")
+    metrics, units = {}, {}
+    for name in ("peak_input_force", "input_force_range", "rms_input_force"):
+        for j, driver in enumerate(study.driver_names):
+            if np.isfinite(columns[name][:, j]).any():
+                metrics[f"{name}.{driver}"], units[f"{name}.{driver}"] = columns[name][:, j], force
+    for m in study.metrics:
+        metrics[m.name], units[m.name] = np.asarray(columns[m.name], float), ""
+    if np.isfinite(columns["min_transmission_angle"]).any():
+        metrics["min_transmission_angle"] = columns["min_transmission_angle"]
+        units["min_transmission_angle"] = "degree"
+    names = list(metrics)
+    pareto = ((names[0], names[1]), pareto_set(metrics[names[0]], metrics[names[1]])) \
+        if len(names) >= 2 else ((), np.zeros(0, dtype=np.intp))
+    best = []
+    if names:
+        key = metrics[names[0]]
+        finite = np.flatnonzero(np.isfinite(key))
+        for v in finite[np.argsort(key[finite], kind="stable")][:N_MOTION]:
+            result = solve_variant(study, int(v))
+            if result is not None:
+                best.append((int(v), result))
+    params = {p: study.values[:, j] for j, p in enumerate(study.names)}
+    return StudyView(study.name, metrics, units, params, np.asarray(columns["worst_status"]),
+                     pareto, best, {m: histogram(x) for m, x in metrics.items()})
+
+
+def histogram(x: np.ndarray, bins: int = N_BINS) -> tuple:
+    """(counts, bin centres, bin widths) of the finite values of x (empty without any)."""
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    counts, edges = np.histogram(x, bins=bins if np.ptp(x) > 0 else 1)
+    return counts.astype(float), 0.5 * (edges[1:] + edges[:-1]), np.diff(edges)

@@ -1,0 +1,92 @@
+"""Fleets of logs: ``run`` and ``fit`` of one scene over a glob of logs give, per log, the row
+of that scene run on that log alone; a log the scene cannot take is a row with its message."""
+import pathlib
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import linkpipe
+from linkpipe.__main__ import main
+from linkpipe.fit import fit
+from linkpipe.stores.study import read_arrays
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+SCENE = ROOT / "configs" / "logged" / "dump_truck_logged.toml"
+LOG = ROOT / "configs" / "logged" / "logs" / "tipper_run.csv"
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    """Three logs of the tipper: the shipped one with its pressure scaled (heavier loads)."""
+    folder = tmp_path_factory.mktemp("fleet")
+    frame = pd.read_csv(LOG)
+    for k, factor in enumerate((1.0, 1.05, 1.1)):
+        one = frame.copy()
+        one["pressure_bar"] = one["pressure_bar"] * factor
+        one.to_csv(folder / f"truck_{k}.csv", index=False)
+    return folder
+
+
+def alone(log: pathlib.Path):
+    """The scene with its log file replaced in its text, loaded as a scene file."""
+    text = SCENE.read_text().replace('file = "logs/tipper_run.csv"', f'file = "{log.as_posix()}"')
+    path = log.parent / f"scene_{log.stem}.toml"
+    path.write_text(text)
+    return linkpipe.load_scene(path)
+
+
+def test_run_over_a_glob_of_logs(logs, tmp_path, capsys):
+    (logs / "bad.csv").write_text("a,b\n1,2\n")
+    try:
+        assert main(["run", str(SCENE), "--logs", str(logs / "*.csv"), "--out", str(tmp_path)]) == 0
+    finally:
+        (logs / "bad.csv").unlink()
+    f = read_arrays(tmp_path / "dump_truck_logged_fleet.h5")
+    assert f["log"].tolist() == ["bad.csv", "truck_0.csv", "truck_1.csv", "truck_2.csv"]
+    assert f["log_failed"].tolist() == [1, 0, 0, 0] and 'no column "t_s"' in f["message"][0]
+    for i in (1, 2, 3):
+        r = linkpipe.solve(alone(logs / f["log"][i]))
+        assert f["steps_ok"][i] == r.n_ok and f["n_steps"][i] == r.n_steps
+        assert f["peak_input_force"][i, 0] == np.abs(r.forces["input_force"][1]).max()
+        assert f["measured_rms"][i, 0] == r.measurements["rms"][0]
+    assert np.isnan(f["peak_input_force"][0, 0]) and f["steps_ok"][0] == -1
+    out = capsys.readouterr().out
+    assert "bad.csv      failed:" in out and "truck_2.csv" in out
+
+
+def test_fit_over_a_glob_of_logs(logs, tmp_path):
+    assert main(["fit", str(SCENE), "--logs", str(logs / "truck_[02].csv"),
+                 "--out", str(tmp_path)]) == 0
+    f = read_arrays(tmp_path / "dump_truck_logged_fleet_fit.h5")
+    assert f["parameter"].tolist() == ["masses.body.mass"]
+    assert f["log"].tolist() == ["truck_0.csv", "truck_2.csv"]
+    for i, name in enumerate(f["log"]):
+        fr = fit(alone(logs / name))
+        assert f["fitted"][i, 0] == fr.fitted[0]
+        assert f["standard_error"][i, 0] == fr.standard_error[0]
+        assert f["rms_after"][i, 0] == fr.after.measurements["rms"][0]
+    assert f["fitted"][1, 0] > f["fitted"][0, 0] * 1.05  # 10 % more pressure: a heavier load
+
+
+def test_fleet_mistakes_are_one_message(tmp_path, capsys):
+    assert main(["run", str(SCENE), "--logs", str(tmp_path / "none*.csv")]) == 2
+    assert main(["run", str(ROOT / "configs" / "basketball_goal.toml"), "--logs",
+                 str(LOG)]) == 2
+    err = capsys.readouterr().err
+    assert "no file matches" in err and "the scene has 0 [[logs]]" in err
+    assert "Traceback" not in err
+
+
+def test_fleet_on_dask_gives_the_rows_of_in_process(logs):
+    pytest.importorskip("dask.distributed")
+    from linkpipe.fleet import run_fleet
+
+    scene = linkpipe.load_scene(SCENE)
+    here = run_fleet("run", scene, str(logs / "truck_*.csv"))
+    there = run_fleet("run", scene, str(logs / "truck_*.csv"), executor="dask", workers=2)
+    assert here[0] == there[0]
+    for a, b in zip(here[1], there[1]):
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])

@@ -1,0 +1,36 @@
+"""The memory estimate ``run`` and ``check`` refuse a sweep by (pipeline.memory_needed): it
+counts every array a Result stores, so it can never be below what the run keeps. Peaks of whole
+runs against it: benchmarks/bench_memory.py (1.8-1.9x at 1-2M steps, 2026-11-24)."""
+import pathlib
+
+import pytest
+
+import linkpipe
+from linkpipe.pipeline import bytes_per_step
+
+CONFIGS = pathlib.Path(__file__).parent.parent / "configs"
+SCENES = sorted(p.relative_to(CONFIGS).with_suffix("").as_posix()
+                for p in list(CONFIGS.glob("*.toml")) + list(CONFIGS.glob("hard/*.toml"))
+                + list(CONFIGS.glob("logged/*.toml")))
+
+
+def stored_bytes(result) -> int:
+    """Every per-step array the Result holds (its variables, as written to the .h5)."""
+    return sum(v.data.nbytes for v in result.variables() if v.dims[:1] == ("step",))
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_the_estimate_counts_at_least_what_a_run_stores(name):
+    scene = linkpipe.load_scene(CONFIGS / f"{name}.toml")
+    result = linkpipe.solve(scene)
+    assert bytes_per_step(scene) * scene.n_steps >= stored_bytes(result)
+
+
+def test_the_estimate_is_not_a_blanket_bound():
+    """Per step the estimate is the stored arrays plus what stage 1 hands the force stage (the
+    influence coefficients, the driver values in internal units): within 2x of the stored
+    bytes on a scene with every effect (the old estimate was 9x)."""
+    scene = linkpipe.load_scene(CONFIGS / "basketball_goal.toml")
+    result = linkpipe.solve(scene)
+    ratio = bytes_per_step(scene) * scene.n_steps / stored_bytes(result)
+    assert 1.0 <= ratio < 2.0

@@ -1,0 +1,471 @@
+"""Design studies: every row equals a one-by-one run of the same variant; bad study files are
+one clear message; a killed study resumes to the same file; the Dask path gives that file too."""
+import copy
+import pathlib
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+import tomli_w
+
+import linkpipe
+from linkpipe.errors import SceneError
+from linkpipe.scene import parse_scene
+from linkpipe.status import OK
+from linkpipe.stores.study import partial_path, read_arrays
+from linkpipe.study import load_study, run_study
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+GOAL = ROOT / "configs" / "basketball_goal.toml"
+
+STUDY = """
+[scene]
+name = "{name}"
+
+[study]
+base = "{base}"
+samples = {samples}
+seed = 3
+batch_size = {batch}
+
+[study.parameters]
+"springs.left.k" = {{ from = 2.0, to = 6.0, steps = 3 }}
+"points.S1.y" = {{ from = -0.75, to = -0.55, steps = 2 }}
+"points.O4.y" = {{ normal = [-2.0, 0.0005] }}
+"links.backboard.lengths.B-C" = {{ uniform = [0.999, 1.001] }}
+
+[study.metrics]
+peak_handle = "max(abs(input_force.theta3a))"
+p95_spring = "percentile(spring_force.left, 95)"
+mean_x = "mean(position.B.x) - 2 * min(spring_force.right) / 4"
+"""
+
+
+def write_study(folder, name="goal", samples=2, batch=4, extra=""):
+    path = pathlib.Path(folder) / f"{name}.toml"
+    path.write_text(STUDY.format(name=name, base=GOAL.as_posix(), samples=samples,
+                                 batch=batch) + extra)
+    return path
+
+
+def one_by_one(study, v):
+    """Variant v built independently: the base scene's TOML with the values set by hand."""
+    data = tomllib.loads(GOAL.read_text())
+    data = copy.deepcopy(data)
+    k, s1y, o4y, bc = study.values[v]
+    data["springs"][0]["k"] = k
+    data["points"]["S1"]["y"] = s1y
+    data["points"]["O4"]["y"] = o4y
+    data["links"][2]["lengths"]["B-C"] = bc
+    try:
+        return linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+    except SceneError:
+        return None
+
+
+def expected_row(r):
+    """The study's columns of one Result, by plain numpy on its ok steps."""
+    ok = r.status == OK
+    f = r.forces["input_force"][1][ok, 0]
+    P = r.position[ok, r.point_names.index("B"), 0]
+    right = r.forces["spring_force"][1][ok, 1]
+    left = r.forces["spring_force"][1][ok, 0]
+    return {"peak_input_force": np.abs(f).max(), "rms_input_force": np.sqrt(np.mean(f * f)),
+            "input_force_range": f.max() - f.min(), "peak_handle": np.abs(f).max(),
+            "p95_spring": np.percentile(left, 95), "mean_x": P.mean() - 2 * right.min() / 4,
+            "worst_status": int(r.status.max()),
+            "first_failed_step": int(np.flatnonzero(~ok)[0]) if (~ok).any() else -1}
+
+
+def test_study_rows_equal_one_by_one_runs(tmp_path):
+    study = load_study(write_study(tmp_path))
+    assert study.n_variants == 3 * 2 * 2
+    path = run_study(study, tmp_path / "out")
+    f = read_arrays(path)
+    assert f["parameter"].tolist() == ["springs.left.k", "points.S1.y", "points.O4.y",
+                                       "links.backboard.lengths.B-C"]
+    assert f["parameter_value"].shape == (12, 4) and f["batch_done"].tolist() == [1, 1, 1]
+    for v in range(study.n_variants):
+        want = expected_row(one_by_one(study, v))
+        for name, value in want.items():
+            got = f[name][v].reshape(-1)[0]
+            assert got == pytest.approx(value, rel=1e-12, abs=1e-12), (v, name)
+
+
+def test_grid_product_and_seeded_draws(tmp_path):
+    study = load_study(write_study(tmp_path, samples=3))
+    values = study.values
+    assert values.shape == (18, 4)
+    grid = [(k, y) for k in (2.0, 4.0, 6.0) for y in (-0.75, -0.55) for _ in range(3)]
+    assert values[:, :2].tolist() == [list(g) for g in grid]
+    rng = np.random.default_rng(3)
+    np.testing.assert_array_equal(values[:, 2], rng.normal(-2.0, 0.0005, 18))
+    np.testing.assert_array_equal(values[:, 3], rng.uniform(0.999, 1.001, 18))
+
+
+def test_distributions_alone_give_samples_variants(tmp_path):
+    path = tmp_path / "tolerance.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\nsamples = 5\nseed = 9\n'
+                    '[study.parameters]\n"points.O2.y" = { uniform = [-1.0016, -0.9984] }\n')
+    study = load_study(path)
+    np.testing.assert_array_equal(study.values[:, 0], np.random.default_rng(9).uniform(
+        -1.0016, -0.9984, 5))
+    f = read_arrays(run_study(study, tmp_path))
+    for v in range(5):
+        data = tomllib.loads(GOAL.read_text())
+        data["points"]["O2"]["y"] = study.values[v, 0]
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        assert f["peak_input_force"][v, 0] == pytest.approx(
+            np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
+
+
+def test_a_variant_that_cannot_assemble_is_a_row(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"points.O4.y" = { from = -2.0, to = -5.0, steps = 3 }\n')
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    assert f["worst_status"].tolist()[0] == OK and f["first_failed_step"][0] == -1
+    for v in (1, 2):
+        r = one_by_one_o4(study.values[v, 0])
+        if r is None:  # the start does not assemble: every step no_assembly
+            assert f["worst_status"][v] == 1 and f["first_failed_step"][v] == 0
+            assert np.isnan(f["peak_input_force"][v, 0])
+        else:
+            assert f["worst_status"][v] == r.status.max()
+            assert f["first_failed_step"][v] == np.flatnonzero(r.status != OK)[0]
+    assert f["worst_status"][2] == 1  # 3 ft below: the parallelogram cannot close
+
+
+def one_by_one_o4(y):
+    data = tomllib.loads(GOAL.read_text())
+    data["points"]["O4"]["y"] = y
+    try:
+        return linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+    except SceneError:
+        return None
+
+
+def test_killed_study_resumes_to_the_same_file(tmp_path):
+    study = load_study(write_study(tmp_path, batch=3))
+    whole = read_arrays(run_study(study, tmp_path / "whole"))
+
+    def kill(n):
+        if n == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_study(study, tmp_path / "cut", after_batch=kill)
+    path = tmp_path / "cut" / "goal_study.h5"
+    assert not path.exists() and partial_path(path).exists()
+    solved = []
+    import linkpipe.study.run as run_module
+    original = run_module.solve_batch
+
+    def counting(st, lo, hi):
+        solved.append(lo)
+        return original(st, lo, hi)
+
+    run_module.solve_batch = counting
+    try:
+        resumed = read_arrays(run_study(study, tmp_path / "cut"))
+    finally:
+        run_module.solve_batch = original
+    assert sorted(solved) == [6, 9]  # only the batches not written before the kill
+    assert not partial_path(path).exists()
+    assert resumed.keys() == whole.keys()
+    for name in whole:
+        if name == "attrs":
+            assert {k: str(v) for k, v in resumed[name].items()} == \
+                   {k: str(v) for k, v in whole[name].items()}
+        else:
+            np.testing.assert_array_equal(resumed[name], whole[name])
+
+
+def test_dask_local_cluster_gives_the_same_file(tmp_path):
+    """--workers 2 (a LocalCluster of our own) and --scheduler (an existing cluster's address)."""
+    pytest.importorskip("dask.distributed")
+    from dask.distributed import LocalCluster
+
+    study = load_study(write_study(tmp_path, samples=1, batch=2))
+    here = read_arrays(run_study(study, tmp_path / "here"))
+    there = read_arrays(run_study(study, tmp_path / "dask", "dask", workers=2))
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=":0") as cluster:
+        remote = read_arrays(run_study(study, tmp_path / "remote", "dask",
+                                       scheduler=cluster.scheduler_address))
+    for name in here:
+        if name != "attrs":
+            np.testing.assert_array_equal(there[name], here[name])
+            np.testing.assert_array_equal(remote[name], here[name])
+
+
+@pytest.mark.parametrize("parameters, metrics, table, key, words", [
+    ('"springs.lft.k" = { from = 1.0, to = 2.0, steps = 2 }', "", "study.parameters",
+     "springs.lft.k", 'did you mean "left"'),
+    ('"springs.left.k" = { from = 1.0, to = 1.0, steps = 3 }', "", "study.parameters",
+     "springs.left.k", "empty range"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 0 }', "", "study.parameters",
+     "springs.left.k", "empty range"),
+    ('"springs.left.k" = { uniform = [2.0, 1.0] }', "", "study.parameters",
+     "springs.left.k", "empty range"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "max(3 * 2)"',
+     "study.metrics", "x", "got a number"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "max(abs(input_forc.theta3a))"',
+     "study.metrics", "x", "'input_forc' is not a variable"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "2 + 3"',
+     "study.metrics", "x", "names no stored variable"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "__import__(\'os\')"',
+     "study.metrics", "x", "unexpected"),
+])
+def test_bad_study_file_is_one_message(tmp_path, parameters, metrics, table, key, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n{parameters}\n'
+                    f"[study.metrics]\n{metrics}\n")
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert (err.value.path, err.value.table, err.value.key) == (str(path), table, key)
+    assert words in str(err.value)
+
+
+@pytest.mark.parametrize("text, table, key, words", [
+    ('[study]\nbase = "nowhere.toml"\n[study.parameters]\n"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study", "base", "no scene file"),
+    ('[study]\nbase = "{goal}"\nsampels = 3\n[study.parameters]\n"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study", "sampels", 'did you mean "samples"'),
+    ('[study]\nbase = "{goal}"\n', "study", "parameters", "missing or empty"),
+    ('[study]\nbase = "{goal}"\n[study.parameters]\n"drivers.theta3a.step" = { from = 1.0, to = 2.0, steps = 2 }\n',
+     "study.parameters", "drivers.theta3a.step", "number of steps"),
+    ('[study]\nbase = "{goal}"\n[points]\n', "points", None, "[study] (and [scene] name) only"),
+])
+def test_bad_study_tables_are_one_message(tmp_path, text, table, key, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace("{goal}", GOAL.as_posix()))
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert (err.value.path, err.value.table, err.value.key) == (str(path), table, key)
+    assert words in str(err.value)
+
+
+def test_cli_bad_study_exits_2_without_traceback(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"springs.left.kk" = { from = 1.0, to = 2.0, steps = 2 }\n')
+    proc = subprocess.run([sys.executable, "-m", "linkpipe", "study", str(path), "--out",
+                           str(tmp_path)], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith(f"error: {path}: [study.parameters] springs.left.kk:")
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_study_inside_a_scene(tmp_path):
+    text = GOAL.read_text() + ('\n[study]\n[study.parameters]\n'
+                               '"masses.backboard.mass" = { from = 1.0, to = 2.0, steps = 2 }\n')
+    path = tmp_path / "goal_in_scene.toml"
+    path.write_text(text)
+    assert linkpipe.load_scene(path).name == "basketball_goal"  # a scene may hold [study]
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    assert study.name == "basketball_goal"
+    for v, mass in enumerate((1.0, 2.0)):
+        data = tomllib.loads(GOAL.read_text())
+        data["masses"][0]["mass"] = mass
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        assert f["peak_input_force"][v, 0] == pytest.approx(
+            np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
+
+
+EVERY_EFFECT = GOAL.read_text().replace(
+    'effects = ["springs", "gravity", "inertia"]',
+    'effects = ["springs", "gravity", "inertia", "damping", "loads"]').replace(
+    "free_length = 0.5833\n", "free_length = 0.5833\ndamping = 0.3\n") + """
+[[loads]]
+name = "hand"
+point = "H"
+force = [0.0, -5.0]
+
+[[loads]]
+name = "twist"
+link = "upper"
+torque = 1.5
+"""
+
+FORCE_STUDY = """
+[study]
+base = "goal_every_effect.toml"
+samples = 2
+seed = 5
+batch_size = 7
+
+[study.parameters]
+"springs.left.k" = { from = 2.0, to = 6.0, steps = 3 }
+"points.S1.y" = { from = -0.9, to = -0.4, steps = 2 }
+"springs.right.damping" = { uniform = [0.1, 0.5] }
+"masses.backboard.inertia" = { normal = [0.375, 0.01] }
+"loads.hand.force.1" = { uniform = [-8.0, -2.0] }
+"loads.twist.torque" = { normal = [1.5, 0.2] }
+"gravity.g.1" = { uniform = [-32.2, -32.1] }
+
+[study.metrics]
+peak_ground = "max(abs(ground_reaction.S1.y))"
+energy = "mean(spring_energy.left) + rms(gravity_energy)"
+"""
+
+
+def test_force_parameters_take_the_vectorised_path_equal_to_one_by_one(tmp_path):
+    """Spring rates and damping, an anchor (S1 widens the drawing: its own size), inertia,
+    loads and gravity, every effect on: stage 1 once, the force stage on all variants of a
+    batch at once; every stored variable of every variant equals its own run."""
+    from linkpipe.study.vector import variant_arrays
+
+    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
+    path = tmp_path / "forces.toml"
+    path.write_text(FORCE_STUDY)
+    study = load_study(path)
+    assert study.slots is not None and study.path_note.startswith("vectorised")
+    status, arrays = variant_arrays(study, study.slots, 0, study.n_variants)
+    base = tomllib.loads(EVERY_EFFECT)
+    for v in range(study.n_variants):
+        data = copy.deepcopy(base)
+        k, s1y, c, inertia, fy, torque, gy = study.values[v]
+        data["springs"][0]["k"], data["points"]["S1"]["y"] = k, s1y
+        data["springs"][1]["damping"], data["masses"][0]["inertia"] = c, inertia
+        data["loads"][0]["force"][1], data["loads"][1]["torque"], data["gravity"]["g"][1] = fy, torque, gy
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        stored = {x.name: x.data for x in r.variables() if x.dims[:1] == ("step",)}
+        assert stored.keys() == arrays.keys()
+        for name, want in stored.items():
+            np.testing.assert_allclose(arrays[name][v], want, rtol=1e-12, atol=1e-12,
+                                       err_msg=f"variant {v} {name}")
+    f = read_arrays(run_study(study, tmp_path / "out"))
+    assert study.n_variants == 12 and f["batch_done"].tolist() == [1, 1] and (f["worst_status"] == 0).all()
+    ok_force = arrays["input_force"][:, :, 0]
+    np.testing.assert_array_equal(f["peak_input_force"][:, 0], np.abs(ok_force).max(axis=1))
+    np.testing.assert_array_equal(
+        f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))
+
+
+def test_pareto_set_is_every_undominated_variant():
+    from linkpipe.study.view import pareto_set
+
+    rng = np.random.default_rng(4)
+    a, b = rng.integers(0, 30, 400).astype(float), rng.integers(0, 30, 400).astype(float)
+    a[::17] = np.nan
+    front = set(pareto_set(a, b).tolist())
+    for i in np.flatnonzero(np.isfinite(a)):
+        beaten = np.isfinite(a) & (a <= a[i]) & (b <= b[i]) & ((a < a[i]) | (b < b[i]))
+        same = np.isfinite(a) & (a == a[i]) & (b == b[i])
+        # undominated: in the front, or an equal variant is (one of equal ones is kept)
+        assert (not beaten.any()) == (i in front or bool(front & set(np.flatnonzero(same))))
+
+
+def test_study_recording_draws_the_file(tmp_path):
+    """The .rrd: each metric against each parameter at the file's values (unit square, y up),
+    the Pareto set, and the best variant's own sweep."""
+    from test_rrd import Recording
+
+    from linkpipe.stores.rrd import study as study_rrd
+    from linkpipe.study.view import pareto_set, study_view
+
+    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
+    path = tmp_path / "forces.toml"
+    path.write_text(FORCE_STUDY)
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path / "out"))
+    study_rrd.write(study_view(study, f), tmp_path / "s.rrd")
+    rec = Recording(tmp_path / "s.rrd")
+    k, peak = study.values[:, 0], f["peak_ground"]
+    entity = "/study/vs/springs.left.k/peak_ground/variants"
+    xy = np.array(rec.static(entity, "Points2D:positions").tolist())
+    want = np.stack([(k - k.min()) / np.ptp(k), 1 - (peak - peak.min()) / np.ptp(peak)], axis=1)
+    np.testing.assert_allclose(xy, want.astype(np.float32), rtol=1e-6)
+    front = pareto_set(f["peak_input_force"][:, 0], f["input_force_range"][:, 0])
+    labels = rec.static("/study/pareto/peak_input_force.theta3a/input_force_range.theta3a/"
+                        "front_points", "Points2D:labels")
+    assert list(labels) == [f"variant {v}" for v in front]
+    assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
+    assert {"/study/spread/peak_ground", "/study/spread/energy"} <= rec.entities  # histograms
+    best = int(np.argmin(f["peak_input_force"][:, 0]))
+    assert f"best variant {best}" in " ".join(rec.view_titles())
+
+
+def test_study_killed_by_sigkill_resumes_to_the_same_file(tmp_path):
+    """A real kill (SIGKILL, no clean-up) half-way: the partial file keeps the finished
+    batches, the same command resumes from them, and the file equals an uninterrupted one."""
+    import signal
+    import time
+
+    from linkpipe.stores.study import read_done
+
+    path = tmp_path / "pins.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\nsamples = 160\nseed = 4\n'
+                    'batch_size = 16\n[study.parameters]\n'
+                    '"points.O2.y" = { uniform = [-1.0016, -0.9984] }\n')
+    command = [sys.executable, "-m", "linkpipe", "study", str(path), "--no-rrd", "--quiet",
+               "--out"]
+    out = tmp_path / "cut"
+    proc = subprocess.Popen(command + [str(out)], cwd=ROOT)
+    final = out / "pins_study.h5"
+    done = None
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            done = read_done(final)
+        except OSError:  # the writer holds it mid-write: look again
+            done = None
+        if done is not None and 2 <= done.sum() < len(done) - 2:
+            break
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert done is not None and 0 < done.sum() < len(done), "the study was not caught half-way"
+    assert not final.exists() and partial_path(final).exists()
+    subprocess.run(command + [str(out)], cwd=ROOT, check=True)
+    subprocess.run(command + [str(tmp_path / "whole")], cwd=ROOT, check=True)
+    resumed, whole = read_arrays(final), read_arrays(tmp_path / "whole" / "pins_study.h5")
+    for name in whole:
+        if name != "attrs":
+            np.testing.assert_array_equal(resumed[name], whole[name], err_msg=name)
+
+
+def test_readme_example_best_variant_is_a_local_minimum_of_one_by_one_runs(tmp_path):
+    """configs/studies/basketball_goal.toml: the variant the study ranks best has the lowest
+    peak handle force among its grid neighbours, each solved on its own."""
+    study = load_study(ROOT / "configs" / "studies" / "basketball_goal.toml")
+    assert study.slots is not None  # spring rate and anchor: the vectorised path
+    f = read_arrays(run_study(study, tmp_path))
+    best = int(np.nanargmin(f["peak_handle"]))
+    k, y = study.values[best]
+
+    def peak(k, y):
+        data = tomllib.loads(GOAL.read_text())
+        data["springs"][0]["k"], data["points"]["S1"]["y"] = k, y
+        r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
+        return np.abs(r.forces["input_force"][1][r.status == OK]).max()
+
+    assert peak(k, y) == pytest.approx(f["peak_handle"][best], rel=1e-12)
+    for dk, dy in ((20.0, 0.0), (-20.0, 0.0), (0.0, 0.05), (0.0, -0.05)):
+        if -0.95 <= y + dy <= -0.05 and 0.0 <= k + dk <= 3000.0:
+            assert peak(k + dk, y + dy) > f["peak_handle"][best]
+    load_study(ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml")  # loads
+
+
+def test_min_transmission_angle_is_the_four_bar_closed_form(tmp_path):
+    """Crank-rocker (crank a, coupler b, rocker c, ground d): at the coupler-rocker pin
+    cos mu = (b^2 + c^2 - a^2 - d^2 + 2 a d cos theta) / (2 b c); the study's metric is the
+    smallest min(mu, 180 - mu) over the sweep, for each rocker length."""
+    base = ROOT / "configs" / "fourbar_crank_rocker.toml"
+    path = tmp_path / "rocker.toml"
+    path.write_text(f'[study]\nbase = "{base.as_posix()}"\n[study.parameters]\n'
+                    '"links.rocker.lengths.O4-B" = { from = 3.0, to = 3.2, steps = 3 }\n')
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    a, b, d = 1.0, 3.5, 4.0
+    theta = np.radians(np.arange(0.0, 361.0))
+    for v, c in enumerate(study.values[:, 0]):
+        mu = np.degrees(np.arccos((b * b + c * c - a * a - d * d + 2 * a * d * np.cos(theta))
+                                  / (2 * b * c)))
+        want = np.minimum(mu, 180.0 - mu).min()
+        assert f["min_transmission_angle"][v] == pytest.approx(want, abs=1e-9)
