@@ -109,13 +109,24 @@ def preflight(scene: Scene):
     assembles at the first driver value (SceneError otherwise): what ``check`` reports."""
     check_memory(scene)
     model = build_model(scene)
-    mob = check_mobility(model)
+    mob = _mobility(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
     present = np.flatnonzero(np.isfinite(s).all(axis=1))  # not every logged value is missing
     if len(present):
         kin.start_state(model, s[present[0]], scene.solver.tol * model.size,
                         scene.solver.max_iter)
     return model, mob
+
+
+def _mobility(model):
+    """:func:`check_mobility`; on a large mechanism (from ``kinematics.SPARSE_FROM`` unknowns)
+    with one BLAS thread whatever ``threads`` says: its dense SVD and least squares of a few
+    hundred unknowns gain nothing from threads and, multi-threaded on a busy machine, were
+    measured to stall for up to a second (docs/performance.md)."""
+    if model.n_q < kin.SPARSE_FROM:
+        return check_mobility(model)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return check_mobility(model)
 
 
 #: BLAS threads while a scene is solved: its solves are many small systems (stacks of 2x2 to
@@ -245,7 +256,7 @@ def status_of(model, kinematic_status, residual, stored: list, forces, size=None
 
 def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:
     """Positions, velocities, accelerations, condition and influence coefficients."""
-    mobility = check_mobility(model)
+    mobility = _mobility(model)
     tell("positions")
     t0 = _time.perf_counter()
     drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
@@ -340,15 +351,18 @@ def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
     if A is not None:
         out["acceleration_residual"] = np.full(S, np.nan)
         good &= np.isfinite(A).all(axis=(1, 2))
-    if good.any():
-        J = model.jacobian(X[good], s[good])
-        qd = model.q_of(V[good])
-        out["velocity_residual"][good] = np.abs(np.einsum("sij,sj->si", J, qd) + model.phi_t(
-            X[good], s[good], s_dot[good])).max(axis=1)
+    idx = np.flatnonzero(good)
+    chunk = kin.dense_chunk(model)  # dense (chunk, m, n) Jacobians: bounded, large mechanisms too
+    for lo in range(0, len(idx), chunk):
+        i = idx[lo:lo + chunk]
+        J = model.jacobian(X[i], s[i])
+        qd = model.q_of(V[i])
+        out["velocity_residual"][i] = np.abs(np.einsum("sij,sj->si", J, qd) + model.phi_t(
+            X[i], s[i], s_dot[i])).max(axis=1)
         if A is not None:
-            g = model.gamma(X[good], V[good], s[good], s_dot[good], s_ddot[good])
-            out["acceleration_residual"][good] = np.abs(
-                np.einsum("sij,sj->si", J, model.q_of(A[good])) - g).max(axis=1)
+            g = model.gamma(X[i], V[i], s[i], s_dot[i], s_ddot[i])
+            out["acceleration_residual"][i] = np.abs(
+                np.einsum("sij,sj->si", J, model.q_of(A[i])) - g).max(axis=1)
     return out
 
 

@@ -121,12 +121,13 @@ def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarr
             return sweep
     return solve_with_newton(model, s, note, start)
 
-from .rates import (dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
+from .rates import (dense_chunk, dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
                           link_angles_unwrapped, link_rates)
 from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
-from .sparse_lu import linear_algebra_used  # noqa: E402
+from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
 __all__ = ["solve_sweep", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
-           "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used"]
+           "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
+           "dense_chunk", "SPARSE_FROM"]

@@ -101,7 +101,8 @@ def estimate_inverse_norm1(solve, solve_transpose, n: int, S: int, iterations: i
     3.1x there, and 3x on the random families of tests/test_condition.py. ``derivatives`` takes
     the exact value wherever the estimate comes within 1e-3 of the singular threshold, so a
     step's status would need an estimate 1000x low to change."""
-    alt = np.array([(-1.0) ** i * (1.0 + i / max(n - 1, 1)) for i in range(n)])
+    i = np.arange(n)
+    alt = np.where(i % 2, -1.0, 1.0) * (1.0 + i / max(n - 1, 1))  # (-1)^i (1 + i / (n - 1))
     starts = (np.full(n, 1.0 / n), alt / np.abs(alt).sum())
     best = np.zeros(S)
     finite = np.ones(S, dtype=bool)

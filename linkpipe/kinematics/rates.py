@@ -10,6 +10,7 @@ from ..model.drive import driver_motion as drive_motion
 from .linalg import (ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse, estimated_condition,
                      is_singular)
 from .sparse import engine
+from .sparse_lu import uses_sparse
 from .linalg import CHUNK
 from ..status import OK, SINGULAR
 
@@ -88,8 +89,21 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
 
 
 def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool):
-    """:func:`derivatives` on dense Jacobians (the independent check of the accuracy ladder)."""
-    return derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration, dense=True)
+    """:func:`derivatives` on dense Jacobians (the independent check of the accuracy ladder),
+    in chunks of steps whose (chunk, m, n) Jacobians and inverses stay small
+    (:func:`dense_chunk`)."""
+    return derivatives(model, X, s, s_dot, s_ddot, status, need_acceleration, dense=True,
+                       chunk=dense_chunk(model))
+
+
+#: doubles per dense (chunk, m, n) stack of Jacobians (32 MB): large mechanisms' dense work goes
+#: in chunks of steps small enough for this, never as one (steps, m, n) array
+DENSE_CHUNK_ENTRIES = 4_000_000
+
+
+def dense_chunk(model: Model) -> int:
+    """Steps per chunk of dense Jacobian work: CHUNK, or fewer where n_rows x n_q is large."""
+    return max(1, min(CHUNK, DENSE_CHUNK_ENTRIES // max(1, model.n_rows * model.n_q)))
 
 
 def _engine_factors(eng, with_inverse: bool, rcond: float):
@@ -145,9 +159,11 @@ def engine_condition(eng, E: np.ndarray, rcond: float, threshold: float = SINGUL
                      within: float = EXACT_WITHIN) -> np.ndarray:
     """The condition (S,) of the engine's Jacobians, entries E (nnz, S), without the inverse:
     :func:`.linalg.estimated_condition` on the engine's block solves, exact (the inverse) at
-    the steps near the thresholds."""
-    return estimated_condition(eng.norm1(E), lambda b: eng.solve(E, b),
-                               lambda b: eng.solve_transpose(E, b),
+    the steps near the thresholds. Large mechanisms (:func:`.sparse_lu.uses_sparse`) invert
+    each diagonal block larger than 2x2 once for the estimate's dozen solves."""
+    inv = eng.block_inverses(E) if uses_sparse(eng.model) else None
+    return estimated_condition(eng.norm1(E), lambda b: eng.solve(E, b, inv),
+                               lambda b: eng.solve_transpose(E, b, inv),
                                lambda near: eng.condition(E[:, near]), eng.model.n_q, E.shape[1],
                                rcond, threshold, within)
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..model import Model, derived
 from ..model import equations as eq
+from .graph import _components, _matching
 
 
 class EngineUnavailable(Exception):
@@ -305,17 +306,32 @@ class Engine:
         self._direct = {int(e) for slots in self._relative_slots.values() for e in slots}
 
     # ------------------------------------------------------------------ solves
-    def solve(self, E: np.ndarray, b) -> list:
+    def solve(self, E: np.ndarray, b, inverses: dict | None = None) -> list:
         """Solve ``J x = b`` at every step: E (nnz, S) entries, b a list of m arrays (..., S).
 
         Returns x as a list of n_q arrays (..., S). Exactly singular blocks give inf or NaN.
+        ``inverses``: :meth:`block_inverses` of E, for many solves with one E.
         """
         with np.errstate(divide="ignore", invalid="ignore"):
-            return self._solve(E, b)
+            return self._solve(E, b, inverses or {})
 
-    def _solve(self, E, b):
+    def block_inverses(self, E: np.ndarray) -> dict:
+        """{block: its inverse (S, k, k)} of every diagonal block of more than two unknowns
+        (NaN where singular): a dozen solves with the same entries (the condition estimate)
+        then multiply instead of factorising each block every time."""
+        out = {}
+        for i, (_, cols, inner, _) in enumerate(self.blocks):
+            if len(cols) > 2:
+                M = _dense_block(E, inner)
+                try:
+                    out[i] = np.linalg.inv(M)
+                except np.linalg.LinAlgError:
+                    out[i] = np.full_like(M, np.nan)
+        return out
+
+    def _solve(self, E, b, inverses: dict):
         x = [None] * self.model.n_q
-        for rows, cols, inner, outer in self.blocks:
+        for i, (rows, cols, inner, outer) in enumerate(self.blocks):
             rhs = []
             for r, out in zip(rows, outer):
                 acc = b[r]
@@ -327,6 +343,10 @@ class Engine:
                 x[cols[0]] = rhs[0] / E[inner[0][0]]
             elif k == 2:
                 x[cols[0]], x[cols[1]] = _cramer2(*_block2(E, inner), *rhs)
+            elif i in inverses:
+                inv = inverses[i]
+                for a, c in enumerate(cols):
+                    x[c] = sum(inv[:, a, j] * rhs[j] for j in range(k))
             else:
                 S = E.shape[1]
                 M = _dense_block(E, inner)
@@ -336,18 +356,21 @@ class Engine:
                     sol = np.linalg.solve(M, R.transpose(2, 0, 1))  # (S, k, r)
                 except np.linalg.LinAlgError:
                     sol = np.full((S, k, R.shape[1]), np.nan)
-                for i, c in enumerate(cols):
-                    x[c] = sol[:, i, :].T.reshape(shp)
+                for a, c in enumerate(cols):
+                    x[c] = sol[:, a, :].T.reshape(shp)
         return x
 
-    def solve_transpose(self, E: np.ndarray, b) -> list:
+    def solve_transpose(self, E: np.ndarray, b, inverses: dict | None = None) -> list:
         """Solve ``J^T y = b`` at every step: b a list of n_q arrays (S,); returns m arrays.
 
         Back substitution through the blocks in reverse order (J^T is block upper triangular).
+        ``inverses``: as :meth:`solve`.
         """
+        inverses = inverses or {}
         with np.errstate(divide="ignore", invalid="ignore"):
             y = [None] * self.model.n_rows
-            for rows, cols, inner, _ in reversed(self.blocks):
+            for i in reversed(range(len(self.blocks))):
+                rows, cols, inner, _ = self.blocks[i]
                 rhs = []
                 for c in cols:
                     acc = b[c]
@@ -362,6 +385,10 @@ class Engine:
                 elif k == 2:  # the block transposed: [[a, c], [b, d]]
                     a, b_, c, d = _block2(E, inner)
                     y[rows[0]], y[rows[1]] = _cramer2(a, c, b_, d, *rhs)
+                elif i in inverses:  # (M^T)^-1 = (M^-1)^T
+                    inv = inverses[i]
+                    for a, r in enumerate(rows):
+                        y[r] = sum(inv[:, j, a] * rhs[j] for j in range(k))
                 else:
                     S = E.shape[1]
                     M = _dense_block(E, inner).transpose(0, 2, 1)
@@ -370,8 +397,8 @@ class Engine:
                         sol = np.linalg.solve(M, R[..., None])[..., 0]
                     except np.linalg.LinAlgError:
                         sol = np.full((S, k), np.nan)
-                    for i, r in enumerate(rows):
-                        y[r] = sol[:, i]
+                    for a, r in enumerate(rows):
+                        y[r] = sol[:, a]
             return y
 
     def matvec(self, E: np.ndarray, x: list) -> list:
@@ -398,61 +425,6 @@ class Engine:
         with np.errstate(invalid="ignore"):
             cond = self.norm1(E) * np.abs(inv).sum(axis=0).max(axis=0)
         return np.where(np.isfinite(cond), cond, np.inf)
-
-
-def _matching(row_cols: list, n: int):
-    """Return a perfect matching row -> column of a bipartite pattern (Kuhn), or None."""
-    col_row = [-1] * n
-
-    def augment(r, seen):
-        for c in row_cols[r]:
-            if not seen[c]:
-                seen[c] = True
-                if col_row[c] < 0 or augment(col_row[c], seen):
-                    col_row[c] = r
-                    return True
-        return False
-
-    for r in range(len(row_cols)):
-        if not augment(r, [False] * n):
-            return None
-    match = [0] * len(row_cols)
-    for c, r in enumerate(col_row):
-        match[r] = c
-    return match
-
-
-def _components(succ: list) -> list:
-    """Return the strongly connected components of a graph (Tarjan), each after its predecessors."""
-    n = len(succ)
-    index, low, on, stack, out = [None] * n, [0] * n, [False] * n, [], []
-    counter = [0]
-
-    def visit(v):
-        index[v] = low[v] = counter[0]
-        counter[0] += 1
-        stack.append(v)
-        on[v] = True
-        for w in succ[v]:
-            if index[w] is None:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif on[w]:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            comp = []
-            while True:
-                w = stack.pop()
-                on[w] = False
-                comp.append(w)
-                if w == v:
-                    break
-            out.append(comp)
-
-    for v in range(n):
-        if index[v] is None:
-            visit(v)
-    return out[::-1]  # Tarjan emits sinks first: reversed, every component follows its sources
 
 
 def _cramer2(a, b, c, d, r0, r1):

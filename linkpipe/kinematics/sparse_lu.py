@@ -73,11 +73,18 @@ class StepLU:
         self.n = n
         self.CT = sp.csr_matrix(eng.CT)  # (nnz, n_features): most entries 1-2 terms
         self.angle = eng.angle
-        # the pattern in compressed-column form, its columns in COLAMD order (once)
-        pattern = sp.csc_matrix((np.arange(1.0, len(eng.rows) + 1), (eng.rows, eng.cols)),
-                                shape=(m, n))
+        # the pattern in compressed-column form (data: each entry's number), its columns in
+        # COLAMD order, computed once from a factorisation of the pattern with generic values
+        # (the engine found it structurally regular; natural order should that one be singular)
+        slot = np.arange(1.0, len(eng.rows) + 1)
+        pattern = sp.csc_matrix((slot, (eng.rows, eng.cols)), shape=(m, n))
         pattern.sort_indices()
-        self.perm_c = splu(pattern, permc_spec="COLAMD").perm_c.copy()
+        generic = pattern.copy()
+        generic.data = np.random.default_rng(0).uniform(1.0, 2.0, generic.nnz)
+        try:
+            self.perm_c = splu(generic, permc_spec="COLAMD").perm_c.copy()
+        except RuntimeError:
+            self.perm_c = np.arange(n)
         # column k of the factorised matrix is column order[k] of J
         order = np.empty(n, dtype=np.intp)
         order[self.perm_c] = np.arange(n)
@@ -184,19 +191,15 @@ class StepFactor:
 
 
 def _parity(perm: np.ndarray) -> float:
-    """+1.0 or -1.0: the sign of a permutation (from its cycles)."""
-    seen = np.zeros(len(perm), dtype=bool)
-    swaps = 0
-    for i in range(len(perm)):
-        if seen[i]:
-            continue
-        j, length = i, 0
-        while not seen[j]:
-            seen[j] = True
-            j = int(perm[j])
-            length += 1
-        swaps += length - 1
-    return -1.0 if swaps % 2 else 1.0
+    """+1.0 or -1.0: the sign of a permutation, (-1)^(n - its number of cycles); the cycles
+    are the connected components of the graph i -> perm[i] (scipy's, in C: O(n))."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(perm)
+    graph = csr_matrix((np.ones(n), (np.arange(n), np.asarray(perm))), shape=(n, n))
+    cycles = connected_components(graph, directed=True, connection="weak")[0]
+    return -1.0 if (n - cycles) % 2 else 1.0
 
 
 def step_lu(model: Model) -> StepLU | None:
