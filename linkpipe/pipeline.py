@@ -287,8 +287,10 @@ def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinemat
         seconds["fd_derivatives"] = _time.perf_counter() - t0
     velocity = der["velocity"] if stages.velocity else None
     acceleration = der["acceleration"] if stages.acceleration else None
+    t0 = _time.perf_counter()
     link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
                   else (None, None))
+    seconds["jacobian"] += _time.perf_counter() - t0  # the links' rates: derivatives too
     return Kinematics(mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der, velocity,
                       acceleration, link_rates)
 
