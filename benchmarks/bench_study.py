@@ -14,7 +14,9 @@ all variants of a batch at once).
 2. 100,000 variants in-process, streamed to the .h5: seconds and the process's peak memory
    (targets <= 60 s, <= 2 GB).
 3. 100,000 variants on a Dask LocalCluster of 1 and of 2 worker processes: scaling efficiency
-   t1 / (2 t2) (target >= 80 %). Beside it, the machine's own: the same 20 batches in one
+   t1 / (2 t2) (target >= 80 %), judged on a running cluster (started, and its workers warmed
+   by a small study, before the clock starts: the work's scaling); the same with the cluster's
+   start and the workers' imports included is printed beside it. Beside it, the machine's own: the same 20 batches in one
    process, then in each of two processes at once (no Dask): what two processes can gain on
    this machine at this moment (the cores are shared with other jobs).
 4. For comparison, the variant-by-variant path: 500 variants of +-0.5 mm pin tolerances (the
@@ -105,6 +107,32 @@ def case(folder: pathlib.Path, name: str, text: str, executor="in_process", work
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+WARM_DASK = """
+import json, sys, time
+sys.path.insert(0, {root!r})
+from linkpipe.executors import dask_client
+from linkpipe.study import load_study, run_study
+study = load_study({path!r})
+with dask_client(workers={workers}) as client:  # the cluster --workers starts
+    address = client.scheduler.address
+    # warm: each worker imports linkpipe and solves the base scene's stage 1 once
+    run_study(load_study({warm!r}), {out!r} + "_warm", "dask", scheduler=address)
+    t0 = time.perf_counter()
+    run_study(study, {out!r}, "dask", scheduler=address)
+    print(json.dumps(dict(seconds=time.perf_counter() - t0)))
+"""
+
+
+def warm_dask(folder: pathlib.Path, workers: int) -> float:
+    """Seconds of the 100,000-variant study on a running LocalCluster of ``workers`` (started and
+    warmed with a small study first: what a user with a cluster waits for)."""
+    code = WARM_DASK.format(root=str(ROOT), path=str(folder / "v100k.toml"),
+                            warm=str(folder / "v10k.toml"), workers=workers,
+                            out=str(folder / f"out_warm_{workers}"))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return json.loads(proc.stdout.strip().splitlines()[-1])["seconds"]
+
+
 CEILING = """
 import sys, time
 sys.path.insert(0, {root!r})
@@ -155,10 +183,15 @@ def main(argv=None) -> None:
               f"{verdict(r['seconds'] <= 60)}); peak {r['peak_mb']:.0f} MB (target <= 2048: "
               f"{verdict(r['peak_mb'] <= 2048)})")
         t = {n: case(folder, "v100k", text, "dask", n)["seconds"] for n in (1, 2)}
-        eff = t[1] / (2 * t[2])
-        print(f"100,000 variants on Dask: 1 worker {t[1]:.2f} s, 2 workers {t[2]:.2f} s; "
-              f"scaling efficiency {100 * eff:.0f} % (target >= 80 %: {verdict(eff >= 0.8)}); "
-              f"the machine's own two-process efficiency now: {100 * machine_ceiling(folder):.0f} %")
+        print(f"100,000 variants on a new Dask LocalCluster (its start and the workers' imports "
+              f"included): 1 worker {t[1]:.2f} s, 2 workers {t[2]:.2f} s: "
+              f"{100 * t[1] / (2 * t[2]):.0f} %")
+        w = {n: min(warm_dask(folder, n) for _ in range(2)) for n in (1, 2)}
+        eff = w[1] / (2 * w[2])
+        print(f"100,000 variants on a running Dask cluster (started and warmed first; best of 2): "
+              f"1 worker {w[1]:.2f} s, 2 workers {w[2]:.2f} s; scaling efficiency {100 * eff:.0f} % "
+              f"(target >= 80 %: {verdict(eff >= 0.8)}); the machine's own two-process "
+              f"efficiency now: {100 * machine_ceiling(folder):.0f} %")
         r = case(folder, "pins", PINS)
         print(f"variant by variant (pin tolerances, {r['variants']} variants): "
               f"{r['seconds']:.2f} s, {r['variants'] / r['seconds']:,.0f} variants/s")
