@@ -29,8 +29,11 @@ from ..version import __version__
 from . import reductions, vector
 
 #: variants solved together (one task of an executor, one write to the HDF5), at most, and
-#: the (variant, step) rows a batch holds at most when the study file gives no batch_size
-DEFAULT_BATCH, BATCH_ROWS = 1000, 100_000
+#: the (variant, step) rows a batch holds at most when the study file gives no batch_size:
+#: fewer, larger tasks halve the Dask client's own work (100,000 variants of 25 steps on a
+#: 2-worker cluster: client CPU 0.79 s with batches of 1000 variants, 0.39 s with 4000),
+#: which shares the cores with the workers; a batch's force arrays stay ~100 MB
+DEFAULT_BATCH, BATCH_ROWS = 4000, 100_000
 #: the names every study file stores: a metric may not take one
 RESERVED = ("variant", "parameter", "driver", "batch", "parameter_value", "peak_input_force",
             "rms_input_force", "input_force_range", "min_transmission_angle", "worst_status",
