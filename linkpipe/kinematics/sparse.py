@@ -184,9 +184,9 @@ class Engine:
         array (or a float when it is constant), on contiguous coordinate arrays; fixed points
         enter as scalars."""
         fx = self._fixed_xy
-        if isinstance(X2, dict):  # {moving point: (x (S,), y (S,))}: no copy into (P, 2, S)
+        if isinstance(X2, dict):  # {point: (x (S,), y (S,))}: moving (and per-row fixed) points
             def xy(p):
-                return fx[p] if p in fx else X2[p]
+                return X2[p] if p in X2 else fx[p]
         else:
             def xy(p):
                 return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
