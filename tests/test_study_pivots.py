@@ -19,6 +19,7 @@ from linkpipe.status import NO_ASSEMBLY, OK
 from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study
 from linkpipe.study import pivots, vector
+from test_study import EVERY_EFFECT
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 GOAL = ROOT / "configs" / "basketball_goal.toml"
@@ -49,26 +50,32 @@ def write(tmp_path, text: str, name="s.toml") -> pathlib.Path:
     return path
 
 
-def own_run(base: pathlib.Path, study, v: int):
+def set_value(data: dict, path: tuple, value: float) -> None:
+    """data at a parameter's path (tables of names, or arrays of tables by name or link)."""
+    node, rest = data[path[0]], path[1:]
+    if isinstance(node, list):
+        node = node[rest[0]] if isinstance(rest[0], int) else next(
+            e for e in node if e.get("name", e.get("link")) == rest[0])
+        rest = rest[1:]
+    for key in rest[:-1]:
+        node = node[key]
+    node[rest[-1]] = float(value)
+
+
+def own_run(base: pathlib.Path, study, v: int, text: str | None = None):
     """Variant v built independently: the base scene's TOML with each value set by hand."""
-    data = tomllib.loads(base.read_text())
+    data = tomllib.loads(base.read_text() if text is None else text)
     for p, value in zip(study.parameters, study.values[v]):
-        table, name, key = p.path[0], p.path[1], p.path[2]
-        if table == "points":
-            data["points"][name][key] = float(value)
-        else:  # springs.<name>.k
-            entry = (data[table][name] if isinstance(name, int)
-                     else next(sp for sp in data[table] if sp["name"] == name))
-            entry[key] = float(value)
+        set_value(data, p.path, value)
     try:
         return linkpipe.solve(parse_scene(tomli_w.dumps(data), str(base)))
     except SceneError:
         return None
 
 
-def assert_rows_are_own_runs(base, study, status, arrays) -> None:
-    for v in range(study.n_variants):
-        r = own_run(base, study, v)
+def assert_rows_are_own_runs(base, study, status, arrays, variants=None, text=None) -> None:
+    for v in range(study.n_variants) if variants is None else variants:
+        r = own_run(base, study, v, text)
         if r is None:
             assert (status[v] == NO_ASSEMBLY).all() and np.isnan(arrays["position"][v]).all()
             continue
@@ -158,6 +165,37 @@ def test_random_small_pivot_moves_equal_one_by_one_runs(tmp_path_factory, moves,
     assert study.slots is not None
     status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
+
+
+def test_pivots_with_every_effect_and_force_numbers_over_chunk_boundaries(tmp_path):
+    """Pivots, an anchor and force numbers at once, every effect on, 700 variants in one batch
+    (17,500 rows: two chunks of the force stage, many of the derivative stage): rows at both
+    ends and across the chunk boundaries equal their own runs; the study file's metric is
+    the rows' own."""
+    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
+    study = load_study(write(tmp_path, """[study]
+base = "goal_every_effect.toml"
+samples = 700
+seed = 4
+batch_size = 700
+[study.parameters]
+"points.O2.x" = { uniform = [-0.00164, 0.00164] }
+"points.O4.y" = { uniform = [-2.00164, -1.99836] }
+"points.S1.x" = { uniform = [-0.3, 0.3] }
+"springs.right.damping" = { uniform = [0.1, 0.5] }
+"masses.backboard.inertia" = { normal = [0.375, 0.01] }
+"loads.hand.force.1" = { uniform = [-8.0, -2.0] }
+[study.metrics]
+peak_ground = "max(abs(ground_reaction.S1.y))"
+"""))
+    assert study.path_note.startswith("vectorised: the pivots")
+    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    assert (status == OK).all()
+    assert_rows_are_own_runs(GOAL, study, status, arrays, [0, 1, 163, 327, 654, 655, 656, 699],
+                             EVERY_EFFECT)
+    f = read_arrays(run_study(study, tmp_path / "out"))
+    np.testing.assert_array_equal(
+        f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))
 
 
 @pytest.mark.parametrize("table", ["springs"])
