@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics.rates import entries_at
+from ..kinematics.affine import entries_at
 from ..kinematics.sparse import engine
 from ..model import Model
 from ..model import equations as eq

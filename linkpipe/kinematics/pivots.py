@@ -8,7 +8,7 @@ guides) as it is when the scene gives them or derives them from other points (th
 checks it), so each variant's equations are the model's with its own fixed points, and those
 are read from the positions X (S, n_points, 2) row by row everywhere except in the sparse
 engine's affine map, whose entries are then read off :meth:`Model.jacobian_terms` itself
-(:func:`.rates.entries_at`).
+(:func:`.affine.entries_at`: the coefficients each variant's own engine has).
 
 A variant is solved here only where its own run (``linkpipe.solve``) would take the same path
 with the same branches (:func:`solve_pivot_variants` returns which): its drawing is assembled
@@ -17,7 +17,9 @@ singular shape (:func:`.dyads.branch_check` per variant), and its start, Newton'
 drawing, lies on the base scene's branches: each two-root dyad's point at the first step is
 farther from the drawing than ``BRANCH_MARGIN`` times less than the distance between the
 dyad's two roots (the margin :func:`.dyads.branch_check` asks of a step), and not on its
-singular shape. The others are left to their own runs.
+singular shape; and its own sparse engine has the base's pattern of entries and coefficients
+(:func:`.affine.same_pattern`), so that its Jacobian entries are its own to the last bit. The
+others are left to their own runs.
 """
 from __future__ import annotations
 
@@ -25,10 +27,12 @@ import numpy as np
 
 from ..model import Model
 from ..status import NO_ASSEMBLY, OK
+from .affine import same_pattern
 from .branches import BRANCH_MARGIN, branch_value
 from .decompose import DyadChain
 from .dyads import solve_chain
 from .rates import derivatives, link_angles_unwrapped, link_rates
+from .sparse import engine
 from .start import carry_steps
 from .vectorised import max_abs_phi
 
@@ -53,6 +57,9 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     usable = sw.ok.reshape(V, S).all(axis=1) & (sw.gap.reshape(V, S) > 0).all(axis=1)
     usable &= carry_steps(model, pivots, s[0], sizes)[1] <= 1.0
     usable &= _on_base_branches(chain, sw.position[::S], pivots, s[0], sizes)
+    eng = engine(model)
+    if eng is not None:  # the variant's own engine: the same entries and coefficient pattern
+        usable &= same_pattern(eng, pivots)
     bad = sw.ok & ~(sw.residual <= 10 * sc.tol * size_rows)  # a redundant constraint not met
     for arr in (sw.position, sw.velocity, sw.acceleration):
         if arr is not None and bad.any():

@@ -9,6 +9,7 @@ from ..model import Model, driver_scale
 from ..model.drive import driver_motion as drive_motion
 from .linalg import (ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse, estimated_condition,
                      is_singular)
+from .affine import entries_at
 from .sparse import engine
 from .linalg import CHUNK
 from ..status import OK, SINGULAR
@@ -90,26 +91,6 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         A[:, model.fixed] = 0.0
     return dict(velocity=V, acceleration=A, condition=condition, velocity_residual=vres,
                 acceleration_residual=ares, status=status, influence=influence)
-
-
-def entries_at(eng, X: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """The engine's Jacobian entries (nnz, S) at positions X (S, n_points, 2), fixed points
-    included, and driver values s (S, nd): the model's own terms summed into the engine's
-    slots (the pattern is the drawing's; a term outside it would be a different structure)."""
-    model = eng.model
-    slot = {int(p): k for k, p in enumerate(model.moving)}
-    E = np.zeros((len(eng.rows), X.shape[0]))
-    for r, p, gx, gy in model.jacobian_terms(X, s):
-        if p not in slot:
-            continue
-        for col, g in ((2 * slot[p], gx), (2 * slot[p] + 1, gy)):
-            e = eng.entry_of.get((r, col))
-            if e is None:
-                if np.any(g != 0):
-                    raise ValueError(f"Jacobian row {r} has a term outside the engine's pattern")
-                continue
-            E[e] += g
-    return E
 
 
 def dense_derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool):
