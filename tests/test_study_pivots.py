@@ -31,6 +31,9 @@ base = "{base}"
 samples = {samples}
 seed = 17
 
+[study.metrics]
+peak_handle = "max(abs(input_force.theta3a))"
+
 [study.parameters]
 "springs.left.k" = {{ from = 2820.0, to = 2820.0, steps = 1 }}
 "points.S1.y" = {{ from = -0.9, to = -0.9, steps = 1 }}
@@ -38,9 +41,6 @@ seed = 17
 "points.O2.y" = {{ uniform = [-1.00164, -0.99836] }}
 "points.O4.x" = {{ uniform = [-0.00164, 0.00164] }}
 "points.O4.y" = {{ uniform = [-2.00164, -1.99836] }}
-
-[study.metrics]
-peak_handle = "max(abs(input_force.theta3a))"
 """
 
 

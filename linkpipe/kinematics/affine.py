@@ -74,7 +74,7 @@ def entries_at(eng, X: np.ndarray, s: np.ndarray) -> np.ndarray:
     order; the relative angle rows from the equations."""
     model = eng.model
     fixed = np.flatnonzero(model.fixed)
-    drawings, which = np.unique(X[:, fixed].reshape(X.shape[0], -1), axis=0, return_inverse=True)
+    drawings, which = _runs(X[:, fixed].reshape(X.shape[0], -1))
     full = np.repeat(model.start_position[None], len(drawings), axis=0)
     full[:, fixed] = drawings.reshape(len(drawings), -1, 2)
     keys, C, _ = affine_coefficients(model, eng.angle, full)
@@ -101,6 +101,14 @@ def entries_at(eng, X: np.ndarray, s: np.ndarray) -> np.ndarray:
         for f, _ in terms[1:]:
             row += feats[f] * c[:, f]
     return E
+
+
+def _runs(F: np.ndarray):
+    """``(values (K, f), which (S,))`` of rows F (S, f) in runs of equal rows (a study's
+    variants: each variant's steps in a row): each run's value and every row's run."""
+    new = np.ones(F.shape[0], dtype=bool)
+    new[1:] = (F[1:] != F[:-1]).any(axis=1)
+    return F[new], np.cumsum(new) - 1
 
 
 def relative_entries(eng, E: np.ndarray, xy, sT: np.ndarray) -> None:
