@@ -7,17 +7,17 @@ Moving a pivot leaves every constant of the model's rows (link lengths, local co
 guides) as it is when the scene gives them or derives them from other points (the study
 checks it), so each variant's equations are the model's with its own fixed points, and those
 are read from the positions X (S, n_points, 2) row by row everywhere except in the sparse
-engine's affine map, whose entries are then read off :meth:`Model.jacobian_terms` itself
-(:func:`.affine.entries_at`: the coefficients each variant's own engine has).
+engine's affine map, whose entries then take the coefficients each variant's own engine has
+(:func:`.affine.entries_at`, read off :meth:`Model.jacobian_terms` at probe configurations).
 
 A variant is solved here only where its own run (``linkpipe.solve``) would take the same path
 with the same branches (:func:`solve_pivot_variants` returns which): its drawing is assembled
 at the first driver value directly (no carry), every step assembles, no dyad comes near its
 singular shape (:func:`.dyads.branch_check` per variant), and its start, Newton's from the
 drawing, lies on the base scene's branches: each two-root dyad's point at the first step is
-farther from the drawing than ``BRANCH_MARGIN`` times less than the distance between the
-dyad's two roots (the margin :func:`.dyads.branch_check` asks of a step), and not on its
-singular shape; and its own sparse engine has the base's pattern of entries and coefficients
+closer to its drawn place (|dx| + |dy|) than the distance between the dyad's two roots over
+``BRANCH_MARGIN`` (the margin :func:`.dyads.branch_check` asks of a step's move), and not on
+its singular shape; and its own sparse engine has the base's pattern of entries and coefficients
 (:func:`.affine.same_pattern`), so that its Jacobian entries are its own to the last bit. The
 others are left to their own runs.
 """

@@ -13,8 +13,10 @@ run's (``tests/test_study.py`` checks every stored variable against one-by-one r
 Before taking this path a study's extreme values of each parameter are parsed as a scene
 (every check of a scene applies; the value must reach the scene unchanged); a moved anchor
 gives each variant its own mechanism size (the length scale of its tolerances), as its own
-scene would. Anything else runs variant by variant
-(:func:`linkpipe.study.batch.solve_batch`), giving the same rows.
+scene would. A coordinate of a pivot (a fixed point the mechanism uses) takes the pivot
+path of :mod:`.pivots` (stage 1 too on all variants at once) where the scene and the move
+allow it. Anything else runs variant by variant (:func:`linkpipe.study.batch.solve_batch`),
+giving the same rows.
 """
 from __future__ import annotations
 
