@@ -257,8 +257,7 @@ def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinemat
     t0 = _time.perf_counter()
     drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
     scale = model_driver_scale(scene)
-    value, s, s_dot, s_ddot = (drive.value, drive.value * scale, drive.rate * scale,
-                               drive.acceleration * scale)
+    s, s_dot, s_ddot = drive.value * scale, drive.rate * scale, drive.acceleration * scale
     # closed-form dyads or the general Newton path, as [solver] method says (see kinematics.solve_sweep);
     # the dyad path also gives velocities and accelerations here
     order = 2 if stages.acceleration else 1 if stages.velocity else 0
