@@ -20,7 +20,10 @@ all variants of a batch at once).
    process, then in each of two processes at once (no Dask): what two processes can gain on
    this machine at this moment (the cores are shared with other jobs).
 4. For comparison, the variant-by-variant path: 500 variants of +-0.5 mm pin tolerances (the
-   pins move: every variant is its own scene).
+   pins move and a link length changes: every variant is its own scene).
+5. Pin tolerances of the pole's pivots only (O2, O4 x and y within +-0.5 mm): the vectorised
+   path with the pivots as per-row columns (2,000 variants), against the same study forced
+   variant by variant (500 variants): variants/s before -> after.
 """
 from __future__ import annotations
 
@@ -74,12 +77,29 @@ samples = 500
 "links.upper.lengths.O2-B" = { uniform = [1.99836, 2.00164] }
 """
 
+PIVOTS = """[study]
+base = "goal_every_effect.toml"
+seed = 3
+samples = {samples}
+
+[study.parameters]
+"points.O2.x" = {{ uniform = [-0.00164, 0.00164] }}
+"points.O2.y" = {{ uniform = [-1.00164, -0.99836] }}
+"points.O4.x" = {{ uniform = [-0.00164, 0.00164] }}
+"points.O4.y" = {{ uniform = [-2.00164, -1.99836] }}
+
+[study.metrics]
+peak_handle = "max(abs(input_force.theta3a))"
+"""
+
 RUN = """
-import json, resource, sys, time
+import dataclasses, json, resource, sys, time
 sys.path.insert(0, {root!r})
 from linkpipe.study import load_study, run_study
 t0 = time.perf_counter()
 study = load_study({path!r})
+if {one_by_one!r}:  # the variant-by-variant path forced (the "before" of a vectorised case)
+    study = dataclasses.replace(study, slots=None, path_note="variant by variant (forced)")
 path = run_study(study, {out!r}, {executor!r}, workers={workers})
 seconds = time.perf_counter() - t0
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
@@ -96,13 +116,15 @@ def setup(folder: pathlib.Path) -> None:
     (folder / "goal_every_effect.toml").write_text(text + EVERY_EFFECT_TABLES)
 
 
-def case(folder: pathlib.Path, name: str, text: str, executor="in_process", workers=None) -> dict:
-    """Run one study in a fresh process; return its seconds, peak memory and path."""
+def case(folder: pathlib.Path, name: str, text: str, executor="in_process", workers=None,
+         one_by_one: bool = False) -> dict:
+    """Run one study in a fresh process; return its seconds, peak memory and path
+    (``one_by_one``: forced onto the variant-by-variant path)."""
     path = folder / f"{name}.toml"
     path.write_text(text)
-    out = folder / f"out_{name}_{executor}_{workers}"
+    out = folder / f"out_{name}_{executor}_{workers}_{one_by_one}"
     code = RUN.format(root=str(ROOT), path=str(path), out=str(out), executor=executor,
-                      workers=workers)
+                      workers=workers, one_by_one=one_by_one)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -167,10 +189,13 @@ def verdict(ok: bool) -> str:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the 10,000-variant case only")
+    ap.add_argument("--pivots", action="store_true", help="the pivot tolerance case only")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         folder = pathlib.Path(tmp)
         setup(folder)
+        if args.pivots:
+            return pivots(folder)
         r = case(folder, "v10k", FORCES.format(samples=10, steps=100))
         print(f"10,000 variants in-process: {r['seconds']:.2f} s (target <= 5 s: "
               f"{verdict(r['seconds'] <= 5)}); {r['variants'] / r['seconds']:,.0f} variants/s; "
@@ -195,6 +220,18 @@ def main(argv=None) -> None:
         r = case(folder, "pins", PINS)
         print(f"variant by variant (pin tolerances, {r['variants']} variants): "
               f"{r['seconds']:.2f} s, {r['variants'] / r['seconds']:,.0f} variants/s")
+        pivots(folder)
+
+
+def pivots(folder: pathlib.Path) -> None:
+    """Case 5: the pole's pivot tolerances, variant by variant (before) and vectorised."""
+    before = case(folder, "pivots500", PIVOTS.format(samples=500), one_by_one=True)
+    after = case(folder, "pivots2000", PIVOTS.format(samples=2000))
+    rate = [r["variants"] / r["seconds"] for r in (before, after)]
+    print(f"pivot tolerances: variant by variant {before['variants']} variants "
+          f"{before['seconds']:.2f} s ({rate[0]:,.0f}/s) -> vectorised {after['variants']} "
+          f"variants {after['seconds']:.2f} s ({rate[1]:,.0f}/s): {rate[1] / rate[0]:.1f}x; "
+          f"{after['path'][:40]}")
 
 
 if __name__ == "__main__":

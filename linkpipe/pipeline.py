@@ -218,10 +218,18 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
                                 else None)
         seconds["forces"] = _time.perf_counter() - t0
     status = status_of(model, kinematic_status, k.sweep.residual, [], forces, finite=k.finite)
+    result = result_of(scene, model, k, forces, status, seconds)
+    return _with_measurements(result) if scene.measurements else result
 
+
+def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict) -> Result:
+    """The Result of a solved stage 1 ``k``, its ``forces`` (or None) and final ``status``
+    (S,): step-first arrays of any number of rows (a study's (variant, step) rows too)."""
+    stages = Stages.of(scene)
+    X, der = k.sweep.position, k.der
     value, drive = k.drive.value, k.drive
     time, time_note = _time_axis(scene, value)
-    result = Result(
+    return Result(
         scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
         driver_velocity=drive.rate if scene.time is not None else None,
         driver_acceleration=drive.acceleration if scene.time is not None else None,
@@ -237,7 +245,6 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
         solver_method_used=k.sweep.method, solver_note=k.sweep.note,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
         kinematics=k)
-    return _with_measurements(result) if scene.measurements else result
 
 
 def status_of(model, kinematic_status, residual, stored: list, forces, size=None,

@@ -16,7 +16,7 @@ from hypothesis import strategies as st_h
 
 import linkpipe
 from linkpipe import status as st
-from linkpipe.kinematics import dyads
+from linkpipe.kinematics import branches, dyads
 from linkpipe import kinematics as kin
 from linkpipe.errors import SceneError
 from linkpipe.model import build_model
@@ -139,7 +139,7 @@ def test_vectorised_general_path_on_a_long_sweep():
         np.testing.assert_allclose(out["acceleration"][:, i], cf["A" + p], atol=1e-11 * 400.0)
     # and the dyads on the same sweep
     plan = kin.decompose(model)
-    dyads.set_branches(plan, X[0], s[0])
+    branches.set_branches(plan, X[0], s[0])
     sw = dyads.solve_chain(plan, s, sd, sdd)
     assert rel_err(sw.position, X) <= REL
     assert rel_err(sw.acceleration, out["acceleration"]) <= REL

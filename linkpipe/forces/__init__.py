@@ -187,7 +187,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
     ok = motion.status == OK
     q_minus_m_qdd = with_couples_as_pairs(model, lagrange_points, lagrange_couples, Xz)
     generalized_q = q_minus_m_qdd[:, model.moving].reshape(n_steps, -1)
-    lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok)
+    lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok, ctx.constants.pivots)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
                                           motion.status, units, Xz, ctx.constants.size)

@@ -20,7 +20,9 @@ class ForceConstants:
     the scene has none); ``load_force`` (n_loads, 2) or (S, n_loads, 2) (zeros for a couple);
     ``load_torque`` (n_loads,) or (S, n_loads); ``start_position`` (n_points, 2) or
     (S, n_points, 2), the drawn positions (a spring's start length); ``size`` the
-    mechanism's length scale, a float or (S,) (the leverage an input must have)."""
+    mechanism's length scale, a float or (S,) (the leverage an input must have); ``pivots``
+    True where the mechanism's own fixed points differ row by row (a study's variants that move
+    them: the Jacobian is read off the positions, :func:`linkpipe.kinematics.rates.entries_at`)."""
 
     spring_k: np.ndarray
     spring_free_length: np.ndarray
@@ -33,6 +35,7 @@ class ForceConstants:
     load_torque: np.ndarray
     start_position: np.ndarray
     size: float | np.ndarray
+    pivots: bool = False
 
     @classmethod
     def of(cls, model) -> "ForceConstants":
@@ -61,6 +64,6 @@ class ForceConstants:
 
     def rows(self, steps: slice) -> "ForceConstants":
         """The constants at a slice of the steps (fields without a step axis as they are)."""
-        return ForceConstants(**{
+        return ForceConstants(pivots=self.pivots, **{
             name: value[steps] if np.ndim(value) == base + 1 else value
             for name, base in self.BASE_NDIM.items() for value in (getattr(self, name),)})

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kinematics.affine import entries_at
 from ..kinematics.sparse import engine
 from ..model import Model
 from ..model import equations as eq
@@ -12,12 +13,13 @@ from ..kinematics.linalg import CHUNK
 
 
 
-def multipliers(model: Model, Xz, s, generalized_q, ok):
+def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False):
     """Return (λ (S, n_rows) NaN where not ok, undetermined (n_rows,) bool).
 
     Square Jacobians go through the sparse engine's transposed block solve; redundant scenes
     (more rows than unknowns) take the minimum-norm solution, and the rows a self-stress can
-    change are flagged ``undetermined``."""
+    change are flagged ``undetermined``. ``pivots``: the fixed points of Xz differ row by row
+    (:class:`.constants.ForceConstants`)."""
     n_steps = Xz.shape[0]
     lam = np.full((n_steps, model.n_rows), np.nan)
     undetermined = np.zeros(model.n_rows, dtype=bool)
@@ -28,7 +30,8 @@ def multipliers(model: Model, Xz, s, generalized_q, ok):
         idx = np.flatnonzero(ok)
         for lo in range(0, len(idx), CHUNK):
             ii = idx[lo:lo + CHUNK]
-            E = eng.entries(model.q_of(Xz[ii]), s[ii])
+            E = (entries_at(eng, Xz[ii], s[ii]) if pivots
+                 else eng.entries(model.q_of(Xz[ii]), s[ii]))
             rhs = list(np.ascontiguousarray(generalized_q[ii].T))
             lam[ii] = np.stack(eng.solve_transpose(E, rhs), axis=1)
         return lam, undetermined

@@ -17,7 +17,8 @@ import numpy as np
 from ..errors import SceneError
 from ..model import Model
 from .decompose import decompose
-from .dyads import branch_check, refine_branches, set_branches, solve_chain
+from .branches import refine_branches, set_branches
+from .dyads import branch_check, solve_chain
 from .sparse import no_engine_reason
 from .start import start_state
 from .vectorised import max_abs_phi, solve_newton
@@ -61,15 +62,7 @@ def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
     if not forced and sc.jacobian != "analytic":
         return None, f"auto: jacobian = {sc.jacobian!r} asks for Newton; general Newton path", None
     tol_abs = sc.tol * model.size
-    start = start_state(model, s[0], tol_abs, sc.max_iter)
-    q0, slope0 = start
-    X0 = model.positions(q0[None])[0]
-    set_branches(chain, X0, s[0])
-    if slope0 is not None and s.shape[0] > 1:
-        # a start on a dyad's singular shape (a change point) takes that dyad's sign a step
-        # along the path the drawing was carried on
-        q1 = q0 + slope0 @ (s[1] - s[0])
-        refine_branches(chain, X0, s[0], model.positions(q1[None])[0], s[1])
+    start = start_branches(model, chain, s)
     sw = solve_chain(chain, s, s_dot, s_ddot, order=order, gaps=not forced,
                      max_abs_phi=max_abs_phi(model))
     if not (forced or branch_check(chain, sw)):
@@ -82,6 +75,22 @@ def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
     status = np.where(sw.ok & ~bad, OK, NO_ASSEMBLY).astype(np.int8)
     return Sweep(sw.position, sw.residual, np.zeros(s.shape[0], dtype=np.int32), status,
                  "dyads", chain.describe(), sw.velocity, sw.acceleration), "", start
+
+
+def start_branches(model: Model, chain, s: np.ndarray):
+    """Assemble the start at s[0] (``start_state``: (q, slope)) and set each dyad's branch of
+    ``chain`` from it; return the start."""
+    sc = model.scene.solver
+    start = start_state(model, s[0], sc.tol * model.size, sc.max_iter)
+    q0, slope0 = start
+    X0 = model.positions(q0[None])[0]
+    set_branches(chain, X0, s[0])
+    if slope0 is not None and s.shape[0] > 1:
+        # a start on a dyad's singular shape (a change point) takes that dyad's sign a step
+        # along the path the drawing was carried on
+        q1 = q0 + slope0 @ (s[1] - s[0])
+        refine_branches(chain, X0, s[0], model.positions(q1[None])[0], s[1])
+    return start
 
 
 def solve_with_newton(model: Model, s, note: str = "", start=None) -> Sweep:
@@ -121,13 +130,14 @@ def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarr
             return sweep
     return solve_with_newton(model, s, note, start)
 
+from .pivots import solve_pivot_variants  # noqa: E402
 from .rates import (dense_chunk, dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
                           link_angles_unwrapped, link_rates)
 from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "solve_pivot_variants", "start_branches", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]

@@ -38,74 +38,16 @@ import numpy as np
 
 from dataclasses import dataclass
 
+from .branches import BRANCH_MARGIN
 from .decompose import Dyad, DyadChain, Line
 from .linalg import CHUNK
-
-
-
-
-BRANCH_MARGIN = 2.0  # a dyad's roots must stay this many steps' motion apart (see branch_check)
-
-
-def set_branches(plan: DyadChain, X0: np.ndarray, s0: np.ndarray) -> None:
-    """Take each dyad's branch (sign) from the configuration ``X0`` (n_points, 2) at driver values s0."""
-    size = plan.model.size
-    for st in plan.steps:
-        val = _branch_value(st, X0, s0)
-        if val is None:
-            continue
-        st.sign = 1.0 if val >= 0 else -1.0
-        st.ambiguous = bool(abs(val) <= 1e-9 * size)
-
-
-def refine_branches(plan: DyadChain, X0: np.ndarray, s0: np.ndarray, X1: np.ndarray,
-                    s1: np.ndarray) -> None:
-    """Re-take the sign of each dyad that starts nearer its singular shape than one step's change.
-
-    ``X1`` at ``s1``: a prediction of the next step along the path the start came by (see
-    :func:`linkpipe.kinematics.start_state`). A dyad whose side at ``X0`` is smaller than the
-    change of that side over the step starts on (or next to) its singular shape, where the
-    start's own side is rounding; the predicted step is on the branch the path continues on.
-    Such dyads are marked ambiguous (``method = "auto"`` leaves those sweeps to Newton)."""
-    for st in plan.steps:
-        v0 = _branch_value(st, X0, s0)
-        if v0 is None:
-            continue
-        v1 = _branch_value(st, X1, s1)
-        if abs(v0) <= abs(v1 - v0):
-            st.sign = 1.0 if v1 >= 0 else -1.0
-            st.ambiguous = True
-
-
-def _branch_value(st: Dyad, X: np.ndarray, s: np.ndarray):
-    """Return the signed side of a two-root dyad's point at configuration X (None: no branches)."""
-    p = st.targets[0]
-    if st.kind == "circles":
-        d = X[st.c2] - X[st.c1]
-        r = X[p] - X[st.c1]
-        return (d[0] * r[1] - d[1] * r[0]) / max(np.hypot(*d), 1e-300)
-    if st.kind == "circle_line":
-        _, t = _line_at(st.line1, X, s)
-        return (X[p] - X[st.c1]) @ t
-    return None
-
-
-def _line_at(line: Line, X: np.ndarray, s: np.ndarray):
-    """Return (point on the line, unit direction) at one configuration."""
-    if line.kind == "fixed":
-        return np.array(line.o), np.array(line.t)
-    if line.kind == "coord":
-        o = np.zeros(2)
-        o[line.axis] = s[line.driver]
-        return o, np.array(line.t)
-    d = X[line.e] - X[line.d]
-    return X[line.d], d / np.hypot(*d)
 
 
 class _Chunk:
     """Per-coordinate arrays of one chunk of steps: x[p], y[p] (float for fixed points)."""
 
-    __slots__ = ("px", "py", "vx", "vy", "ax", "ay", "s", "sd", "sdd", "_target", "gap2", "trig", "geo")
+    __slots__ = ("px", "py", "vx", "vy", "ax", "ay", "s", "sd", "sdd", "_target", "gap2", "trig", "geo",
+                 "period")
 
 
 def _rows_line(line: Line, px, py, ch, order):
@@ -371,7 +313,8 @@ class ChainSweep:
 
 
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
-          order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK) -> ChainSweep:
+          order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK,
+          fixed_position: np.ndarray | None = None, period: int = 0) -> ChainSweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
@@ -380,6 +323,11 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     ``max_abs_phi``: an optional ``f(points {moving p: (x (n,), y (n,))}, s (nd, n), trig) -> (n,)``,
     max |Phi| over all the model's constraint rows, for the residual at every step (``trig``:
     {driver: (cos, sin)} of the angle drivers, already computed).
+
+    ``fixed_position`` (S, n_points, 2): the fixed points' positions row by row (a study's
+    variants that move pivots, on one (variant, step) row axis; ``max_abs_phi`` then also gets
+    the fixed points); default the model's drawing. ``period``: the rows are runs of this many
+    steps (variants): no step pair across two runs counts in ``gap``.
     """
     model = plan.model
     S = s.shape[0]
@@ -406,31 +354,22 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     dcols, ddcols = _scalar_if_constant(dcols), _scalar_if_constant(ddcols)
     ch = _Chunk()
     ch.gap2 = [] if gaps else None
+    ch.period = period
+    fixed_at = _fixed_columns(fixed_position, fixed)
     prev = {}  # dyad point -> (x, y, gap^2) at the last step of the chunk before
     with np.errstate(invalid="ignore", divide="ignore"):
         for lo in range(0, S, chunk):
             hi = min(S, lo + chunk)
             n = hi - lo
-            ch.px = [float(X0[p, 0]) if fixed[p] else None for p in range(P)]
-            ch.py = [float(X0[p, 1]) if fixed[p] else None for p in range(P)]
             ch.s = [c[lo:hi] for c in cols]
-            ch.trig = {}
-            ch.geo = {}
-            for st in plan.steps:
-                _position(st, ch)
-            buf = bufs[0]
-            total = 0.0
-            for p in moving:
-                buf[:n, p, 0] = ch.px[p]
-                buf[:n, p, 1] = ch.py[p]
-                total = total + ch.px[p] + ch.py[p]  # NaN anywhere stays NaN
-            X[lo:hi] = buf[:n]
+            total = _position_pass(plan, ch, fixed_at, lo, hi, bufs[0], moving)
+            X[lo:hi] = bufs[0][:n]
             if moving:
                 ok[lo:hi] = np.isfinite(total)
             if gaps:
                 _branch_margins(ch, gap, prev, lo, hi)
             if max_abs_phi is not None:
-                pts = {p: (ch.px[p], ch.py[p]) for p in moving}
+                pts = {p: (ch.px[p], ch.py[p]) for p in moving + list(fixed_at)}
                 residual[lo:hi] = max_abs_phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
             if order >= 1:
                 ch.sd = [c if isinstance(c, float) else c[lo:hi] for c in dcols]
@@ -452,6 +391,38 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     return ChainSweep(X, V, A, ok, residual, gap)
 
 
+def _position_pass(plan: DyadChain, ch: _Chunk, fixed_at: dict, lo: int, hi: int,
+                   buf: np.ndarray, moving: list):
+    """Positions of the chunk's steps ``lo .. hi`` (driver values ``ch.s`` set) into
+    ``buf[:n]``, the per-row pivots ``fixed_at`` too; returns the sum of the moving points'
+    coordinates (n,) (NaN at a step without assembly)."""
+    model, n = plan.model, hi - lo
+    X0, fixed = model.start_position, model.fixed
+    ch.px = [float(X0[p, 0]) if fixed[p] else None for p in range(model.n_points)]
+    ch.py = [float(X0[p, 1]) if fixed[p] else None for p in range(model.n_points)]
+    for p, (x, y) in fixed_at.items():  # per-row pivots: columns of the chunk's rows
+        ch.px[p], ch.py[p] = x[lo:hi], y[lo:hi]
+        buf[:n, p, 0], buf[:n, p, 1] = ch.px[p], ch.py[p]
+    ch.trig = {}
+    ch.geo = {}
+    for st in plan.steps:
+        _position(st, ch)
+    total = 0.0
+    for p in moving:
+        buf[:n, p, 0] = ch.px[p]
+        buf[:n, p, 1] = ch.py[p]
+        total = total + ch.px[p] + ch.py[p]  # NaN anywhere stays NaN
+    return total
+
+
+def _fixed_columns(fixed_position, fixed) -> dict:
+    """{fixed point: (x (S,), y (S,))} contiguous columns of per-row pivots ({} for none)."""
+    if fixed_position is None:
+        return {}
+    return {int(p): (np.ascontiguousarray(fixed_position[:, p, 0]),
+                     np.ascontiguousarray(fixed_position[:, p, 1])) for p in np.flatnonzero(fixed)}
+
+
 def _scalar_if_constant(columns):
     """Constant rates (the usual sweep) stay scalars: zero terms can be skipped."""
     if columns is None:
@@ -467,9 +438,11 @@ def _branch_margins(ch: _Chunk, gap: np.ndarray, prev: dict, lo: int, hi: int) -
     for p, g2 in ch.gap2:
         x, y = ch.px[p], ch.py[p]
         mv = np.abs(x[1:] - x[:-1]) + np.abs(y[1:] - y[:-1])
-        g = np.minimum(g2[1:], g2[:-1])
-        np.minimum(gap[lo + 1:hi], g - (BRANCH_MARGIN * mv) ** 2, out=gap[lo + 1:hi])
-        if p in prev:
+        g = np.minimum(g2[1:], g2[:-1]) - (BRANCH_MARGIN * mv) ** 2
+        if ch.period:  # a pair of two variants' rows is no step of either
+            g[(np.arange(lo + 1, hi) % ch.period) == 0] = np.inf
+        np.minimum(gap[lo + 1:hi], g, out=gap[lo + 1:hi])
+        if p in prev and not (ch.period and lo % ch.period == 0):
             x0, y0, g0 = prev[p]
             m0 = abs(x[0] - x0) + abs(y[0] - y0)
             gap[lo] = min(gap[lo], min(g0, g2[0]) - (BRANCH_MARGIN * m0) ** 2)

@@ -9,6 +9,7 @@ from ..model import Model, driver_scale
 from ..model.drive import driver_motion as drive_motion
 from .linalg import (ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse, estimated_condition,
                      is_singular)
+from .affine import entries_at
 from .sparse import engine
 from .sparse_lu import uses_sparse
 from .linalg import CHUNK
@@ -17,7 +18,8 @@ from ..status import OK, SINGULAR
 
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
-                need_influence: bool = True, chunk: int = CHUNK, dense: bool = False):
+                need_influence: bool = True, chunk: int = CHUNK, dense: bool = False,
+                fixed_per_row: bool = False):
     """Velocities, accelerations, condition and influence coefficients of a solved sweep: the
     one place they are solved, from one factorisation of each ok step's Jacobian.
 
@@ -32,13 +34,17 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     at fixed points, so a sweep's rates are not held twice); with ``need_influence`` the influence coefficients
     ``dq/ds = -J^-1 Phi_s`` over the driver rows (what the force stage needs of the inverse).
 
+    ``fixed_per_row``: the fixed points of X differ row by row (a study's variants that move
+    pivots): the engine's entries are read off the model's terms at X itself
+    (:func:`entries_at`) instead of its affine map of the drawing.
+
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
     acceleration_residual, status, influence (S, n_q, n_drivers) NaN where not ok, or None.
     """
     rcond = model.scene.solver.singular_rcond
     eng = None if dense else engine(model)
     factorise = (_dense_factors if eng is None else
-                 _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond))
+                 _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond, fixed_per_row))
     S = X.shape[0]
     status = status.copy()
     condition = np.full(S, np.nan)
@@ -106,7 +112,7 @@ def dense_chunk(model: Model) -> int:
     return max(1, min(CHUNK, DENSE_CHUNK_ENTRIES // max(1, model.n_rows * model.n_q)))
 
 
-def _engine_factors(eng, with_inverse: bool, rcond: float):
+def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool = False):
     """The sparse engine's factorisation of a chunk of k steps: (condition (k,),
     ``regular_steps(rows (k,) bool)`` -> the g picked steps' ``solve(b (g, m)) -> J^-1 b``
     (n, g), ``driver_columns(phi_s (g, nd)) -> -J^-1 Phi_s`` over the driver rows (g, n, nd)
@@ -116,11 +122,11 @@ def _engine_factors(eng, with_inverse: bool, rcond: float):
     the cheaper way to their exact condition. Otherwise no inverse: block solves, and the
     condition estimated from a few of them (:func:`.linalg.estimate_inverse_norm1`), taken
     exactly where the estimate comes within POLISH_FROM of the singular threshold, so a step's
-    status never rests on an estimate."""
+    status never rests on an estimate. ``fixed_per_row``: as :func:`derivatives` says."""
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
 
     def factorise(model: Model, X, s):
-        E = eng.entries(model.q_of(X), s)
+        E = entries_at(eng, X, s) if fixed_per_row else eng.entries(model.q_of(X), s)
         if with_inverse:
             inv = eng.inverse(E)  # (n, m, k)
             cond = eng.condition(E, inv)
@@ -214,22 +220,30 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
     return V, A
 
 
-def link_angles_unwrapped(model: Model, X: np.ndarray) -> np.ndarray:
+def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0) -> np.ndarray:
     """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
 
     One vectorised pass: each gap is filled with the link's last angle before it (the first
     one, before its first), so the jump across the gap is unwrapped as between neighbours and
-    the filled steps add zero corrections; the gaps are NaN again afterwards."""
+    the filled steps add zero corrections; the gaps are NaN again afterwards. ``period``: the
+    rows are runs of this many steps (a study's variants), each unwrapped on its own."""
     ang = model.link_angles(X)
+    if period:
+        return link_angles_unwrapped_runs(ang.reshape(-1, period, ang.shape[-1])).reshape(ang.shape)
+    return link_angles_unwrapped_runs(ang)
+
+
+def link_angles_unwrapped_runs(ang: np.ndarray) -> np.ndarray:
+    """:func:`link_angles_unwrapped` of angles (..., S, n_links), along the steps axis."""
     fin = np.isfinite(ang)
     if fin.all():
-        return np.unwrap(ang, axis=0)
-    S = ang.shape[0]
+        return np.unwrap(ang, axis=-2)
+    S = ang.shape[-2]
     rows = np.where(fin, np.arange(S)[:, None], -1)
-    np.maximum.accumulate(rows, axis=0, out=rows)  # the last finite step at or before each
-    first = np.argmax(fin, axis=0)  # the first finite step (0 where there is none)
-    rows = np.where(rows < 0, first, rows)
-    out = np.unwrap(np.take_along_axis(ang, rows, axis=0), axis=0)
+    np.maximum.accumulate(rows, axis=-2, out=rows)  # the last finite step at or before each
+    first = np.argmax(fin, axis=-2)  # the first finite step (0 where there is none)
+    rows = np.where(rows < 0, first[..., None, :], rows)
+    out = np.unwrap(np.take_along_axis(ang, rows, axis=-2), axis=-2)
     out[~fin] = np.nan
     return out
 

@@ -19,6 +19,7 @@ import numpy as np
 from ..model import Model, derived
 from ..model import equations as eq
 from .graph import _components, _matching
+from .affine import affine_coefficients, relative_entries
 
 
 class EngineUnavailable(Exception):
@@ -52,42 +53,13 @@ class Engine:
     def _coefficients(self):
         """Return (rows, cols, C (n_features, nnz)): each non-zero entry's affine coefficients,
         read off the model's own Jacobian terms at 1 + n + 2 na probe configurations at once
-        (q = 0; q = e_k; an angle driver at pi and pi/2), entry by entry: never a dense
-        (n_features, m, n) array. Relative angle rows get their structural pattern only (their
-        entries come from the equations at every step)."""
+        (q = 0; q = e_k; an angle driver at pi and pi/2: :func:`.affine.affine_coefficients`),
+        entry by entry: never a dense (n_features, m, n) array. Relative angle rows get their
+        structural pattern only (their entries come from the equations at every step)."""
         model = self.model
-        n, nd, na = model.n_q, model.n_drivers, len(self.angle)
-        n_probes = 1 + n + 2 * na
-        probe_q = np.zeros((n_probes, n))
-        probe_q[1:1 + n] = np.eye(n)
-        probe_s = np.zeros((n_probes, nd))
-        for k, j in enumerate(self.angle):
-            probe_s[1 + n + k, j] = np.pi
-            probe_s[1 + n + na + k, j] = np.pi / 2
+        keys, C, keep = affine_coefficients(model, self.angle, model.start_position[None])
+        C, keep = C[0], keep[0]
         slot = {int(p): k for k, p in enumerate(model.moving)}
-        relative_rows = {model.n_constraints + int(j) for j in self.relative}
-        values: dict = {}  # (row, col) -> (n_probes,), terms added in the model's order
-        for r, p, gx, gy in model.jacobian_terms(model.positions(probe_q), probe_s):
-            if p not in slot:
-                continue
-            for col, g in ((2 * slot[p], gx), (2 * slot[p] + 1, gy)):
-                values[(r, col)] = values[(r, col)] + g if (r, col) in values else (
-                    np.zeros(n_probes) + g)
-        keys = sorted(k for k in values if k[0] not in relative_rows)
-        V = np.array([values[k] for k in keys]).reshape(len(keys), n_probes).T  # (n_probes, e)
-        J0 = V[0]
-        C = np.zeros((self.n_features, len(keys)))
-        base = J0.copy()
-        for k in range(na):
-            bc = 0.5 * (J0 - V[1 + n + k])
-            C[1 + n + k] = bc
-            C[1 + n + na + k] = V[1 + n + na + k] - J0 + bc
-            base = base - bc
-        C[0] = base
-        C[1:1 + n] = V[1:1 + n] - J0
-        # clean rounding noise: entries are exact small rationals of the lengths
-        C[np.abs(C) < 1e-14 * max(1.0, np.abs(C).max() if C.size else 0.0)] = 0.0
-        keep = np.abs(C).max(axis=0) > 0 if C.size else np.zeros(0, dtype=bool)
         entries = {k: C[:, e] for e, k in enumerate(keys) if keep[e]}
         for j in self.relative:  # structural pattern: the driver's moving points
             r = model.n_constraints + int(j)
@@ -185,9 +157,9 @@ class Engine:
         array (or a float when it is constant), on contiguous coordinate arrays; fixed points
         enter as scalars."""
         fx = self._fixed_xy
-        if isinstance(X2, dict):  # {moving point: (x (S,), y (S,))}: no copy into (P, 2, S)
+        if isinstance(X2, dict):  # {point: (x (S,), y (S,))}: moving (and per-row fixed) points
             def xy(p):
-                return fx[p] if p in fx else X2[p]
+                return X2[p] if p in X2 else fx[p]
         else:
             def xy(p):
                 return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
@@ -257,15 +229,7 @@ class Engine:
         def xy(p):
             return fx[p] if p in fx else (X2[slot[p], 0], X2[slot[p], 1])
 
-        for j in self.relative:
-            r = md.n_constraints + j
-            c, sn = np.cos(sT[j]), np.sin(sT[j])
-            for e in self._relative_slots[j]:
-                E[e] = 0.0
-            for _, p, gx, gy in eq.driver_jacobian_terms(md.rows.drivers[j], r, xy, c, sn):
-                if p in slot:
-                    E[self.entry_of[(r, 2 * slot[p])]] += gx
-                    E[self.entry_of[(r, 2 * slot[p] + 1)]] += gy
+        relative_entries(self, E, xy, sT)
 
     # ------------------------------------------------------------------ block-triangular order
     def _blocks(self):

@@ -101,12 +101,8 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
 
     if not model.n_drivers or not model.n_q:
         return None
-    s_drawn = model.driver_values_at(model.start_position[None])[0]
-    delta = s0 - s_drawn
-    angle = model.drv_angle
-    delta[angle] = (delta[angle] + np.pi) % (2 * np.pi) - np.pi  # the shorter way round
-    step = np.where(angle, CARRY_ANGLE_STEP, CARRY_LENGTH_STEP * model.size)
-    n_needed = float(np.max(np.abs(delta) / step))
+    delta, n_needed = carry_steps(model, model.start_position[None], s0, model.size)
+    delta, n_needed = delta[0], float(n_needed[0])
     if not n_needed <= MAX_CARRY_STEPS:  # far off (or not finite): the direct solve at s0 decides
         return None
     n = int(np.ceil(n_needed))
@@ -133,3 +129,14 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
     if model.n_drivers == 1:
         slope = ((q[-1] - q[-2]) / (path[-1, 0] - path[-2, 0]))[:, None]
     return q[-1], slope
+
+
+def carry_steps(model: Model, X0: np.ndarray, s0: np.ndarray, size):
+    """``(delta (V, nd), steps (V,))``: how far drawings X0 (V, n_points, 2) of sizes ``size``
+    (float or (V,)) are from the driver values s0 (nd,) (angles the shorter way round), and in
+    how many carry steps; at most 1 step: the start is assembled at s0 directly."""
+    delta = s0 - model.driver_values_at(X0)
+    angle = model.drv_angle
+    delta[:, angle] = (delta[:, angle] + np.pi) % (2 * np.pi) - np.pi  # the shorter way round
+    step = np.where(angle, CARRY_ANGLE_STEP, CARRY_LENGTH_STEP * np.asarray(size)[..., None])
+    return delta, np.max(np.abs(delta) / step, axis=-1)

@@ -146,8 +146,11 @@ def load_study(path, catalog_of=None) -> Study:
     study = Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
                   batch, digest.hexdigest())
     slots, why = vector.plan(study)
-    note = ("vectorised: stage 1 solved once, the force stage on all variants of a batch at once"
-            if slots is not None else f"variant by variant: {why}")
+    note = (f"variant by variant: {why}" if slots is None else
+            "vectorised: the pivots as per-row columns, stage 1 and the force stage on all "
+            "variants of a batch at once (a variant on another path or branch: its own run)"
+            if any(s[0] == "pivot" for s in slots) else
+            "vectorised: stage 1 solved once, the force stage on all variants of a batch at once")
     return dataclasses.replace(study, slots=None if slots is None else tuple(slots), path_note=note)
 
 

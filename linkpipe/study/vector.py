@@ -13,8 +13,10 @@ run's (``tests/test_study.py`` checks every stored variable against one-by-one r
 Before taking this path a study's extreme values of each parameter are parsed as a scene
 (every check of a scene applies; the value must reach the scene unchanged); a moved anchor
 gives each variant its own mechanism size (the length scale of its tolerances), as its own
-scene would. Anything else runs variant by variant
-(:func:`linkpipe.study.batch.solve_batch`), giving the same rows.
+scene would. A coordinate of a pivot (a fixed point the mechanism uses) takes the pivot
+path of :mod:`.pivots` (stage 1 too on all variants at once) where the scene and the move
+allow it. Anything else runs variant by variant (:func:`linkpipe.study.batch.solve_batch`),
+giving the same rows.
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ from ..forces.constants import ForceConstants
 from ..model.build import mechanism_size
 from ..pipeline import solve, status_of
 from ..result import Motion, units_of
+from . import pivots
 
 #: force tables and the keys of them the vectorised path varies: key -> ForceConstants field
 FORCE_KEYS = {"springs": {"k": "spring_k", "free_length": "spring_free_length",
@@ -57,7 +60,7 @@ def slot_of(scene, path: tuple):
 def _scene_value(scene, slot) -> float:
     """The parsed scene's number at ``slot`` (to check that a value reaches it unchanged)."""
     field, *index = slot
-    if field == "point":
+    if field in ("point", "pivot"):
         p = scene.points[index[0]]
         return p.x if index[1] == 0 else p.y
     if field == "gravity":
@@ -81,15 +84,18 @@ def _anchor_reason(scene, point: int) -> str:
 def plan(study) -> tuple[list | None, str]:
     """``(slots, "")`` when the study can take the vectorised path, else ``(None, why not)``."""
     scene = study.scene
-    if scene.measurements or scene.time is not None or not scene.effects:
-        return None, "the scene has measurements, a [time] table or no forces"
+    if scene.measurements or scene.time is not None:
+        return None, "the scene has measurements or a [time] table"
     slots = []
     for j, p in enumerate(study.parameters):
         slot = slot_of(scene, p.path)
         if slot is None:
             return None, f"{p.address} changes the kinematics"
-        if slot[0] == "point" and _anchor_reason(scene, slot[1]):
-            return None, f"{p.address}: {_anchor_reason(scene, slot[1])}"
+        why = _anchor_reason(scene, slot[1]) if slot[0] == "point" else ""
+        if why.endswith("moves"):
+            return None, f"{p.address}: {why}"
+        if why:  # a pivot: the mechanism's own fixed point
+            slot = ("pivot",) + slot[1:]
         for value in (study.values[:, j].min(), study.values[:, j].max()):
             try:
                 trial = scene_with(scene, study.data, [p], [value])
@@ -97,8 +103,12 @@ def plan(study) -> tuple[list | None, str]:
                 return None, f"{p.address} = {value:g} fails the scene's checks ({exc.message})"
             if _scene_value(trial, slot) != value:
                 return None, f"{p.address}: the scene does not take the value as written"
+            if why and pivots.changed_constants(study, trial):
+                return None, f"{p.address}: {why} and {pivots.changed_constants(study, trial)}"
         slots.append(slot)
-    return slots, ""
+    moved = any(s[0] == "pivot" for s in slots)
+    why = pivots.path_reason(study) if moved else "" if scene.effects else "the scene has no forces"
+    return (None, why) if why else (slots, "")
 
 
 def base_result(study):
@@ -109,32 +119,42 @@ def base_result(study):
     return _BASE[study.fingerprint]
 
 
+def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
+    """{ForceConstants field: per-row values (V x S rows, ...)} of variants with parameter
+    ``values`` (V, n_parameters): the scene's constants tiled, each varied number a column;
+    a moved point (anchor or pivot) sets the rows' drawn positions and their own sizes."""
+    V = values.shape[0]
+    constants = ForceConstants.of(model)
+    per_row = {f.name: np.array(np.broadcast_to(getattr(constants, f.name),
+                                                (V * S,) + getattr(constants, f.name).shape))
+               for f in dataclasses.fields(ForceConstants) if f.name not in ("size", "pivots")}
+    for j, (field, *index) in enumerate(slots):
+        if field in ("point", "pivot"):
+            field = "start_position"
+        per_row[field][(slice(None),) + tuple(index)] = np.repeat(values[:, j], S)
+    if any(s[0] in ("point", "pivot") for s in slots):  # a moved point may widen the drawing
+        per_row["size"] = np.repeat(mechanism_size(study.scene, per_row["start_position"][::S]), S)
+    else:
+        per_row["size"] = model.size
+    return per_row
+
+
 def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     """``(status (V, S), {variable: (V, S, ...)})`` of variants ``lo .. hi - 1``: every
     step-first variable a one-by-one run stores."""
+    if any(s[0] == "pivot" for s in slots):
+        return pivots.variant_arrays(study, slots, lo, hi)
     base = base_result(study)
     k, model = base.kinematics, base.model
     V, S = hi - lo, base.n_steps
-    values = study.values[lo:hi]
 
     def rows(a):
         return None if a is None else np.tile(a, (V,) + (1,) * (a.ndim - 1))
 
+    per_row = per_row_constants(study, model, slots, study.values[lo:hi], S)
     X = rows(k.sweep.position)
-    constants = ForceConstants.of(model)
-    per_row = {f.name: np.array(np.broadcast_to(getattr(constants, f.name),
-                                                (V * S,) + getattr(constants, f.name).shape))
-               for f in dataclasses.fields(ForceConstants) if f.name != "size"}
-    for j, (field, *index) in enumerate(slots):
-        column = np.repeat(values[:, j], S)
-        if field == "point":
-            X[:, index[0], index[1]] = column
-            field = "start_position"
-        per_row[field][(slice(None),) + tuple(index)] = column
-    if any(s[0] == "point" for s in slots):  # an anchor may widen the drawing: its own size
-        per_row["size"] = np.repeat(mechanism_size(study.scene, per_row["start_position"][::S]), S)
-    else:
-        per_row["size"] = model.size
+    for field, p, axis in (s for s in slots if s[0] == "point"):
+        X[:, p, axis] = per_row["start_position"][:, p, axis]
     motion = Motion(s=rows(k.s), s_dot=rows(k.s_dot), s_ddot=rows(k.s_ddot), position=X,
                     velocity=rows(k.velocity), acceleration=rows(k.acceleration),
                     status=rows(k.der["status"]), influence=rows(k.der["influence"]),

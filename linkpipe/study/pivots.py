@@ -1,0 +1,122 @@
+"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots).
+
+A parameter ``points.<P>.x | y`` of a fixed point that links, sliders or drivers use changes
+the kinematics, but on a scene that takes the closed-form dyads (``[solver] method`` auto) it
+changes nothing else of the model where the scene gives the lengths and local coordinates of
+the links at that point (checked at both ends of each parameter's range: the model's rows and
+mass-centre frames must equal the base scene's). All variants of a batch then run as one
+stage 1 on V x S rows (variant, step) with the pivots as per-row columns
+(:func:`linkpipe.kinematics.pivots.solve_pivot_variants`), then one force stage on the same
+rows, force parameters of the study as per-row constants (:mod:`.vector`). A variant whose own
+run would take another path or other branches (or not assemble) is solved by its own run
+(:func:`linkpipe.study.batch.solve_variant`) and its rows put in place: every row is its own
+run's (``tests/test_study_pivots.py``).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .. import kinematics as kin
+from ..forces import compute_forces
+from ..forces.applied import center_frame
+from ..forces.constants import ForceConstants
+from ..model.build import build_model
+from ..pipeline import Kinematics, Stages, result_of, status_of
+from ..result import Motion, units_of
+from ..status import NO_ASSEMBLY
+from . import vector
+
+_CHAIN: dict = {}  # study fingerprint -> the base scene's dyad chain with its branches
+
+
+def changed_constants(study, trial) -> str:
+    """What of the model a trial scene (a pivot moved) changes beyond its fixed points ("":
+    nothing, the vectorised path applies)."""
+    base, model = build_model(study.scene), build_model(trial)
+    for family in ("dist", "local", "sfix", "smov", "drivers"):
+        if getattr(model.rows, family) != getattr(base.rows, family):
+            return (f"the model's {family} rows change with it (a length or local coordinate "
+                    "taken from the drawing)")
+    for m in study.scene.masses:
+        if center_frame(model, m.link, m.center) != center_frame(base, m.link, m.center):
+            return f"the mass centre of {m.link} is taken from the drawing"
+    return ""
+
+
+def path_reason(study) -> str:
+    """Why a study that moves pivots cannot take the vectorised path ("" when it can)."""
+    scene = study.scene
+    if scene.solver.method != "auto" or scene.solver.derivatives == "finite_difference":
+        return 'pivots move: the vectorised path needs [solver] method = "auto" and analytic derivatives'
+    base = vector.base_result(study)
+    if base.solver_method_used != "dyads":
+        return "pivots move and the base scene does not take the closed-form dyads"
+    if any(st.ambiguous for st in base_chain(study).steps):
+        return "pivots move and a dyad starts on its singular shape"
+    return ""
+
+
+def base_chain(study):
+    """The base scene's dyads with the branches its own run takes (once per process)."""
+    if study.fingerprint not in _CHAIN:
+        _CHAIN.clear()
+        base = vector.base_result(study)
+        chain = kin.decompose(base.model)
+        kin.start_branches(base.model, chain, base.kinematics.s)
+        _CHAIN[study.fingerprint] = chain
+    return _CHAIN[study.fingerprint]
+
+
+def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
+    """``(status (V, S), {variable: (V, S, ...)})`` of variants ``lo .. hi - 1`` (as
+    :func:`.vector.variant_arrays`): the usable ones at once, the others by their own runs."""
+    base = vector.base_result(study)
+    scene, model, k = study.scene, base.model, base.kinematics
+    V, S = hi - lo, base.n_steps
+    per_row = vector.per_row_constants(study, model, slots, study.values[lo:hi], S)
+    stages = Stages.of(scene)
+    order = 2 if stages.acceleration else 1 if stages.velocity else 0
+    usable, a = kin.solve_pivot_variants(model, base_chain(study), per_row["start_position"][::S],
+                                         per_row["size"][::S],
+                                         k.s, k.s_dot, k.s_ddot, order, stages.forces)
+    der = a["der"]
+    forces = None
+    if stages.forces:
+        motion = Motion(s=a["s"], s_dot=a["s_dot"], s_ddot=a["s_ddot"], position=a["position"],
+                        velocity=a["velocity"], acceleration=a["acceleration"],
+                        status=der["status"], influence=der["influence"],
+                        link_angular_acceleration=a["link_rates"][1])
+        forces = compute_forces(model, motion, units_of(scene), ForceConstants(**per_row, pivots=True))
+    stored = [a["position"], a["link_angle"], a["velocity"], a["acceleration"], *a["link_rates"]]
+    status = status_of(model, der["status"], a["residual"], stored, forces, per_row["size"])
+    drive = dataclasses.replace(k.drive, **{f.name: np.tile(v, (V,) + (1,) * (v.ndim - 1))
+                                            for f in dataclasses.fields(k.drive)
+                                            for v in [getattr(k.drive, f.name)] if v is not None})
+    sweep = kin.Sweep(a["position"], a["residual"], np.zeros(V * S, dtype=np.int32), a["status"],
+                      "dyads", k.sweep.note, a["velocity"], a["acceleration"])
+    rows = Kinematics(k.mobility, drive, a["s"], a["s_dot"], a["s_ddot"], sweep, a["link_angle"],
+                      der, a["velocity"], a["acceleration"], a["link_rates"])
+    result = result_of(scene, model, rows, forces, status, {})
+    out = {v.name: v.data.reshape((V, S) + v.data.shape[1:]) for v in result.variables()
+           if v.dims[:1] == ("step",)}
+    for v in np.flatnonzero(~usable):
+        _own_run(study, lo + int(v), out, v)
+    return out["status"], out
+
+
+def _own_run(study, variant: int, out: dict, row: int) -> None:
+    """Put variant ``variant``'s own run into row ``row`` of every array of ``out`` (NaN and
+    no_assembly where its scene cannot be built or assembled)."""
+    from .batch import solve_variant  # batch imports vector, which imports this module
+
+    r = solve_variant(study, variant, None)
+    stored = {} if r is None else {v.name: v.data for v in r.variables()}
+    for name, arr in out.items():
+        if name in stored:
+            arr[row] = stored[name]
+        elif name == "status":
+            arr[row] = NO_ASSEMBLY
+        else:
+            arr[row] = np.nan if arr.dtype.kind == "f" else 0
