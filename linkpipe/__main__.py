@@ -30,7 +30,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--rrd-max-steps", type=_threads, default=100_000, metavar="N",
                      help="the most steps a recording keeps; past it a uniform stride (the "
                           ".h5 keeps every step; 0: no limit; default 100,000)")
-    run.add_argument("--rrd-max-mb", type=_threads, default=50, metavar="MB",
+    run.add_argument("--rrd-max-mb", type=_megabytes, default=50.0, metavar="MB",
                      help="the largest recording in MB (10^6 bytes); a sweep whose recording "
                           "would be larger keeps a uniform stride of steps (0: no limit; "
                           "default 50)")
@@ -78,6 +78,17 @@ def _executor_options(p) -> None:
                        help="run batches on an existing Dask cluster (tcp://host:8786)")
 
 
+def _megabytes(text: str) -> float:
+    """``--rrd-max-mb``: a number of MB >= 0 (0: no cap)."""
+    value = float(text)
+    if not value >= 0 or value == float("inf"):
+        raise ValueError(text)
+    return value
+
+
+_megabytes.__name__ = "size in MB (a number >= 0)"
+
+
 def _threads(text: str, low: int = 0) -> int:
     """``--threads``: a whole number >= 0 (argparse turns the ValueError into exit 2)."""
     value = int(text)
@@ -86,8 +97,14 @@ def _threads(text: str, low: int = 0) -> int:
     return value
 
 
+_threads.__name__ = "whole number (>= 0)"
+
+
 def _positive(text: str) -> int:
     return _threads(text, 1)
+
+
+_positive.__name__ = "whole number (>= 1)"
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
@@ -256,7 +273,7 @@ def _write_locked(result, out: pathlib.Path, args, bar):
         t0 = time.perf_counter()
         target = None if args.no_rrd else out / f"{name}.rrd"
         kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
-                         max_steps=args.rrd_max_steps, max_bytes=args.rrd_max_mb * 10**6)
+                         max_steps=args.rrd_max_steps, max_bytes=int(args.rrd_max_mb * 10**6))
         seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))

@@ -39,3 +39,8 @@ def did_you_mean(word: str, choices) -> str:
     if choices:
         return "valid: " + ", ".join(f'"{c}"' for c in choices)
     return ""
+
+
+class MemoryRefused(SceneError):
+    """A sweep refused before any work because it would need more memory than is available:
+    the scene's mistake (fewer steps), never a failed trial or a failed row of a study."""

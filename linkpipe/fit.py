@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from .errors import SceneError
+from .errors import MemoryRefused, SceneError
 from .pipeline import solve
 from .scene import Scene
 from .scene.keys import TABLES, _suggest
@@ -198,6 +198,8 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     def residuals(x):
         try:
             r = _solve_counted(scene_with(scene, data, params, x), reuse, counter)
+        except MemoryRefused:
+            raise  # the scene's size, not this trial's values
         except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
             return np.full(int(mask.sum()), FAILED_STEP_SIGMAS)
         weighted = r.measurements["residual"] / sigma

@@ -43,6 +43,10 @@ def log_entry(scene: Scene, data: dict, log_name: str | None) -> int:
     """The index of the ``[[logs]]`` entry the fleet replaces."""
     logs = data.get("logs") or []
     names = [entry.get("name") for entry in logs]
+    if not logs:
+        raise SceneError(scene.path, "logs", None, "a fleet replaces the file of one [[logs]] "
+                         "entry, and this scene reads no log",
+                         "add [[logs]] with name, file and time, and drive or measure from it")
     if log_name is None:
         if len(logs) == 1:
             return 0

@@ -14,7 +14,7 @@ from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
 from .result import Motion, Result, units_of
 from .status import NO_INPUT, OK, assign, counts, finite_rows
-from .errors import SceneError
+from .errors import MemoryRefused, SceneError
 from .scene import Scene, load_scene
 
 
@@ -87,15 +87,17 @@ def available_memory() -> int | None:
 
 
 def check_memory(scene: Scene) -> None:
-    """SceneError when the sweep would need more memory than is available (before any work:
-    a run that the kernel kills half-way writes nothing)."""
+    """MemoryRefused (a SceneError) when the sweep would need more memory than is available
+    (before any work: a run that the kernel kills half-way writes nothing). What the steps
+    need is compared with the memory still free: the fixed part of the estimate (libraries,
+    the recording) is held already or bounded, and no number of steps could remove it."""
     need = memory_needed(scene)
     avail = available_memory()
-    if avail is not None and need > avail:
+    if avail is not None and need - FIXED_BYTES > avail:
         first = scene.drivers[0] if scene.drivers else None
         driver = first.name if first else ""
         key = "step" if first is not None and first.step is not None else "steps"
-        raise SceneError(scene.path, f'drivers "{driver}"', key,
+        raise MemoryRefused(scene.path, f'drivers "{driver}"', key,
                          f"{scene.n_steps:,} steps of {len(scene.points)} points need about "
                          f"{need / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is available",
                          ("use a larger step" if key == "step" else "use fewer steps")
@@ -197,7 +199,8 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     t0 = _time.perf_counter()
-    check_memory(scene)
+    if kinematics is None:  # a reused stage 1 was checked when it was solved
+        check_memory(scene)
     model = build_model(scene)
     seconds["model"] = _time.perf_counter() - t0
     k = _stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics

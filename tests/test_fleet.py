@@ -74,7 +74,7 @@ def test_fleet_mistakes_are_one_message(tmp_path, capsys):
     assert main(["run", str(ROOT / "configs" / "basketball_goal.toml"), "--logs",
                  str(LOG)]) == 2
     err = capsys.readouterr().err
-    assert "no file matches" in err and "the scene has 0 [[logs]]" in err
+    assert "no file matches" in err and "this scene reads no log" in err and "add [[logs]]" in err
     assert "Traceback" not in err
 
 

@@ -34,3 +34,17 @@ def test_the_estimate_is_not_a_blanket_bound():
     result = linkpipe.solve(scene)
     ratio = bytes_per_step(scene) * scene.n_steps / stored_bytes(result)
     assert 1.0 <= ratio < 2.0
+
+
+def test_a_small_scene_is_not_refused_on_a_machine_with_little_memory_free(monkeypatch):
+    """What the steps need is what is compared with the memory free: the estimate's fixed
+    part (the libraries, already loaded) is no reason to refuse a 9-step scene; a sweep whose
+    steps alone need more is refused with the scene's error."""
+    import linkpipe.pipeline as pipeline
+    from linkpipe.errors import MemoryRefused
+
+    monkeypatch.setattr(pipeline, "available_memory", lambda: 50 * 2**20)
+    assert linkpipe.solve(CONFIGS / "shear_press.toml").n_ok == 9
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text().replace("steps = 361", "steps = 1000000")
+    with pytest.raises(MemoryRefused, match="steps of 5 points need about"):
+        linkpipe.solve(linkpipe.scene.parse_scene(text, "big.toml"))

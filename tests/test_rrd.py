@@ -663,10 +663,11 @@ def test_short_sweeps_keep_every_step_and_no_info(solve, tmp_path):
 
 
 def test_a_recording_past_its_size_cap_keeps_a_stride_and_stays_within_it(tmp_path, capsys):
-    """--rrd-max-mb 1 on a 30,000-step crank-rocker with every effect (about 0.9 kB a step,
-    ~27 MB whole): the size measured on two samples of steps sets the stride, the file is
-    within 1 MB and above half of it (the stride is not wildly coarse), and the info text and
-    the summary say why; the .h5 keeps every step."""
+    """--rrd-max-mb 0.5 on a 10,000-step crank-rocker with every effect (about 0.9 kB a step,
+    ~9 MB whole; a sweep this short was recorded whole whatever the cap): the size measured on
+    two samples of steps sets the stride, the file is within 0.5 MB and above half of it (the
+    stride is not wildly coarse), and the info text and the summary say why; the .h5 keeps
+    every step."""
     import re
 
     from linkpipe.__main__ import main
@@ -677,17 +678,17 @@ def test_a_recording_past_its_size_cap_keeps_a_stride_and_stays_within_it(tmp_pa
 
     text = (CONFIG_DIR / "fourbar_crank_rocker.toml").read_text()
     scene = tmp_path / "capped.toml"
-    scene.write_text(re.sub(r"steps = \d+", "steps = 30000", text) + EFFECTS)
-    assert main(["run", str(scene), "--out", str(tmp_path), "--rrd-max-mb", "1"]) == 0
+    scene.write_text(re.sub(r"steps = \d+", "steps = 10000", text) + EFFECTS)
+    assert main(["run", str(scene), "--out", str(tmp_path), "--rrd-max-mb", "0.5"]) == 0
     out = capsys.readouterr().out
     size = (tmp_path / "fourbar_crank_rocker.rrd").stat().st_size
-    assert 0.5e6 < size <= 1e6
-    stride = int(re.search(r"recording: every (\d+)th step \(([\d,]+) of 30,000; 1 MB at most\); "
-                           r"the \.h5 keeps every step", out).group(1))
+    assert 0.25e6 < size <= 0.5e6
+    stride = int(re.search(r"recording: every (\d+)th step \(([\d,]+) of 10,000; 0\.5 MB at "
+                           r"most\); the \.h5 keeps every step", out).group(1))
     rec = Recording(tmp_path / "fourbar_crank_rocker.rrd")
     np.testing.assert_array_equal(rec.steps("/mechanism/points")["step"].to_numpy(),
-                                  np.arange(0, 30000, stride))
+                                  np.arange(0, 10000, stride))
     (info,) = rec.static("/info", "TextDocument:text")
-    assert "1 MB at most" in str(info)
+    assert "0.5 MB at most" in str(info)
     with h5py.File(tmp_path / "fourbar_crank_rocker.h5") as f:
-        assert f["position"].shape[0] == 30000
+        assert f["position"].shape[0] == 10000

@@ -469,3 +469,57 @@ def test_min_transmission_angle_is_the_four_bar_closed_form(tmp_path):
                                   / (2 * b * c)))
         want = np.minimum(mu, 180.0 - mu).min()
         assert f["min_transmission_angle"][v] == pytest.approx(want, abs=1e-9)
+
+
+def test_a_study_without_forces_or_metrics_writes_its_recording(tmp_path, capsys):
+    """No input force (kinematics only) and no [study.metrics]: nothing to draw a Pareto set
+    of two metrics from; the study still writes its .h5 and .rrd and exits 0 (it crashed)."""
+    from linkpipe.__main__ import main
+
+    path = tmp_path / "nof.toml"
+    path.write_text(f'[study]\nbase = "{(ROOT / "configs" / "fourbar_crank_rocker.toml").as_posix()}"\n'
+                    '[study.parameters]\n'
+                    '"links.coupler.lengths.A-B" = { from = 3.0, to = 4.0, steps = 4 }\n')
+    assert main(["study", str(path), "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "nof_study.rrd").stat().st_size > 0
+    assert "wrote" in capsys.readouterr().out
+    assert np.isfinite(read_arrays(tmp_path / "nof_study.h5")["min_transmission_angle"]).all()
+
+
+@pytest.mark.parametrize("metric, words", [
+    ("max(" * 1500 + "input_force.theta3a" + ")" * 1500, "longer than 2000 characters"),
+    ("(" * 600 + "max(input_force.theta3a)" + ")" * 600, "nested too deeply"),
+])
+def test_a_reduction_too_long_or_deep_is_one_message(tmp_path, capsys, metric, words):
+    from linkpipe.__main__ import main
+
+    path = write_study(tmp_path, extra=f'deep = "{metric}"\n')
+    assert main(["study", str(path), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "[study.metrics] deep" in err and words in err and "Traceback" not in err
+
+
+def test_a_metric_that_is_not_finite_is_said_in_the_summary(tmp_path, capsys):
+    """x / 0 is inf for every variant: stored as it is, and the summary says so (it left the
+    metric out silently, with a numpy warning on stderr)."""
+    from linkpipe.__main__ import main
+
+    path = write_study(tmp_path, extra='over_zero = "max(input_force.theta3a) / 0"\n')
+    assert main(["study", str(path), "--out", str(tmp_path)]) == 0
+    captured = capsys.readouterr()
+    assert "over_zero: not finite at 12 variant(s) (12 infinite" in captured.out
+    assert "Warning" not in captured.err
+    assert np.isinf(read_arrays(tmp_path / "goal_study.h5")["over_zero"]).all()
+
+
+def test_a_sweep_too_long_for_memory_stops_the_study_not_a_row(tmp_path, monkeypatch):
+    """The memory refusal is the scene's error (exit 2 on the command line), never a
+    variant's failed row nor a fit's failed trial."""
+    import linkpipe.pipeline as pipeline
+    from linkpipe.errors import MemoryRefused
+    from linkpipe.study.batch import solve_variant
+
+    study = load_study(str(write_study(tmp_path)))
+    monkeypatch.setattr(pipeline, "available_memory", lambda: 1)
+    with pytest.raises(MemoryRefused):
+        solve_variant(study, 0)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..errors import SceneError
+from ..errors import MemoryRefused, SceneError
 from ..fit import scene_with
 from ..pipeline import DEFAULT_THREADS, solve
 from ..status import NO_ASSEMBLY
@@ -34,6 +34,8 @@ def solve_variant(study, v: int, threads: int | None = DEFAULT_THREADS):
     (``threads``: as :func:`linkpipe.solve`'s; None leaves the BLAS pool as it is)."""
     try:
         return solve(variant_scene(study, v), threads=threads)
+    except MemoryRefused:
+        raise  # the study's sweep is too long for this machine: not a row of data
     except SceneError:
         return None
 

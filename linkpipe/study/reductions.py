@@ -109,12 +109,21 @@ class _Parser:
         return ("call", text, args)
 
 
+#: the longest reduction accepted (a parser's recursion stays far from Python's limit below it)
+MAX_LENGTH = 2000
+
+
 def parse(text: str):
     """Return the tree of a reduction (ReductionError when it is not one)."""
     if not isinstance(text, str) or not text.strip():
         raise ReductionError("expected a reduction such as \"max(abs(input_force.crank))\"")
+    if len(text) > MAX_LENGTH:
+        raise ReductionError(f"longer than {MAX_LENGTH} characters: write a shorter reduction")
     p = _Parser(text)
-    node = p.expr()
+    try:
+        node = p.expr()
+    except RecursionError:
+        raise ReductionError("nested too deeply: write it with fewer parentheses") from None
     if p.peek()[0] != "end":
         raise ReductionError(f"unexpected {p.peek()[1]!r} after a complete expression")
     return node
@@ -192,9 +201,10 @@ def evaluate(tree, series) -> np.ndarray:
         return series(tree[1], tree[2])
     if tag == "neg":
         return -evaluate(tree[1], series)
-    if tag == "bin":
+    if tag == "bin":  # x / 0 is inf (NaN for 0 / 0), reported as not finite: not a warning
         a, b = evaluate(tree[2], series), evaluate(tree[3], series)
-        return {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.divide}[tree[1]](a, b)
+        with np.errstate(all="ignore"):
+            return {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.divide}[tree[1]](a, b)
     name, args = tree[1], tree[2]
     x = evaluate(args[0], series)
     if name == "abs":

@@ -27,10 +27,16 @@ def study_table(study, path, seconds: float | None = None) -> str:
             col = data[:, j]
             label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or name in
                             ("peak_input_force", "rms_input_force") else "")
-            if np.isfinite(col).any():
-                lines.append(f"  {label}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} (mean "
-                             f"{np.nanmean(col):.6g}, sd {np.nanstd(col):.3g}, 5-95 % "
-                             f"{np.nanpercentile(col, 5):.6g} .. {np.nanpercentile(col, 95):.6g})")
+            fin = col[np.isfinite(col)]
+            if len(fin):
+                lines.append(f"  {label}: {fin.min():.6g} .. {fin.max():.6g} (mean "
+                             f"{fin.mean():.6g}, sd {fin.std():.3g}, 5-95 % "
+                             f"{np.percentile(fin, 5):.6g} .. {np.percentile(fin, 95):.6g})")
+            if len(fin) < len(col):
+                infinite = int(np.isinf(col).sum())
+                lines.append(f"  {label}: not finite at {len(col) - len(fin):,} variant(s)"
+                             + (f" ({infinite:,} infinite: a division by zero or an overflow in "
+                                "the reduction?)" if infinite else " (no ok step, or NaN)"))
     key = (f["peak_input_force"][:, 0] if len(study.driver_names) and
            np.isfinite(f["peak_input_force"]).any() else
            f[study.metrics[0].name] if study.metrics else None)

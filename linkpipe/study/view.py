@@ -56,7 +56,7 @@ def study_view(study, columns: dict) -> StudyView:
         units["min_transmission_angle"] = "degree"
     names = list(metrics)
     pareto = ((names[0], names[1]), pareto_set(metrics[names[0]], metrics[names[1]])) \
-        if len(names) >= 2 else ((), np.zeros(0, dtype=np.intp))
+        if len(names) >= 2 else ((None, None), np.zeros(0, dtype=np.intp))
     best = []
     if names:
         key = metrics[names[0]]

@@ -44,10 +44,13 @@ MAX_STEPS = 100_000
 #: the largest recording written (issue 16: larger ones load slowly or not at all in the viewer);
 #: a sweep whose recording would be larger keeps a uniform stride of steps
 MAX_BYTES = 50_000_000
-#: sweeps up to this many steps are recorded whole without measuring their size: no scene
-#: records 5 kB a step (measured: 0.5 kB for a four-bar's kinematics, 0.9 kB with every
-#: effect, 0.9 kB for the basketball goal)
-UNMEASURED_STEPS = 10_000
+#: a bound of any scene's bytes per recorded step (measured: 0.5 kB for a four-bar's
+#: kinematics, 0.9 kB with every effect, 0.9 kB for the basketball goal): a sweep whose steps
+#: times this fit the cap is recorded whole without measuring its size
+MAX_BYTES_PER_STEP = 5_000
+#: what a file adds to the bytes recorded into memory: the default blueprint (the layout of
+#: the views) and the footer (measured: 70 kB for the crank-rocker with every effect)
+FILE_OVERHEAD = 128 * 1024
 #: the part of the size cap the plan fills
 SIZE_MARGIN = 0.9
 #: the samples of steps recorded into memory to measure a recording's fixed and per-step bytes
@@ -77,18 +80,18 @@ def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_
     recording within ``max_bytes`` (0/None: no size cap)."""
     n = result.n_steps
     stride, why = stride_of(n, max_steps), f"--rrd-max-steps {max_steps:,}" if max_steps else ""
-    if max_bytes and n > UNMEASURED_STEPS:
+    if max_bytes and n * MAX_BYTES_PER_STEP > max_bytes:
         (k0, b0), (k1, b1) = [(len(rows), recorded_bytes(result.strided(rows))) for rows in
                               (np.unique(np.linspace(0, n - 1, k).round().astype(int))
                                for k in SAMPLE_STEPS)]
         per_step = max(b1 - b0, 0) / (k1 - k0)
-        fixed = max(b0 - per_step * k0, 0.0)
+        fixed = max(b0 - per_step * k0, 0.0) + FILE_OVERHEAD
         # 10 % kept free: denser steps compress a little worse than the samples (measured:
         # a recording planned for 1 MB from the samples came out at 1.06 MB)
         room = max(SIZE_MARGIN * max_bytes - fixed, per_step)  # at least one step
         by_size = int(np.ceil(n * per_step / room)) if per_step > 0 else 1
         if by_size > stride:
-            stride, why = by_size, f"{max_bytes / 1e6:,.0f} MB at most"
+            stride, why = by_size, f"{max_bytes / 1e6:,.6g} MB at most"
     return stride, why
 
 
