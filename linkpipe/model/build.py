@@ -216,9 +216,12 @@ class Model:
         return ok
 
     def link_angles(self, X: np.ndarray) -> np.ndarray:
-        """Return each link's direction (first to second point) in radians ``(S, n_links)``."""
-        d = X[:, self.link_b] - X[:, self.link_a]
-        return np.arctan2(d[..., 1], d[..., 0])
+        """Return each link's direction (first to second point) in radians ``(S, n_links)``
+        (link by link on contiguous columns: no (S, n_links, 2) temporary)."""
+        out = np.empty((X.shape[0], len(self.link_a)))
+        for j, (a, b) in enumerate(zip(self.link_a, self.link_b)):
+            out[:, j] = np.arctan2(X[:, b, 1] - X[:, a, 1], X[:, b, 0] - X[:, a, 0])
+        return out
 
 
 def _stacked(X: np.ndarray, s: np.ndarray):
