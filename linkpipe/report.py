@@ -1,0 +1,122 @@
+"""What the command line prints about a run, a check and a fit: the per-scene summary, the
+table of stage times (``run -v``), a scene's description (``check``) and a fit's table. Text
+only; the numbers come from a :class:`~linkpipe.result.Result` (or a fit's result)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def summary(result, written=(), seconds_total=None, writer_seconds=None,
+            recording_kept=None) -> str:
+    """Return the short per-scene report printed by ``run``."""
+    sc = result.scene
+    lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
+             f"{result.n_steps - result.n_ok} failed)"]
+    lines += [f"  warning: {w}" for w in sc.warnings]
+    solved = np.isfinite(result.position).all(axis=(1, 2))  # not no_assembly / not_converged
+    if np.isfinite(result.residual[solved]).any():
+        how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else
+               f"Newton iterations mean {result.iterations.mean():.2f} max {result.iterations.max()}")
+        lines.append(f"  max residual {np.nanmax(result.residual[solved]):.2e} {result.units()['length']}"
+                     f" (solved steps), {how}")
+    if result.velocity_residual is not None and np.isfinite(result.velocity_residual).any():
+        extra = f"  max linear-equation residuals: velocity {np.nanmax(result.velocity_residual):.1e}"
+        if result.acceleration_residual is not None and np.isfinite(result.acceleration_residual).any():
+            extra += f", acceleration {np.nanmax(result.acceleration_residual):.1e}"
+        lines.append(extra)
+    from .scene import Solver
+
+    changed = {k: v for k, v in vars(sc.solver).items() if v != getattr(Solver, k)}
+    used = getattr(result, "solver_method_used", "")
+    path = [f"path {used}"] if used else []
+    if getattr(result, "linear_algebra_used", ""):
+        path.append(f"linear algebra {result.linear_algebra_used}")
+    if changed or path:  # the path taken, and the [solver] knobs not at linkpipe's defaults
+        lines.append("  solver: " + ", ".join(path + [f"{k} {v}" for k, v in changed.items()]))
+    if used == "newton" and result.solver_note:  # why not the fast path, why not sparse
+        lines.append(f"  solver note: {result.solver_note}")
+    if result.mobility.redundant:
+        line = (f"  redundant constraints: {result.mobility.redundant} (solved by least squares; "
+                f"'singular' only beyond them)")
+        names = result.forces_not_unique()
+        if names:
+            line += f"; not unique (minimum-norm choice): {', '.join(names)}"
+        lines.append(line)
+    if result.time_note:
+        lines.append(f"  {result.time_note}")
+    if sc.effects:
+        lines.append(f"  effects: {', '.join(sc.effects)}")
+    if sc.present_but_off:
+        lines.append(f"  present but off: {', '.join(sc.present_but_off)}")
+    if result.forces and "input_force" in result.forces:
+        _, f, unit = result.forces["input_force"]
+        for j, name in enumerate(result.driver_names):
+            col = f[:, j]
+            if np.isfinite(col).any():
+                lines.append(f"  input force {name}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} {unit}")
+    if result.measurements:
+        m = result.measurements
+        for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):
+            lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
+                         f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
+    if recording_kept:
+        lines.append(f"  recording: {recording_kept}; the .h5 keeps every step")
+    if written:
+        lines.append("  wrote " + ", ".join(written))
+    stage_seconds = {**result.seconds, **(writer_seconds or {})}
+    secs = ", ".join(f"{k} {v:.3f}" for k, v in stage_seconds.items())
+    if seconds_total is not None:
+        secs += f"; total {seconds_total:.3f}"
+    lines.append(f"  seconds: {secs}")
+    return "\n".join(lines)
+
+
+def stage_table(seconds: dict, total: float, n_steps: int) -> str:
+    """The time of each stage, its share of the scene's total and its rate in steps per second;
+    "other" is what no stage timed: first imports of the writers (h5py, rerun), the memory
+    check, statuses, the Result."""
+    rows = dict(seconds)
+    rows["other"] = max(total - sum(seconds.values()), 0.0)
+    lines = [f"  {'stage':<14}{'seconds':>9}{'share':>8}{'steps/s':>12}"]
+    for stage, sec in rows.items():
+        rate = f"{n_steps / sec:,.0f}" if sec > 0 and stage != "other" else ""
+        lines.append(f"  {stage:<14}{sec:>9.3f}{sec / total if total else 0:>8.0%}{rate:>12}")
+    lines.append(f"  {'total':<14}{total:>9.3f}{'100%':>8}{n_steps / total if total else 0:>12,.0f}")
+    return "\n".join(lines)
+
+
+def describe(scene, mob) -> str:
+    """What ``check`` prints of a valid scene."""
+    lines = [f"{scene.path}: scene {scene.name!r} is valid",
+             f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}",
+             f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}"]
+    if scene.sliders:
+        lines.append(f"  sliders: {', '.join(s.name for s in scene.sliders)}")
+    lines.append(f"  degrees of freedom: {mob.dof} ({mob.n_q} unknowns, {mob.n_constraints} "
+                 f"constraints, rank {mob.rank}, {mob.redundant} redundant); drivers: "
+                 + ", ".join(f"{d.name} ({d.steps} steps)" for d in scene.drivers))
+    if mob.redundant:
+        lines.append(f"  redundant: {mob.redundant} constraint(s) implied by the others (e.g. a "
+                     "link parallel to two others); solved by least squares, 'singular' flags only "
+                     "rank loss beyond them, and the forces they share are a minimum-norm choice")
+    lines.append(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
+    if scene.present_but_off:
+        lines.append(f"  present but off: {', '.join(scene.present_but_off)}")
+    return "\n".join(lines)
+
+
+def fit_table(result) -> str:
+    """What ``fit`` prints: each parameter initial -> fitted +- standard error, and the
+    measurements' RMS residual before and after."""
+    lines = [f"{result.scene.name}: fit of {len(result.parameters)} parameter(s) to "
+             f"{len(result.scene.measurements)} measurement(s): {result.message}",
+             f"  {result.n_evaluations} evaluations, stage 1 solved {result.stage1_solves} time(s)"]
+    width = max(len(n) for n in result.names)
+    for k, p in enumerate(result.parameters):
+        err = (f"± {result.standard_error[k]:.4g}" if result.identifiable[k]
+               else "not identifiable from these measurements")
+        lines.append(f"  {p.address:<{width}}  {p.initial:.6g} -> {result.fitted[k]:.6g} {err}")
+    b, a = result.before.measurements, result.after.measurements
+    for k, name in enumerate(b["names"]):
+        lines.append(f"  measurement {name}: rms {b['rms'][k]:.4g} -> {a['rms'][k]:.4g} {b['units'][k]}")
+    return "\n".join(lines)
