@@ -98,6 +98,10 @@ def parameters_of(scene: Scene, data: dict) -> list[Parameter]:
     out = []
     for name in names:
         path, value = locate(scene, data, name)
+        twin = next((q.address for q in out if q.path == path), None)
+        if twin is not None:
+            raise SceneError(where, "fit", "parameters", f'"{name}" is the same value as '
+                             f'"{twin}" (two addresses of one number)', "name it once")
         lo, hi = _bounds_of(scene, bounds, name, value)
         out.append(Parameter(name, path, float(value), (lo, hi)))
     for name in bounds:
@@ -192,6 +196,12 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     before = _solve_counted(scene_with(scene, data, params, x0), None, counter)
     reuse = before.kinematics if force_only else None
     mask = np.isfinite(before.measurements["residual"])
+    for k, m in enumerate(scene.measurements):
+        if not mask[:, k].any():  # nothing to fit to: not a success with the start values
+            raise SceneError(scene.path, f'measurements "{m.name}"', "log",
+                             f'no step has both a measured value ("{m.log}.{m.column}") and '
+                             f'a computed one ("{m.address}")',
+                             "check that the log column holds numbers at the steps that solve")
     sigma = np.array([m.sigma if m.sigma is not None else 1.0 for m in scene.measurements])
     cost: list[float] = []
 

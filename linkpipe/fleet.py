@@ -150,12 +150,20 @@ COLUMNS = {
 }
 
 
+def log_labels(paths) -> list[str]:
+    """Each log's label: its path from the folder all the logs share (``a.csv``,
+    ``sub/a.csv``): unique, as the paths are, and short."""
+    paths = [os.path.abspath(p) for p in paths]
+    root = os.path.commonpath([os.path.dirname(p) for p in paths]) if paths else ""
+    return [os.path.relpath(p, root) for p in paths]
+
+
 def fleet_columns(kind: str, scene: Scene, paths, rows) -> tuple[dict, dict]:
     """``(labels {dimension: names}, columns {name: (dims, array)})`` of a fleet's rows: one
     row per log, a failed log's cells at their fill values (NaN, -1) and its message kept."""
     from .fit import parameters_of
 
-    labels = {"log": [os.path.basename(p) for p in paths],
+    labels = {"log": log_labels(paths),
               "driver": [d.name for d in scene.drivers],
               "measurement": [m.name for m in scene.measurements]}
     if kind == "fit":

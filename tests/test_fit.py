@@ -162,3 +162,25 @@ def test_a_bad_parameter_is_one_message_exit_2_nothing_written(tmp_path, capsys,
     assert err.count("error:") == 1 and "Traceback" not in err
     assert "[fit] parameters" in err and words in err, err
     assert not out.exists()
+
+
+def test_one_value_named_twice_is_a_scene_error(tmp_path):
+    """Two addresses of one number (an index written 1 and 01): one message, not a fit that
+    moves one value under two names."""
+    path, _ = make(tmp_path, fit_params='["gravity.g.1", "gravity.g.01"]',
+                   extra="\n[gravity]\ng = [0.0, -9.81]\n")
+    with pytest.raises(linkpipe.errors.SceneError, match='the same value as "gravity.g.1"'):
+        fit(load_scene(str(path)))
+
+
+def test_a_measured_column_with_no_value_is_an_error_not_a_fit(tmp_path):
+    """Every measured sample empty: nothing to fit to; a SceneError naming the measurement
+    (it reported success with the start value and a standard error of 0)."""
+    t = np.linspace(0.0, 2.0, 81)
+    write_log(tmp_path, np.full_like(t, np.nan), t, 45.0 * t)
+    (tmp_path / "run.csv").write_text((tmp_path / "run.csv").read_text().replace("nan", ""))
+    path = tmp_path / "guess.toml"
+    path.write_text(scene_text())
+    with pytest.raises(linkpipe.errors.SceneError) as err:
+        fit(load_scene(str(path)))
+    assert 'measurements "torque"' in str(err.value) and "no step has both" in str(err.value)

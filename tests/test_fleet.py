@@ -90,3 +90,11 @@ def test_fleet_on_dask_gives_the_rows_of_in_process(logs):
         assert a.keys() == b.keys()
         for key in a:
             np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_logs_of_one_name_in_two_folders_keep_two_labels():
+    """Labels are paths from the folder the logs share (a name alone collided across folders)."""
+    from linkpipe.fleet import log_labels
+
+    assert log_labels(["rig/a_good.csv", "rig/sub/a_good.csv"]) == ["a_good.csv", "sub/a_good.csv"]
+    assert log_labels(["/x/rig/b.csv", "/x/rig/c.csv"]) == ["b.csv", "c.csv"]

@@ -228,3 +228,22 @@ def test_unknown_column_lists_the_nearest_names(tmp_path):
     with pytest.raises(linkpipe.SceneError) as err:
         linkpipe.load_scene(str(path))
     assert 'nearest columns: "crank_deg"' in str(err.value)
+
+
+@pytest.mark.parametrize("stamp", ["datetime", "timedelta", "datetime_utc"])
+def test_a_parquet_time_column_of_dates_is_seconds_from_its_first_row(tmp_path, stamp):
+    """A Parquet log whose time column holds timestamps (or durations) drives the sweep
+    exactly as the same log with seconds: the dates are seconds from the first row (they
+    were read as nanoseconds labelled "s")."""
+    t = stamps()
+    seconds = write_scene(tmp_path, encoder_frame(t), file="enc_s.parquet")
+    by_seconds = linkpipe.solve(str(seconds))
+    frame = encoder_frame(t)
+    delta = pd.to_timedelta(np.round(t * 1e9).astype(np.int64), unit="ns")
+    origin = pd.Timestamp("2026-03-01 08:00:00", tz="UTC" if stamp == "datetime_utc" else None)
+    frame["t"] = delta if stamp == "timedelta" else origin + delta
+    dated = write_scene(tmp_path, frame, file="enc_d.parquet")
+    by_dates = linkpipe.solve(str(dated))
+    np.testing.assert_allclose(by_dates.time, by_seconds.time, rtol=0, atol=1e-9)  # ns stamps
+    np.testing.assert_allclose(by_dates.position, by_seconds.position, rtol=0, atol=1e-9)
+    assert (by_dates.status == OK).all()

@@ -523,3 +523,94 @@ def test_a_sweep_too_long_for_memory_stops_the_study_not_a_row(tmp_path, monkeyp
     monkeypatch.setattr(pipeline, "available_memory", lambda: 1)
     with pytest.raises(MemoryRefused):
         solve_variant(study, 0)
+
+
+def test_best_and_pareto_rank_only_variants_that_finish_the_sweep(tmp_path, capsys):
+    """A variant that stops assembling partway has metrics over fewer steps: it is never listed
+    as best, shown as the best motion, nor put in the Pareto set while variants that finish
+    the sweep exist (it was ranked among them by its partial peaks)."""
+    from linkpipe.__main__ import main
+    from linkpipe.study.view import study_view
+
+    path = tmp_path / "o4.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"points.O4.x" = { from = -0.6, to = 0.6, steps = 7 }\n'
+                    '"points.O4.y" = { from = -2.3, to = -1.7, steps = 7 }\n'
+                    '"springs.left.k" = { from = 0.0, to = 3000.0, steps = 4 }\n')
+    assert main(["study", str(path), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    f = read_arrays(tmp_path / "o4_study.h5")
+    assert (f["worst_status"] != OK).any() and (f["worst_status"] == OK).any()
+    best = [int(v) for v in __import__("re").findall(r"variant (\d+):", out)]
+    assert best and all(f["worst_status"][v] == OK for v in best)
+    view = study_view(load_study(path), f)
+    assert all(f["worst_status"][v] == OK for v, _ in view.best)
+    assert all(f["worst_status"][v] == OK for v in view.pareto[1])
+
+
+def test_a_changed_log_restarts_the_study_instead_of_resuming(tmp_path):
+    """The fingerprint a resumed run must match covers the logs' data, not only the texts."""
+    logged = ROOT / "configs" / "logged"
+    base = tmp_path / "truck.toml"
+    text = (logged / "dump_truck_logged.toml").read_text()
+    log = tmp_path / "run.csv"
+    log.write_text((logged / "logs" / "tipper_run.csv").read_text())
+    base.write_text(text.replace("logs/tipper_run.csv", "run.csv"))
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{base.as_posix()}"\n[study.parameters]\n'
+                    '"masses.body.mass" = { from = 15000.0, to = 18000.0, steps = 4 }\n')
+    import pandas as pd
+
+    first = load_study(path)
+    frame = pd.read_csv(log)
+    frame.to_csv(log, index=False)  # written anew: other text, the same numbers
+    assert log.read_text() != (logged / "logs" / "tipper_run.csv").read_text()
+    assert load_study(path).fingerprint == first.fingerprint
+    frame[frame.columns[1]] *= 0.8
+    frame.to_csv(log, index=False)
+    assert load_study(path).fingerprint != first.fingerprint
+
+
+@pytest.mark.parametrize("parameters, key, words", [
+    ('"drivers.theta3a.from" = { from = -60.0, to = -40.0, steps = 3 }', "drivers.theta3a.from",
+     "would change the number of steps"),
+    ('"gravity.g.1" = { from = -32.0, to = -10.0, steps = 3 }\n'
+     '"gravity.g.01" = { from = -1.0, to = 0.0, steps = 2 }', "gravity.g.01",
+     'the same value as "gravity.g.1"'),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 1 }', "springs.left.k",
+     "one step cannot cover from 1.0 to 2.0"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 20000 }\n'
+     '"springs.right.k" = { from = 1.0, to = 2.0, steps = 20000 }', "parameters",
+     "400,000,000 variants"),
+])
+def test_studies_that_cannot_be_one_step_axis_or_name_a_value_twice(tmp_path, parameters, key,
+                                                                    words):
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n{parameters}\n')
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert key in str(err.value) and words in str(err.value)
+
+
+def test_two_runs_of_one_study_into_one_folder_wait_for_each_other(tmp_path):
+    """The second run waits for the first (it took the first one's unfinished file for one cut
+    short by a kill and deleted it); both end with the complete file."""
+    import threading
+    import time
+
+    path = write_study(tmp_path, batch=2)
+    done = []
+
+    def run(pause):
+        run_study(load_study(path), tmp_path / "out",
+                  after_batch=lambda n: time.sleep(pause))
+        done.append(read_arrays(tmp_path / "out" / "goal_study.h5"))
+
+    first = threading.Thread(target=run, args=(0.05,))
+    first.start()
+    time.sleep(0.1)
+    run(0.0)
+    first.join()
+    assert len(done) == 2 and (done[0]["batch_done"] == 1).all()
+    for name in ("peak_input_force", "worst_status"):
+        np.testing.assert_array_equal(done[0][name], done[1][name])

@@ -100,13 +100,25 @@ def numeric_column(frame, column: str, path: Path, table: _Table, key: str) -> n
     return values
 
 
+def _seconds_from_first(raw) -> np.ndarray:
+    """A time column of dates (datetime64) or durations (timedelta64), as seconds from its first
+    row (NaN where a stamp is missing)."""
+    values = raw.to_numpy(dtype="timedelta64[ns]" if raw.dtype.kind == "m" else "datetime64[ns]")
+    finite = ~np.isnat(values)  # (a time zone is dropped: UTC, the same offsets)
+    origin = values[finite][0] if finite.any() else values[0]
+    seconds = (values - origin) / np.timedelta64(1, "ns") * 1e-9
+    return np.where(finite, seconds, np.nan).astype(float)
+
+
 def time_column(frame, column: str, path: Path, table: _Table) -> np.ndarray:
     """The time column: numbers, finite and strictly increasing (a SceneError names the file
-    and the first bad row otherwise)."""
+    and the first bad row otherwise). Dates or durations (a Parquet timestamp column) are
+    seconds from the first row."""
     if column not in frame.columns:
         raise table.error("time", f'"{path}" has no column "{column}"',
                           nearest_columns(column, frame.columns))
-    t = numeric_column(frame, column, path, table, "time")
+    t = (_seconds_from_first(frame[column]) if frame[column].dtype.kind in "mM"
+         else numeric_column(frame, column, path, table, "time"))
     if len(t) < 2:
         raise table.error("time", f'"{path}" has {len(t)} row(s): a log needs at least two '
                           "samples", "give the log its samples, one row each")

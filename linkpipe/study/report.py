@@ -37,16 +37,18 @@ def study_table(study, path, seconds: float | None = None) -> str:
                 lines.append(f"  {label}: not finite at {len(col) - len(fin):,} variant(s)"
                              + (f" ({infinite:,} infinite: a division by zero or an overflow in "
                                 "the reduction?)" if infinite else " (no ok step, or NaN)"))
-    key = (f["peak_input_force"][:, 0] if len(study.driver_names) and
-           np.isfinite(f["peak_input_force"]).any() else
-           f[study.metrics[0].name] if study.metrics else None)
+    by_force = len(study.driver_names) > 0 and np.isfinite(f["peak_input_force"]).any()
+    key_name = "peak_input_force" if by_force else study.metrics[0].name if study.metrics else None
+    key = f["peak_input_force"][:, 0] if by_force else f[key_name] if key_name else None
     if key is not None and np.isfinite(key).any():
-        finite = np.flatnonzero(np.isfinite(key))
-        order = finite[np.argsort(key[finite], kind="stable")][:N_BEST]
-        lines.append("  best (lowest " + ("peak_input_force" if key is not None and study.driver_names
-                                           else study.metrics[0].name) + "):")
+        from .view import ranked
+
+        order = ranked(key, f["worst_status"])[:N_BEST]
+        whole = bool((f["worst_status"][order] == 0).all())
+        lines.append(f"  best (lowest {key_name}"
+                     + ("" if whole else "; no variant has every step ok: these fail some") + "):")
         varied = [j for j in range(len(study.names)) if np.ptp(study.values[:, j]) > 0]
         for v in order:
             values = ", ".join(f"{study.names[j]} = {study.values[v, j]:.6g}" for j in varied)
-            lines.append(f"    variant {v}: {key[v]:.6g} at {values}")
+            lines.append(f"    variant {v}: {key[v]:.6g}" + (f" at {values}" if values else ""))
     return "\n".join(lines)

@@ -65,10 +65,19 @@ def run_study(study, out, executor: str = "in_process", workers=None, scheduler=
 
     ``after_batch(n_written)``: called after each batch is written (a test stops a study
     half-way by raising there)."""
-    from ..stores.study import StudyFile
+    from ..stores import output_lock
 
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    # a second run of the same study into the same folder waits for the first (it would
+    # otherwise take the first one's unfinished file for one cut short by a kill)
+    with output_lock(out, f"{study.name}_study"):
+        return _run_locked(study, out, executor, workers, scheduler, progress, after_batch)
+
+
+def _run_locked(study, out: pathlib.Path, executor, workers, scheduler, progress, after_batch):
+    from ..stores.study import StudyFile
+
     path = out / f"{study.name}_study.h5"
     store = StudyFile(path, *layout(study), study.fingerprint)
     try:

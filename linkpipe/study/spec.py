@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import itertools
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,8 +140,13 @@ def load_study(path, catalog_of=None) -> Study:
     params = _parameters(path, raw, scene, base)
     catalog = (catalog_of or _catalog)(scene)
     metrics = _metrics(path, raw, catalog)
+    _check_variant_count(path, params, samples)
     values = variant_values(params, samples, seed)
     digest = hashlib.sha256("\0".join([__version__, text, scene.text, str(batch)]).encode())
+    for log in scene.logs:  # the data a scene reads, not only its text: a changed log restarts
+        digest.update(np.ascontiguousarray(log.t).tobytes())
+        for column in sorted(log.columns):
+            digest.update(column.encode() + np.ascontiguousarray(log.columns[column]).tobytes())
     study = Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
                   batch, digest.hexdigest())
     slots, why = vector.plan(study)
@@ -201,12 +205,24 @@ def _parameters(path, raw, scene: Scene, base: dict) -> tuple[StudyParameter, ..
     for address, spec in table.items():
         where = (path, "study.parameters", address)
         p_path, value = locate(scene, base, address, where)
-        if p_path[0] in ("time",) or p_path[-1] in _STEP_KEYS:
+        if p_path[0] in ("time",) or p_path[-1] in _STEP_KEYS or _moves_step_count(base, p_path):
             raise SceneError(*where, "would change the number of steps; the variants of a "
                              "study share one step axis", "vary another value")
+        twin = next((q.address for q in out if q.path == p_path), None)
+        if twin is not None:
+            raise SceneError(*where, f'is the same value as "{twin}" (two addresses of one '
+                             "number)", "vary it once")
         kind, numbers = _variation(where, spec)
         out.append(StudyParameter(address, p_path, float(value), kind, numbers))
     return tuple(out)
+
+
+def _moves_step_count(base: dict, p_path: tuple) -> bool:
+    """Whether a driver's ``from`` or ``to`` sets its number of steps (a driver given by
+    ``step``: (to - from) / step + 1 steps)."""
+    if p_path[0] != "drivers" or p_path[-1] not in ("from", "to") or len(p_path) != 3:
+        return False
+    return "step" in base["drivers"][p_path[1]] and "steps" not in base["drivers"][p_path[1]]
 
 
 def _variation(where, spec) -> tuple[str, tuple]:
@@ -223,6 +239,9 @@ def _variation(where, spec) -> tuple[str, tuple]:
         if n < 1 or (n > 1 and lo == hi):
             raise SceneError(*where, f"an empty range (from {lo}, to {hi}, steps {n})",
                              "give steps >= 1, and from != to when steps > 1")
+        if n == 1 and lo != hi:  # one step cannot reach `to`: say which value is meant
+            raise SceneError(*where, f"one step cannot cover from {lo} to {hi}",
+                             "give steps >= 2, or from = to = the one value")
         return "grid", (float(lo), float(hi), n)
     if len(keys) == 1 and keys <= {"normal", "uniform"}:
         kind = keys.pop()
@@ -239,11 +258,28 @@ def _variation(where, spec) -> tuple[str, tuple]:
                      "make a grid or one distribution", hint)
 
 
+#: the most variants a study may have (its table of values alone is 8 bytes a parameter each)
+MAX_VARIANTS = 100_000_000
+
+
+def _check_variant_count(path, params, samples: int) -> None:
+    """SceneError before any work when the grids' product times the samples is too many."""
+    count = samples if any(p.kind != "grid" for p in params) else 1
+    for p in params:
+        if p.kind == "grid":
+            count *= p.spec[2]
+    if count > MAX_VARIANTS:
+        raise SceneError(path, "study", "parameters", f"{count:,} variants (the grids' product "
+                         f"times samples) is more than {MAX_VARIANTS:,}",
+                         "use fewer grid steps or samples, or split the study into several files")
+
+
 def variant_values(params, samples: int, seed: int) -> np.ndarray:
     """(V, n_parameters): the grids' full product, each point with ``samples`` joint draws."""
     grids = [np.linspace(*p.spec) for p in params if p.kind == "grid"]
-    product = list(itertools.product(*grids))  # one empty point when there are no grids
-    points = np.array(product, dtype=float).reshape(len(product), len(grids))
+    # the full product in itertools.product's order (last grid fastest), as one array
+    points = (np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
+              if grids else np.zeros((1, 0)))
     draws = [p for p in params if p.kind != "grid"]
     per_point = samples if draws else 1
     V = points.shape[0] * per_point

@@ -39,6 +39,15 @@ def pareto_set(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return order[keep]
 
 
+def ranked(key: np.ndarray, worst_status: np.ndarray) -> np.ndarray:
+    """Variant indices by ``key`` (lowest first) among those whose every step is ok; when no
+    variant has all steps ok, among those with a finite key (a variant that cannot finish the
+    sweep is never ranked above one that can: its metrics cover only the steps it reached)."""
+    whole = np.flatnonzero(np.isfinite(key) & (np.asarray(worst_status) == 0))
+    pool = whole if len(whole) else np.flatnonzero(np.isfinite(key))
+    return pool[np.argsort(key[pool], kind="stable")]
+
+
 def study_view(study, columns: dict) -> StudyView:
     """The view of a finished study's file (``columns``: its arrays, as read back)."""
     from .batch import solve_variant
@@ -55,13 +64,15 @@ def study_view(study, columns: dict) -> StudyView:
         metrics["min_transmission_angle"] = columns["min_transmission_angle"]
         units["min_transmission_angle"] = "degree"
     names = list(metrics)
-    pareto = ((names[0], names[1]), pareto_set(metrics[names[0]], metrics[names[1]])) \
+    status = np.asarray(columns["worst_status"])
+    whole = status == 0  # the Pareto set of the variants that finish the sweep, when any do
+    pool = np.flatnonzero(whole) if whole.any() else np.arange(len(status))
+    pareto = ((names[0], names[1]), pool[pareto_set(metrics[names[0]][pool],
+                                                    metrics[names[1]][pool])]) \
         if len(names) >= 2 else ((None, None), np.zeros(0, dtype=np.intp))
     best = []
     if names:
-        key = metrics[names[0]]
-        finite = np.flatnonzero(np.isfinite(key))
-        for v in finite[np.argsort(key[finite], kind="stable")][:N_MOTION]:
+        for v in ranked(metrics[names[0]], status)[:N_MOTION]:
             result = solve_variant(study, int(v))
             if result is not None:
                 best.append((int(v), result))
