@@ -119,8 +119,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
         return command(args)
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the writers removed their temporaries
         # one status for a run stopped from outside, whichever signal (130, as for Ctrl-C)
+        kept = ("a study's finished batches stay in its .partial file: the same command resumes "
+                "from them" if args.command == "study" else
+                "outputs written before stay, the one being written was not kept")
         print(f"linkpipe: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}; "
-              "outputs written before stay, the one being written was not kept", file=sys.stderr)
+              f"{kept}", file=sys.stderr)
         return 130
     finally:
         for signum, handler in previous.items():

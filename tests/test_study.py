@@ -614,3 +614,18 @@ def test_two_runs_of_one_study_into_one_folder_wait_for_each_other(tmp_path):
     assert len(done) == 2 and (done[0]["batch_done"] == 1).all()
     for name in ("peak_input_force", "worst_status"):
         np.testing.assert_array_equal(done[0][name], done[1][name])
+
+
+def test_an_interrupted_study_says_it_can_be_resumed(tmp_path, capsys, monkeypatch):
+    """Ctrl-C during a study: exit 130 and one line saying the finished batches are kept and
+    the same command resumes (not "the one being written was not kept")."""
+    import linkpipe.study
+    from linkpipe.__main__ import main
+
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(linkpipe.study, "run_study", stop)
+    assert main(["study", str(write_study(tmp_path)), "--out", str(tmp_path)]) == 130
+    err = capsys.readouterr().err
+    assert "the same command resumes" in err and len(err.strip().splitlines()) == 1
