@@ -192,8 +192,15 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
                          "[[measurements]]", "add [[measurements]] with log, of and sigma")
     x0 = np.array([p.initial for p in params])
     force_only = all(p.force_only for p in params)
-    counter = {"stage1": 0, "wanted": frozenset(m.of[0] for m in scene.measurements)}
-    before = _solve_counted(scene_with(scene, data, params, x0), None, counter)
+    wanted = frozenset(m.of[0] for m in scene.measurements)  # trials read nothing else
+    stage1 = 0
+
+    def solve_at(x, reuse):
+        nonlocal stage1
+        stage1 += reuse is None
+        return solve(scene_with(scene, data, params, x), kinematics=reuse, wanted=wanted)
+
+    before = solve_at(x0, None)
     reuse = before.kinematics if force_only else None
     mask = np.isfinite(before.measurements["residual"])
     for k, m in enumerate(scene.measurements):
@@ -207,7 +214,7 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
 
     def residuals(x):
         try:
-            r = _solve_counted(scene_with(scene, data, params, x), reuse, counter)
+            r = solve_at(x, reuse)
         except MemoryRefused:
             raise  # the scene's size, not this trial's values
         except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
@@ -225,18 +232,12 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
                         max_nfev=max_evaluations)
     se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
                                                              for m in scene.measurements))
-    after = _solve_counted(scene_with(scene, data, params, sol.x), reuse, counter)
+    after = solve_at(sol.x, reuse)
     fitted_data = copy.deepcopy(data)
     for p, v in zip(params, sol.x):
         _set(fitted_data, p.path, v)
     return FitResult(scene, params, sol.x, se, identifiable, cost, before, after, fitted_data,
-                     counter["stage1"], sol.message, sol.nfev)
-
-
-def _solve_counted(scene, reuse, counter):
-    if reuse is None:
-        counter["stage1"] += 1
-    return solve(scene, kinematics=reuse, wanted=counter["wanted"])
+                     stage1, sol.message, sol.nfev)
 
 
 def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):
