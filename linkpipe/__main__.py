@@ -78,33 +78,31 @@ def _executor_options(p) -> None:
                        help="run batches on an existing Dask cluster (tcp://host:8786)")
 
 
+def _number(text: str, kind, low, what: str):
+    """An option's value of ``kind`` (int or float), finite and >= ``low``; argparse turns the
+    ArgumentTypeError into one line naming the option, exit 2."""
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not low <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    return value
+
+
 def _megabytes(text: str) -> float:
     """``--rrd-max-mb``: a number of MB >= 0 (0: no cap)."""
-    value = float(text)
-    if not value >= 0 or value == float("inf"):
-        raise ValueError(text)
-    return value
+    return _number(text, float, 0.0, "a size in MB >= 0 (0: no cap)")
 
 
-_megabytes.__name__ = "size in MB (a number >= 0)"
-
-
-def _threads(text: str, low: int = 0) -> int:
-    """``--threads``: a whole number >= 0 (argparse turns the ValueError into exit 2)."""
-    value = int(text)
-    if value < low:
-        raise ValueError(text)
-    return value
-
-
-_threads.__name__ = "whole number (>= 0)"
+def _threads(text: str) -> int:
+    """``--threads``, ``--rrd-max-steps``: a whole number >= 0."""
+    return _number(text, int, 0, "a whole number >= 0")
 
 
 def _positive(text: str) -> int:
-    return _threads(text, 1)
-
-
-_positive.__name__ = "whole number (>= 1)"
+    """``--workers``: a whole number >= 1."""
+    return _number(text, int, 1, "a whole number >= 1")
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
