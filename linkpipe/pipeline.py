@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import time as _time
 from dataclasses import dataclass, field
 
@@ -181,16 +182,13 @@ class Kinematics:
     #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
     force_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
-    @property
+    @functools.cached_property
     def finite(self) -> np.ndarray:
         """(S,) True where every stored kinematic array is finite (computed once: a fit's
         trials reuse it)."""
-        if "finite" not in self.force_cache:
-            stored = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
-                      *self.link_rates]
-            self.force_cache["finite"] = finite_rows([a for a in stored if a is not None],
-                                                     len(self.s))
-        return self.force_cache["finite"]
+        stored = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
+                  *self.link_rates]
+        return finite_rows([a for a in stored if a is not None], len(self.s))
 
 
 def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
