@@ -108,12 +108,17 @@ print(json.dumps(dict(seconds=seconds, peak_mb=peak, variants=study.n_variants,
 """
 
 
-def setup(folder: pathlib.Path) -> None:
-    text = GOAL.read_text().replace(
+def goal_every_effect() -> str:
+    """The basketball goal with every effect on (the base of these studies and of
+    tests/test_study.py's vectorised cases)."""
+    return GOAL.read_text().replace(
         'effects = ["springs", "gravity", "inertia"]',
         'effects = ["springs", "gravity", "inertia", "damping", "loads"]').replace(
-        "free_length = 0.5833\n", "free_length = 0.5833\ndamping = 0.3\n")
-    (folder / "goal_every_effect.toml").write_text(text + EVERY_EFFECT_TABLES)
+        "free_length = 0.5833\n", "free_length = 0.5833\ndamping = 0.3\n") + EVERY_EFFECT_TABLES
+
+
+def setup(folder: pathlib.Path) -> None:
+    (folder / "goal_every_effect.toml").write_text(goal_every_effect())
 
 
 def case(folder: pathlib.Path, name: str, text: str, executor="in_process", workers=None,

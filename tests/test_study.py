@@ -277,20 +277,10 @@ def test_study_inside_a_scene(tmp_path):
             np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
 
 
-EVERY_EFFECT = GOAL.read_text().replace(
-    'effects = ["springs", "gravity", "inertia"]',
-    'effects = ["springs", "gravity", "inertia", "damping", "loads"]').replace(
-    "free_length = 0.5833\n", "free_length = 0.5833\ndamping = 0.3\n") + """
-[[loads]]
-name = "hand"
-point = "H"
-force = [0.0, -5.0]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_study import goal_every_effect  # noqa: E402  (the benchmark's base scene)
 
-[[loads]]
-name = "twist"
-link = "upper"
-torque = 1.5
-"""
+EVERY_EFFECT = goal_every_effect()
 
 FORCE_STUDY = """
 [study]
