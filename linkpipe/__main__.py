@@ -210,7 +210,8 @@ def _load_all(paths, outcome: _Outcome) -> list:
 
 
 def _run(args) -> int:
-    from .pipeline import check_memory, solve
+    from .pipeline import check_memory
+    from .segments import steps_per_segment
 
     out = pathlib.Path(args.out)
     if out.exists() and not out.is_dir():
@@ -226,47 +227,49 @@ def _run(args) -> int:
     for scene in scenes:
         with _reporting(scene.path, outcome):
             t0 = time.perf_counter()
-            check_memory(scene)  # before the progress bar: a sweep too big for memory is a scene error
+            segment = steps_per_segment(scene)
+            # before the progress bar: a sweep too big for memory is a scene error
+            check_memory(scene, segment)
             bar = _progress_bar(scene, args)
-            result = solve(scene, progress=bar.stage if bar else None,
-                           threads=args.threads or None)
-            written, writer_seconds, kept = _write(result, out, args, bar)
+            out.mkdir(parents=True, exist_ok=True)
+            from .stores import output_lock
+
+            with output_lock(out, scene.name):  # another run of this name waits: .h5, .rrd pair
+                result, written, kept = _solve_and_write(scene, out, args, bar, segment)
             if bar:
                 bar.close()
             if not args.quiet:
                 total = time.perf_counter() - t0
-                print(summary(result, written, total, writer_seconds, kept))
+                print(summary(result, written, total, None, kept))
                 if args.verbose:
-                    print(stage_table({**result.seconds, **writer_seconds}, total,
-                                      result.n_steps))
+                    print(stage_table(result.seconds, total, result.totals.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
         print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
     return outcome.code
 
 
-def _write(result, out: pathlib.Path, args, bar) -> tuple[list[str], dict[str, float], str | None]:
-    """Write the scene's .h5 and .rrd (and stream where asked); return (paths, seconds each,
-    the steps the recording kept when not every one)."""
-    out.mkdir(parents=True, exist_ok=True)
-    from .stores import output_lock
+def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
+    """Solve ``scene`` (in segments where it is long: :mod:`linkpipe.segments`), its .h5
+    written segment by segment, then its .rrd (and streams where asked) from the rows the
+    recording keeps; return (the Result with every stage's seconds, paths written, the steps
+    the recording kept when not every one)."""
+    from .segments import stream
+    from .stores import stop_if_interrupted
 
-    with output_lock(out, result.scene.name):  # another run of this name waits: .h5, .rrd pair
-        return _write_locked(result, out, args, bar)
+    name = scene.name
+    recording = not args.no_rrd or args.spawn or args.connect
+    written, kept = [], None
+    with contextlib.ExitStack() as files:
+        sinks = []
+        if not args.no_h5:
+            from .stores import hdf5
 
-
-def _write_locked(result, out: pathlib.Path, args, bar):
-    written, seconds, kept = [], {}, None
-    name = result.scene.name
-    if not args.no_h5:
-        from .stores import hdf5
-
-        if bar:
-            bar.stage("hdf5")
-        t0 = time.perf_counter()
-        hdf5.write(result, out / f"{name}.h5")
-        seconds["hdf5"] = time.perf_counter() - t0
-        written.append(str(out / f"{name}.h5"))
-    if not args.no_rrd or args.spawn or args.connect:
+            sinks.append(files.enter_context(hdf5.SweepWriter(out / f"{name}.h5", scene.n_steps)))
+            written.append(str(out / f"{name}.h5"))
+        result = stream(scene, sinks, max_steps=args.rrd_max_steps if recording else None,
+                        progress=bar.stage if bar else None, threads=args.threads or None,
+                        segment=segment, between=stop_if_interrupted)
+    if recording:
         from .stores import rrd
 
         if bar:
@@ -275,43 +278,40 @@ def _write_locked(result, out: pathlib.Path, args, bar):
         target = None if args.no_rrd else out / f"{name}.rrd"
         kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
                          max_steps=args.rrd_max_steps, max_bytes=int(args.rrd_max_mb * 10**6))
-        seconds["rrd"] = time.perf_counter() - t0
+        result.seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))
-    return written, seconds, kept
+    return result, written, kept
 
 
 PROGRESS_MIN_STEPS = 20_000  # sweeps at least this long get a progress bar
 
 
 class _StageBar:
-    """A tqdm bar over one scene's stages (solve stages, then the writers)."""
+    """A tqdm bar over one scene's steps, its postfix the stage at work (a sweep in segments
+    moves the bar at the end of each segment; a whole one at its end)."""
 
-    def __init__(self, scene, total):
+    def __init__(self, scene):
         from tqdm import tqdm
 
-        self.bar = tqdm(total=total, desc=scene.name, unit="stage", leave=False, file=sys.stderr,
+        self.bar = tqdm(total=scene.n_steps, desc=scene.name, unit="step", unit_scale=True,
+                        leave=False, file=sys.stderr,
                         disable=None)  # None: shown on a terminal only, never in a log
-        self.started = False
 
-    def stage(self, name):
-        if self.started:
-            self.bar.update(1)
-        self.started = True
+    def stage(self, name, done: int | None = None):
+        if done is not None:
+            self.bar.update(done - self.bar.n)
         self.bar.set_postfix_str(name)
 
     def close(self):
-        self.bar.update(1)
+        self.bar.update(self.bar.total - self.bar.n)
         self.bar.close()
 
 
 def _progress_bar(scene, args):
     if args.quiet or scene.n_steps < PROGRESS_MIN_STEPS:
         return None
-    from .pipeline import Stages
-
-    writers = (0 if args.no_h5 else 1) + (0 if args.no_rrd else 1)
-    return _StageBar(scene, len(Stages.of(scene).stages) + 1 + writers)
+    return _StageBar(scene)
 
 
 def _check(args) -> int:

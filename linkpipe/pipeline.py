@@ -14,8 +14,8 @@ from . import kinematics as kin
 from .model import build_model, check_mobility
 from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
-from .result import Motion, Result, units_of
-from .status import NO_INPUT, OK, assign, counts, finite_rows
+from .result import Motion, Result, Totals, units_of
+from .status import FLAG_MEANINGS, NO_INPUT, OK, assign, finite_rows
 from .errors import MemoryRefused, SceneError
 from .scene import Scene, load_scene
 
@@ -70,10 +70,24 @@ def bytes_per_step(scene: Scene) -> int:
     return 8 * (numbers + 2 * len(scene.measurements))
 
 
-def memory_needed(scene: Scene) -> int:
+def whole_sweep_bytes_per_step(scene: Scene) -> int:
+    """The bytes per step a run in segments (:mod:`linkpipe.segments`) keeps for the whole
+    sweep: the drivers' motion in scene and internal units, the time axis, and the general
+    path's positions with their residuals, iterations and statuses (the dyads need none, but
+    the path is known only once solved: an upper bound)."""
+    nd, P = max(1, len(scene.drivers)), len(scene.points)
+    n_q = 2 * sum(not p.fixed for p in scene.points)
+    return 8 * (6 * nd + 2) + 1 + 8 * (2 * P + n_q + 1) + 5
+
+
+def memory_needed(scene: Scene, segment: int | None = None) -> int:
     """An upper bound of a run's peak memory in bytes (checked against measured peaks in
-    benchmarks/bench_logs.py)."""
-    return int(scene.n_steps * bytes_per_step(scene) * TRANSIENT_FACTOR) + FIXED_BYTES
+    benchmarks/bench_memory.py): the whole sweep's arrays, or with ``segment`` (steps) a run in
+    segments: one segment's arrays and what stays whole."""
+    if segment is None or segment >= scene.n_steps:
+        return int(scene.n_steps * bytes_per_step(scene) * TRANSIENT_FACTOR) + FIXED_BYTES
+    return int(segment * bytes_per_step(scene) * TRANSIENT_FACTOR
+               + scene.n_steps * whole_sweep_bytes_per_step(scene)) + FIXED_BYTES
 
 
 def available_memory() -> int | None:
@@ -88,12 +102,12 @@ def available_memory() -> int | None:
     return None
 
 
-def check_memory(scene: Scene) -> None:
+def check_memory(scene: Scene, segment: int | None = None) -> None:
     """MemoryRefused (a SceneError) when the sweep would need more memory than is available
     (before any work: a run that the kernel kills half-way writes nothing). What the steps
     need is compared with the memory still free: the fixed part of the estimate (libraries,
     the recording) is held already or bounded, and no number of steps could remove it."""
-    need = memory_needed(scene)
+    need = memory_needed(scene, segment)
     avail = available_memory()
     if avail is not None and need - FIXED_BYTES > avail:
         first = scene.drivers[0] if scene.drivers else None
@@ -531,9 +545,5 @@ def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]
 
 def message(status: np.ndarray) -> str:
     """One line: how many steps are ok, and what the others are."""
-    found = counts(status)
-    n_ok, n_steps = found.get("ok", 0), len(status)
-    if n_ok == n_steps:
-        return f"all {n_steps} steps ok"
-    return f"{n_ok}/{n_steps} steps ok; " + ", ".join(
-        f"{n} {k}" for k, n in found.items() if k != "ok")
+    found = np.bincount(np.asarray(status, dtype=np.intp), minlength=len(FLAG_MEANINGS))
+    return Totals(len(status), tuple(int(n) for n in found), np.nan, np.nan, 0, 0).message

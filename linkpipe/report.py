@@ -9,20 +9,21 @@ import numpy as np
 def summary(result, written=(), seconds_total=None, writer_seconds=None,
             recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run``."""
-    sc = result.scene
-    lines = [f"{sc.name}: {result.message} ({result.n_steps} steps, {result.n_ok} ok, "
-             f"{result.n_steps - result.n_ok} failed)"]
+    sc, totals = result.scene, result.totals
+    lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
+             f"{totals.n_steps - totals.n_ok} failed)"]
     lines += [f"  warning: {w}" for w in sc.warnings]
-    solved = np.isfinite(result.position).all(axis=(1, 2))  # not no_assembly / not_converged
-    if np.isfinite(result.residual[solved]).any():
+    if np.isfinite(totals.max_residual_solved):
         how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else
-               f"Newton iterations mean {result.iterations.mean():.2f} max {result.iterations.max()}")
-        lines.append(f"  max residual {np.nanmax(result.residual[solved]):.2e} {result.units()['length']}"
+               f"Newton iterations mean {totals.iterations_sum / totals.n_steps:.2f} max "
+               f"{totals.iterations_max}")
+        lines.append(f"  max residual {totals.max_residual_solved:.2e} {result.units()['length']}"
                      f" (solved steps), {how}")
-    if result.velocity_residual is not None and np.isfinite(result.velocity_residual).any():
-        extra = f"  max linear-equation residuals: velocity {np.nanmax(result.velocity_residual):.1e}"
-        if result.acceleration_residual is not None and np.isfinite(result.acceleration_residual).any():
-            extra += f", acceleration {np.nanmax(result.acceleration_residual):.1e}"
+    vres, ares = totals.max_velocity_residual, totals.max_acceleration_residual
+    if vres is not None and np.isfinite(vres):
+        extra = f"  max linear-equation residuals: velocity {vres:.1e}"
+        if ares is not None and np.isfinite(ares):
+            extra += f", acceleration {ares:.1e}"
         lines.append(extra)
     from .scene import Solver
 
@@ -48,12 +49,12 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
         lines.append(f"  effects: {', '.join(sc.effects)}")
     if sc.present_but_off:
         lines.append(f"  present but off: {', '.join(sc.present_but_off)}")
-    if result.forces and "input_force" in result.forces:
-        _, f, unit = result.forces["input_force"]
+    if totals.input_force_min is not None:
+        unit = result.forces["input_force"][2]
         for j, name in enumerate(result.driver_names):
-            col = f[:, j]
-            if np.isfinite(col).any():
-                lines.append(f"  input force {name}: {np.nanmin(col):.6g} .. {np.nanmax(col):.6g} {unit}")
+            if np.isfinite(totals.input_force_min[j]):
+                lines.append(f"  input force {name}: {totals.input_force_min[j]:.6g} .. "
+                             f"{totals.input_force_max[j]:.6g} {unit}")
     if result.measurements:
         m = result.measurements
         for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):

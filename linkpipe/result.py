@@ -93,6 +93,91 @@ class Forces:
         return out
 
 
+def _nanmax(a) -> float:
+    """The largest finite value of ``a`` (NaN where there is none)."""
+    a = np.asarray(a)
+    fin = a[np.isfinite(a)]
+    return float(fin.max()) if fin.size else np.nan
+
+
+@dataclass(frozen=True)
+class Totals:
+    """What a run's summary and the HDF5 root attributes say of the whole sweep, kept apart from
+    the arrays so that a sweep solved in segments (:mod:`linkpipe.segments`) sums them as it
+    goes: :meth:`of` one Result (or segment), :meth:`merged` two in step order.
+
+    ``status_counts`` (n_flags,) steps per status code; residual maxima NaN where no step has a
+    finite one (``max_residual_solved``: over steps whose positions are finite); the linear
+    equations' residual maxima None where the run solved no such equation; ``input_force_min``
+    / ``_max`` (n_drivers,) over finite values, NaN where none (None without forces)."""
+
+    n_steps: int
+    status_counts: tuple
+    max_residual: float
+    max_residual_solved: float
+    iterations_sum: int
+    iterations_max: int
+    max_velocity_residual: float | None = None
+    max_acceleration_residual: float | None = None
+    input_force_min: np.ndarray | None = None
+    input_force_max: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, result: "Result") -> "Totals":
+        found = np.bincount(np.asarray(result.status, dtype=np.intp), minlength=len(FLAG_MEANINGS))
+        solved = np.isfinite(result.position).all(axis=(1, 2))
+        lo = hi = None
+        if result.forces and "input_force" in result.forces:
+            f = result.forces["input_force"][1]
+            with np.errstate(invalid="ignore"):
+                lo = np.where(np.isfinite(f), f, np.inf).min(axis=0, initial=np.inf)
+                hi = np.where(np.isfinite(f), f, -np.inf).max(axis=0, initial=-np.inf)
+            lo, hi = np.where(np.isinf(lo), np.nan, lo), np.where(np.isinf(hi), np.nan, hi)
+        vres, ares = result.velocity_residual, result.acceleration_residual
+        return cls(result.n_steps, tuple(int(n) for n in found), _nanmax(result.residual),
+                   _nanmax(result.residual[solved]), int(result.iterations.sum()),
+                   int(result.iterations.max()) if result.n_steps else 0,
+                   None if vres is None else _nanmax(vres), None if ares is None else _nanmax(ares),
+                   lo, hi)
+
+    def merged(self, later: "Totals") -> "Totals":
+        """The totals of this run's steps followed by ``later``'s."""
+        def biggest(a, b):
+            if a is None or b is None:
+                return a if b is None else b
+            return np.fmax(a, b)
+
+        def smallest(a, b):
+            return a if b is None else b if a is None else np.fmin(a, b)
+
+        return Totals(self.n_steps + later.n_steps,
+                      tuple(a + b for a, b in zip(self.status_counts, later.status_counts)),
+                      float(biggest(self.max_residual, later.max_residual)),
+                      float(biggest(self.max_residual_solved, later.max_residual_solved)),
+                      self.iterations_sum + later.iterations_sum,
+                      max(self.iterations_max, later.iterations_max),
+                      biggest(self.max_velocity_residual, later.max_velocity_residual),
+                      biggest(self.max_acceleration_residual, later.max_acceleration_residual),
+                      smallest(self.input_force_min, later.input_force_min),
+                      biggest(self.input_force_max, later.input_force_max))
+
+    @property
+    def n_ok(self) -> int:
+        return self.status_counts[OK]
+
+    def counts(self) -> dict[str, int]:
+        """``{name: number of steps}`` for the codes that occur, in code order."""
+        return {FLAG_MEANINGS[c]: n for c, n in enumerate(self.status_counts) if n}
+
+    @property
+    def message(self) -> str:
+        """One line: how many steps are ok, and what the others are."""
+        if self.n_ok == self.n_steps:
+            return f"all {self.n_steps} steps ok"
+        return f"{self.n_ok}/{self.n_steps} steps ok; " + ", ".join(
+            f"{n} {k}" for k, n in self.counts().items() if k != "ok")
+
+
 @dataclass(frozen=True)
 class Result:
     """Everything one run produced, step axis first (like scipy's ``OdeResult``).
@@ -137,6 +222,16 @@ class Result:
     measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
     kinematics: Any = field(default=None, repr=False, compare=False)  # pipeline.Kinematics
     step_numbers: np.ndarray | None = None  # the sweep's step of each row (None: 0, 1, ...)
+    #: the whole sweep's Totals where this Result holds some of its rows (a sweep streamed in
+    #: segments: the rows its recording keeps); None: this Result's own rows are the sweep
+    sweep_totals: Totals | None = None
+    #: (stride, why) where the rows were taken at a uniform stride of the sweep's steps
+    sampled: tuple | None = None
+
+    @property
+    def totals(self) -> Totals:
+        """The whole sweep's :class:`Totals` (what the summary and the HDF5 attributes say)."""
+        return self.sweep_totals if self.sweep_totals is not None else Totals.of(self)
 
     #: the fields that hold one row per step (step axis first)
     PER_STEP = ("driver_value", "time", "position", "link_angle", "status", "residual",
@@ -291,7 +386,7 @@ class Result:
         from .version import __version__
         import datetime
 
-        sc = self.scene
+        sc, totals = self.scene, self.totals
         attrs: dict[str, Any] = {
             "linkpipe_version": __version__,
             "scene_name": sc.name,
@@ -314,16 +409,17 @@ class Result:
             "degrees_of_freedom": self.mobility.dof,
             "redundant_constraints": self.mobility.redundant,
             "forces_not_unique": self.forces_not_unique(),
-            "steps_ok": self.n_ok,
-            "steps_failed": self.n_steps - self.n_ok,
-            "max_residual": float(np.nanmax(self.residual)) if np.isfinite(self.residual).any() else np.nan,
-            "newton_iterations_mean": float(self.iterations.mean()) if self.n_steps else 0.0,
-            "newton_iterations_max": int(self.iterations.max()) if self.n_steps else 0,
+            "steps_ok": totals.n_ok,
+            "steps_failed": totals.n_steps - totals.n_ok,
+            "max_residual": totals.max_residual,
+            "newton_iterations_mean": (totals.iterations_sum / totals.n_steps
+                                       if totals.n_steps else 0.0),
+            "newton_iterations_max": totals.iterations_max,
         }
-        if self.velocity_residual is not None and np.isfinite(self.velocity_residual).any():
-            attrs["max_velocity_residual"] = float(np.nanmax(self.velocity_residual))
-        if self.acceleration_residual is not None and np.isfinite(self.acceleration_residual).any():
-            attrs["max_acceleration_residual"] = float(np.nanmax(self.acceleration_residual))
+        for key in ("max_velocity_residual", "max_acceleration_residual"):
+            value = getattr(totals, key)
+            if value is not None and np.isfinite(value):
+                attrs[key] = value
         if self.time_note:
             attrs["time_note"] = self.time_note
         attrs["warnings"] = list(self.scene.warnings)  # legal but probably not meant

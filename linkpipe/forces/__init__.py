@@ -87,14 +87,21 @@ def _gathered(out: Forces | None, part: Forces, n_steps: int) -> Forces:
                      for name, (dims, data, unit) in part.variables.items()}
         return Forces(variables=variables, coords=dict(part.coords),
                       status=np.empty(n_steps, part.status.dtype), undefined=part.undefined)
-    for name, (dims, data, unit) in part.variables.items():
+    combine_flags(out.variables, part.variables)
+    return out
+
+
+def combine_flags(into: dict, part: dict) -> None:
+    """Fold the per-sweep flags of one chunk (or segment) of steps, ``part`` {name: (dims, data,
+    units)}, into ``into``: each variable without a step axis (the ``*_unique`` flags: no
+    self-stress reaches that force at any ok step) is the minimum over the chunks."""
+    for name, (dims, data, unit) in part.items():
         if dims[:1] == ("step",):
             continue
-        if name in out.variables:
-            np.minimum(out.variables[name][1], data, out=out.variables[name][1])
+        if name in into:
+            np.minimum(into[name][1], data, out=into[name][1])
         else:
-            out.variables[name] = (dims, data.copy(), unit)
-    return out
+            into[name] = (dims, data.copy(), unit)
 
 
 #: the scene entries each effect reads: an effect is computed again only when these change

@@ -18,6 +18,7 @@ import os
 import pathlib
 import re
 import shutil
+import threading
 import time
 import uuid
 from collections.abc import Iterator
@@ -49,6 +50,13 @@ def interrupt(interrupted: bool = True) -> None:
     ``interrupt(False)`` clears the mark (a new command in the same process)."""
     global _INTERRUPTED
     _INTERRUPTED = interrupted
+
+
+def stop_if_interrupted() -> None:
+    """Raise KeyboardInterrupt where a signal was marked (:func:`interrupt`) but its exception
+    was swallowed (it landed in a finaliser): a long run checks between its segments."""
+    if _INTERRUPTED:
+        raise KeyboardInterrupt
 
 
 def _alive(pid: int) -> bool:
@@ -122,12 +130,30 @@ def atomic_path(path: str | os.PathLike, n_bytes: int = 0) -> Iterator[pathlib.P
 
 
 def _fsync(path: pathlib.Path) -> None:
-    if path.exists():
-        fd = os.open(path, os.O_RDONLY)
+    """fsync ``path`` in a helper thread while this one waits in short sleeps: a long sweep's
+    file may take seconds to reach the disk, and a signal (Ctrl-C) must still stop the run at
+    once (Python runs signal handlers only between the main thread's own steps)."""
+    if not path.exists():
+        return
+    fd = os.open(path, os.O_RDONLY)
+    failed: list[BaseException] = []
+
+    def sync():
         try:
             os.fsync(fd)
-        finally:
-            os.close(fd)
+        except OSError as exc:
+            failed.append(exc)
+
+    worker = threading.Thread(target=sync, name="linkpipe-fsync", daemon=True)
+    worker.start()
+    try:
+        while worker.is_alive():
+            worker.join(0.05)
+    finally:
+        if not worker.is_alive():
+            os.close(fd)  # (an interrupted wait leaves it to the process's exit)
+    if failed:
+        raise failed[0]
 
 
 @contextlib.contextmanager

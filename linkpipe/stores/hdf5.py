@@ -7,6 +7,7 @@ are HDF5 dimension scales and every data variable has them attached, so h5py, xa
 """
 from __future__ import annotations
 
+import functools
 import os
 from typing import Any
 
@@ -22,9 +23,132 @@ _PHANTOM = "This is a netCDF dimension but not a netCDF variable."
 
 def write(result, path: str | os.PathLike) -> None:
     """Write ``result`` to ``path`` atomically (temporary file, then ``os.replace``)."""
-    variables = result.variables()
-    write_layout(path, result.attributes(), result.coordinates(), variables,
-                 n_bytes=sum(v.data.nbytes for v in variables))
+    with SweepWriter(path, result.n_steps) as writer:
+        writer.add(result)
+        writer.finish(result)
+
+
+def _clean_failures(method):
+    """Re-raise an OSError from h5py (a full disk) as a new one that holds no h5py frames: a
+    traceback that keeps a dataset of a file that then fails to close alive was seen to crash
+    the garbage collector later. The caller (``atomic_path``) turns ENOSPC into OutputError."""
+    @functools.wraps(method)
+    def wrapper(*args, **kwargs):
+        failure = None
+        try:
+            return method(*args, **kwargs)
+        except OSError as exc:
+            failure = OSError(exc.errno, str(exc).splitlines()[0] if str(exc) else "write failed")
+        raise failure
+
+    return wrapper
+
+
+class SweepWriter:
+    """Write one run's file from its rows as they come, step-first variables into datasets of
+    the whole sweep's length, each part's rows written in place (a sweep solved in segments:
+    :mod:`linkpipe.segments`; a whole Result is one part). The datasets are contiguous, not
+    chunked: HDF5 2.0 (through h5py 3.16) was measured to crash the process (a segmentation
+    fault when the file is closed) after a write into a chunked dataset fails on a full disk,
+    while a contiguous one fails cleanly (``tests/faults/test_writes.py``). A context manager: the file is written to a temporary name and
+    renamed into place only when :meth:`finish` was called and nothing failed.
+
+    ``add(part)``: a Result of some of the sweep's steps (``part.step_numbers``, or all of them):
+    the first part creates the file's layout; each writes its rows, and the variables without a
+    step axis (the ``*_unique`` flags) are the minimum over the parts. ``restart()``: the parts
+    come again from the first step. ``finish(result)``: the flags and the root attributes
+    (``result.attributes()``: the whole sweep's totals)."""
+
+    stage = "hdf5"
+
+    def __init__(self, path: str | os.PathLike, n_steps: int):
+        self.path, self.n_steps = path, n_steps
+        self._atomic = self._file = None
+        self._flags: dict = {}
+        self._datasets: dict = {}
+
+    def __enter__(self) -> "SweepWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        raised = None
+        self._datasets.clear()  # no dataset outlives its file (h5py objects of a file that
+        #                         failed to close were seen to crash the garbage collector)
+        try:
+            if self._file is not None:
+                self._file.close()  # h5py flushes here: a full disk may show now
+        except Exception as error:  # noqa: BLE001 (any failure to close loses the file)
+            raised = error
+        finally:
+            self._file = None
+        if self._atomic is None:
+            if raised is not None and exc[0] is None:
+                raise raised
+            return
+        if exc[0] is None and raised is not None:
+            exc = (type(raised), raised, raised.__traceback__)
+        elif exc[0] is None and not self._finished:  # left early: nothing is kept
+            exc = (RuntimeError, RuntimeError("the writer was not finished"), None)
+            raised = None
+        else:
+            raised = None
+        # the temporary file is removed on an exception (a full disk becomes OutputError)
+        self._atomic.__exit__(*exc)
+        if raised is not None:
+            raise raised
+
+    @_clean_failures
+    def _open(self, part) -> None:
+        variables = part.variables()
+        per_step = sum(v.data.nbytes for v in variables if v.dims[:1] == ("step",))
+        n_bytes = per_step * self.n_steps // max(1, part.n_steps) + sum(
+            v.data.nbytes for v in variables if v.dims[:1] != ("step",))
+        self._atomic = atomic_path(self.path, n_bytes)
+        tmp = self._atomic.__enter__()
+        self._finished = False
+        f = self._file = h5py.File(tmp, "w", track_order=True)
+        scales = {}
+        for c in part.coordinates():
+            if c.name == "step":
+                ds = f.create_dataset("step", shape=(self.n_steps,), dtype=np.int64)
+                ds.make_scale("step")
+                ds.attrs["units"] = c.units
+                scales["step"] = self._datasets["step"] = ds
+            else:
+                scales[c.name] = _write_coordinate(f, c)
+        for var in variables:
+            shape = ((self.n_steps,) + var.data.shape[1:] if var.dims[:1] == ("step",)
+                     else None)
+            self._datasets[var.name] = _write_variable(f, var, scales, shape)
+
+    @_clean_failures
+    def add(self, part) -> None:
+        if self._file is None:
+            self._open(part)
+        steps = (part.step_numbers if part.step_numbers is not None
+                 else np.arange(part.n_steps))
+        rows = slice(int(steps[0]), int(steps[0]) + len(steps)) if len(steps) else slice(0, 0)
+        if len(steps) and rows.stop - rows.start != len(steps):
+            raise ValueError("a part's steps must be consecutive")
+        self._datasets["step"][rows] = steps
+        for var in part.variables():
+            if var.dims[:1] == ("step",):
+                self._datasets[var.name][rows] = _array(var.data)
+            elif var.name in self._flags:
+                np.minimum(self._flags[var.name], var.data, out=self._flags[var.name])
+            else:
+                self._flags[var.name] = np.array(var.data)
+
+    def restart(self) -> None:
+        self._flags = {}
+
+    @_clean_failures
+    def finish(self, result) -> None:
+        for name, data in self._flags.items():
+            self._datasets[name][...] = data
+        for key, value in result.attributes().items():
+            _set_attr(self._file.attrs, key, value)
+        self._finished = True
 
 
 def write_layout(path: str | os.PathLike, attributes: dict, coordinates, variables,
@@ -72,11 +196,18 @@ def _write_coordinate(f: h5py.File, coord) -> h5py.Dataset:
     return ds
 
 
-def _write_variable(f: h5py.File, var, scales: dict[str, h5py.Dataset]) -> h5py.Dataset:
+def _write_variable(f: h5py.File, var, scales: dict[str, h5py.Dataset],
+                    shape: tuple | None = None) -> h5py.Dataset:
+    """Create ``var``'s dataset with its attributes and dimension scales: with its data, or
+    (``shape``: the whole sweep's, step axis first) empty, for the caller to fill."""
     data = _array(var.data)
     if data.ndim != len(var.dims):
         raise ValueError(f"variable {var.name!r}: {data.ndim}-d data for dims {var.dims}")
-    ds = f.create_dataset(var.name, data=data)
+    if shape is None:
+        ds = f.create_dataset(var.name, data=data)
+    else:
+        ds = f.create_dataset(var.name, shape=shape, dtype=data.dtype)
+        data = ds  # the shape the scales below read
     ds.attrs["units"] = var.units
     for key, value in var.attrs.items():
         _set_attr(ds.attrs, key, value)

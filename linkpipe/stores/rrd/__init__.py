@@ -23,6 +23,7 @@ import numpy as np
 import rerun as rr
 
 from .. import atomic_path
+from ...segments import stride_of
 from . import forces, mechanism, series
 from .columns import driver_timeline, sender
 from .forces import FORCE_FRACTION, KINDS, force_arrows, force_legend
@@ -57,19 +58,15 @@ SIZE_MARGIN = 0.9
 SAMPLE_STEPS = (250, 1000)
 
 
-def stride_of(n_steps: int, max_steps: int | None = MAX_STEPS) -> int:
-    """The stride a recording of ``n_steps`` keeps (1: every step; ``max_steps`` 0/None: no cap)."""
-    if not max_steps or n_steps <= max_steps:
-        return 1
-    return -(-n_steps // max_steps)
-
-
 def recorded_bytes(result) -> int:
     """The bytes of ``result``'s recording, recorded into memory (the encoding a file gets)."""
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"size-{uuid.uuid4().hex}")
     memory = stream.memory_recording()
-    log_result(stream, result)
-    return len(memory.drain_as_bytes())
+    try:
+        log_result(stream, result)
+    finally:  # drained even when interrupted: a sink dropped with data warns on stderr
+        recorded = memory.drain_as_bytes()
+    return len(recorded)
 
 
 def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES):
@@ -109,11 +106,15 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     """
     if path is None and not spawn and not connect:
         return None
-    stride, why = plan(result, max_steps, max_bytes)
+    # a sweep solved in segments comes with its rows at a stride already (result.sampled):
+    # the size cap may widen it
+    base, base_why = result.sampled or (1, "")
+    stride, why = plan(result, None if result.sampled else max_steps, max_bytes)
     info = kept = None
-    if stride > 1:
+    if stride * base > 1:
         rows = np.arange(0, result.n_steps, stride)
-        kept = f"every {stride}th step ({len(rows):,} of {result.n_steps:,}; {why})"
+        why = " and ".join(w for w in (base_why, why if stride > 1 else "") if w)
+        kept = f"every {stride * base}th step ({len(rows):,} of {result.totals.n_steps:,}; {why})"
         info = f"This recording keeps {kept}; the .h5 keeps every step."
         result = result.strided(rows)
     scene = result.scene

@@ -1,0 +1,202 @@
+"""A long sweep solved, written and recorded segment by segment: a run's memory is set by the
+size of a segment, not by the length of the sweep (issue 16).
+
+``python -m linkpipe run`` solves a sweep of more than one segment's steps
+(:func:`segment_steps`: a power of two from 16,384 to 131,072 steps, as many as
+:data:`SEGMENT_BYTES` of the scene's stored arrays allow) in segments: stage 1 of the segment
+(:class:`linkpipe.pipeline.Stage1`, which carries the dyads' branch margins, the link angles'
+unwrapping and the torsion springs' turns across segments), then its forces and statuses, then
+every sink (the HDF5 writer, :class:`linkpipe.stores.hdf5.SweepWriter`) takes the segment's
+rows, and :class:`Sampled` keeps the rows the recording will hold (a uniform stride of at most
+``--rrd-max-steps`` steps) and the whole sweep's :class:`~linkpipe.result.Totals`. What stays
+whole: the drivers' motion (a few numbers per step) and, on the general Newton path, the
+positions (its coarse continuation spans the sweep).
+
+A segmented run writes the same file as the whole sweep solved at once, to the last bit
+(``tests/test_segments.py``; segments of any other size agree to rounding). Where auto's closed-form dyads fail the branch check in a later
+segment, the whole sweep goes to the general path (as it does when solved at once) and the
+sinks start again from the first step (:data:`RESTART`). Scenes with measurements (their RMS
+spans the sweep) or finite-difference derivatives (they read neighbouring steps) are solved
+whole: :func:`why_whole`.
+"""
+from __future__ import annotations
+
+import contextlib
+import time as _time
+from dataclasses import replace
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from .model import build_model
+from .pipeline import (DEFAULT_THREADS, Stage1, Stages, bytes_per_step, check_memory, result_of,
+                       solve, status_of)
+from .result import Result, Totals, units_of
+from .scene import Scene
+
+#: the bytes of stored arrays one segment may hold (its transients come on top: about 1.3 x)
+SEGMENT_BYTES = 48 * 2**20
+#: the fewest and most steps of a segment: powers of two, so that a segment holds whole chunks
+#: of every stage that works in chunks of steps (the derivatives' and the dyads' 8,192, the
+#: force stage's 16,384). Each step's numbers are then computed in the
+#: same batch as in the whole sweep, so they agree to the last bit (a batched solve's last few
+#: steps take a different SIMD path, with other rounding, than the ones before them)
+MIN_SEGMENT_STEPS, MAX_SEGMENT_STEPS = 2**14, 2**17
+#: what :func:`stream` hands its sinks when the sweep starts again from its first step
+RESTART = object()
+
+
+def segment_steps(scene: Scene) -> int:
+    """The steps of one segment of ``scene``'s sweep: the largest power of two whose stored
+    arrays fit :data:`SEGMENT_BYTES`, within [MIN_SEGMENT_STEPS, MAX_SEGMENT_STEPS]."""
+    fit = max(1, SEGMENT_BYTES // bytes_per_step(scene))
+    return int(min(MAX_SEGMENT_STEPS, max(MIN_SEGMENT_STEPS, 2 ** int(np.log2(fit)))))
+
+
+def why_whole(scene: Scene) -> str:
+    """Why ``scene``'s sweep is solved whole rather than in segments ("" when it can be)."""
+    if scene.measurements:
+        return "measurements: their RMS and maximum span the sweep"
+    if scene.solver.derivatives == "finite_difference":
+        return "finite-difference derivatives read the neighbouring steps"
+    return ""
+
+
+def steps_per_segment(scene: Scene) -> int:
+    """The segment size :func:`stream` uses for ``scene``: :func:`segment_steps`, or the whole
+    sweep where it is shorter or :func:`why_whole` says so."""
+    if why_whole(scene):
+        return scene.n_steps
+    return min(scene.n_steps, segment_steps(scene))
+
+
+def stride_of(n_steps: int, max_steps: int | None) -> int:
+    """The uniform stride of steps that keeps at most ``max_steps`` of ``n_steps`` (1: every
+    step; ``max_steps`` 0/None: no cap)."""
+    if not max_steps or n_steps <= max_steps:
+        return 1
+    return -(-n_steps // max_steps)
+
+
+def segments(scene: Scene, segment: int, seconds: dict, progress=None):
+    """Yield the Result of each segment of ``segment`` steps of ``scene``'s sweep, in step
+    order (``step_numbers`` set), or :data:`RESTART` where the sweep goes to the general path
+    after some segments (the segments then come again from the first step)."""
+    tell = progress if callable(progress) else (lambda stage, done=0: None)
+    stages = Stages.of(scene)
+    t0 = _time.perf_counter()
+    model = build_model(scene)
+    seconds["model"] = seconds.get("model", 0.0) + _time.perf_counter() - t0
+    stage1 = Stage1(scene, model, stages, tell, seconds)
+    S, lo = scene.n_steps, 0
+    while lo < S:
+        hi = min(S, lo + segment)
+        k = stage1.segment(lo, hi)
+        if k is None:  # auto leaves the dyads for Newton: the whole sweep, from its first step
+            stage1.use_newton()
+            lo = 0
+            yield RESTART
+            continue
+        forces = None
+        if stages.forces:
+            from .forces import compute_forces
+
+            tell("forces")
+            t0 = _time.perf_counter()
+            forces = compute_forces(model, k.motion(), units_of(scene))
+            seconds["forces"] = seconds.get("forces", 0.0) + _time.perf_counter() - t0
+        status = status_of(model, k.der["status"], k.sweep.residual, [], forces, finite=k.finite)
+        time, time_note = stage1.time_axis
+        yield result_of(scene, model, k, forces, status, seconds,
+                        (None if time is None else time[lo:hi], time_note), np.arange(lo, hi))
+        tell("segment", hi)
+        lo = hi
+
+
+class Sampled:
+    """The rows of a streamed sweep its recording keeps (every ``stride``-th step) and the whole
+    sweep's :class:`Totals` and per-sweep flags (the ``*_unique`` variables: the minimum over
+    the segments, as the force stage takes it over its chunks)."""
+
+    def __init__(self, n_steps: int, stride: int, why: str = ""):
+        self.n_steps, self.stride, self.why = n_steps, stride, why
+        self.restart()
+
+    def restart(self) -> None:
+        self.parts: list[Result] = []
+        self.totals: Totals | None = None
+        self.flags: dict = {}
+
+    def add(self, part: Result) -> None:
+        lo = int(part.step_numbers[0])
+        self.parts.append(part.strided(np.arange((-lo) % self.stride, part.n_steps, self.stride)))
+        totals = Totals.of(part)
+        self.totals = totals if self.totals is None else self.totals.merged(totals)
+        from .forces import combine_flags
+
+        combine_flags(self.flags, part.forces or {})
+
+    def result(self, seconds: dict) -> Result:
+        """The kept rows as one Result, with the whole sweep's totals and flags."""
+        first = self.parts[0]
+        rows = {name: np.concatenate([getattr(p, name) for p in self.parts])
+                for name in Result.PER_STEP if getattr(first, name) is not None}
+        forces = None
+        if first.forces:
+            forces = {name: (dims, np.concatenate([p.forces[name][1] for p in self.parts])
+                             if dims[:1] == ("step",) else self.flags[name][1], unit)
+                      for name, (dims, _, unit) in first.forces.items()}
+        return replace(first, **rows, forces=forces, seconds=seconds, message=self.totals.message,
+                       step_numbers=np.concatenate([p.step_numbers for p in self.parts]),
+                       sweep_totals=self.totals,
+                       sampled=(self.stride, self.why) if self.stride > 1 else None)
+
+
+def stream(scene: Scene, sinks=(), max_steps: int | None = None, progress=None,
+           threads: int | None = DEFAULT_THREADS, segment: int | None = None,
+           between=None) -> Result:
+    """Solve ``scene`` in segments (:func:`steps_per_segment`, or ``segment`` steps), handing
+    each segment's Result to every sink (``sink.add(part)``; ``sink.restart()`` at
+    :data:`RESTART`; ``sink.finish(result)`` at the end, ``sink.stage`` names its seconds);
+    return the rows a recording keeps (at most ``max_steps``, a uniform stride; None: one row,
+    no recording) with the whole sweep's totals and seconds (:class:`Sampled`).
+
+    A sweep solved whole (one segment, :func:`why_whole`) is :func:`linkpipe.solve`'s Result:
+    every row, its measurements compared. ``between``: called after each segment (the CLI
+    stops there on a signal whose exception a finaliser swallowed)."""
+    segment = segment or steps_per_segment(scene)
+    S = scene.n_steps
+    seconds: dict[str, float] = {}
+    if segment >= S:
+        result = solve(scene, progress=progress, threads=threads)
+        seconds = dict(result.seconds)
+        _hand(sinks, "add", result, seconds)
+        _hand(sinks, "finish", result, seconds)
+        return replace(result, seconds=seconds)
+    check_memory(scene, segment)
+    stride = stride_of(S, max_steps) if max_steps is not None else S
+    kept = Sampled(S, stride, f"--rrd-max-steps {max_steps:,}" if max_steps else "")
+    pools = (contextlib.nullcontext() if threads is None
+             else threadpool_limits(limits=threads, user_api="blas"))
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"), pools:
+        for part in segments(scene, segment, seconds, progress):
+            if part is RESTART:
+                kept.restart()
+                for sink in sinks:
+                    sink.restart()
+                continue
+            kept.add(part)
+            _hand(sinks, "add", part, seconds)
+            if between is not None:
+                between()
+    result = kept.result(seconds)
+    _hand(sinks, "finish", result, seconds)
+    return result
+
+
+def _hand(sinks, method: str, result: Result, seconds: dict) -> None:
+    """Call ``method`` of every sink with ``result``, timing it under the sink's stage name."""
+    for sink in sinks:
+        t0 = _time.perf_counter()
+        getattr(sink, method)(result)
+        seconds[sink.stage] = seconds.get(sink.stage, 0.0) + _time.perf_counter() - t0
