@@ -127,7 +127,8 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
     constants = ForceConstants.of(model)
     per_row = {f.name: np.array(np.broadcast_to(getattr(constants, f.name),
                                                 (V * S,) + getattr(constants, f.name).shape))
-               for f in dataclasses.fields(ForceConstants) if f.name not in ("size", "pivots")}
+               for f in dataclasses.fields(ForceConstants)
+               if f.name not in ("size", "pivots", "model_rows")}
     for j, (field, *index) in enumerate(slots):
         if field in ("point", "pivot"):
             field = "start_position"
