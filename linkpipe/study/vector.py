@@ -145,7 +145,7 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
         if field in ("point", "pivot"):
             field = "start_position"
         per_row[field][(slice(None),) + tuple(index)] = np.repeat(values[:, j], S)
-    if any(s[0] in ("point", "pivot") for s in slots):  # a moved point may widen the drawing
+    if any(s[0] in ("point", "pivot", "length") for s in slots):  # a moved point may widen the drawing
         per_row["size"] = np.repeat(mechanism_size(study.scene, per_row["start_position"][::S]), S)
     else:
         per_row["size"] = model.size
