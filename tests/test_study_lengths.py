@@ -237,3 +237,18 @@ def test_random_link_lengths_equal_one_by_one_runs(tmp_path_factory, moves, seed
     status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
     assert_bitwise_own_runs(ROCKER, study, arrays, np.flatnonzero(usable(study)))
+
+
+def test_the_batch_rows_equal_the_variant_by_variant_paths(tmp_path):
+    """The study file's rows of a batch (every metric) on the vectorised path and on the same
+    study forced variant by variant (each variant's scene parsed and solved): equal."""
+    import dataclasses
+
+    from linkpipe.study.batch import solve_batch
+
+    study = tolerance_study(tmp_path, 6)
+    fast = solve_batch(study, 0, 6)
+    slow = solve_batch(dataclasses.replace(study, slots=None), 0, 6)
+    assert fast.keys() == slow.keys()
+    for name in fast:
+        np.testing.assert_array_equal(fast[name], slow[name], err_msg=name)
