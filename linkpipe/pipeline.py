@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import time as _time
 from dataclasses import dataclass, field
@@ -178,9 +179,21 @@ class Kinematics:
     velocity: np.ndarray | None
     acceleration: np.ndarray | None
     link_rates: tuple
+    #: (S, n_torsion_springs) the whole turns each torsion spring's angle drops (a broadcast
+    #: view), or None without torsion springs (:func:`linkpipe.forces.springs.torsion_offset`)
+    torsion_offset: np.ndarray | None = None
     #: what the force stage may keep between calls on this stage 1 without the Lagrange side
     #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
     force_cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def motion(self) -> Motion:
+        """The sweep as the force stage takes it."""
+        return Motion(s=self.s, s_dot=self.s_dot, s_ddot=self.s_ddot,
+                      position=self.sweep.position, velocity=self.velocity,
+                      acceleration=self.acceleration, status=self.der["status"],
+                      influence=self.der["influence"],
+                      link_angular_acceleration=self.link_rates[1], link_angle=self.link_angle,
+                      torsion_offset=self.torsion_offset)
 
     @functools.cached_property
     def finite(self) -> np.ndarray:
@@ -202,17 +215,14 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     model = build_model(scene)
     seconds["model"] = _time.perf_counter() - t0
     k = _stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics
-    X, der = k.sweep.position, k.der
-    kinematic_status = der["status"]
+    kinematic_status = k.der["status"]
     forces = None
     if stages.forces:
         from .forces import LAGRANGE_VARIABLES, compute_forces
 
         tell("forces")
         t0 = _time.perf_counter()
-        motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=X, velocity=k.velocity,
-                        acceleration=k.acceleration, status=kinematic_status,
-                        influence=der["influence"], link_angular_acceleration=k.link_rates[1])
+        motion = k.motion()
         lagrange = wanted is None or bool(wanted & LAGRANGE_VARIABLES)
         forces = compute_forces(model, motion, units_of(scene), lagrange=lagrange,
                                 cache=k.force_cache if kinematics is not None and not lagrange
@@ -223,13 +233,16 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     return _with_measurements(result) if scene.measurements else result
 
 
-def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict) -> Result:
+def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
+              time_axis: tuple | None = None, step_numbers: np.ndarray | None = None) -> Result:
     """The Result of a solved stage 1 ``k``, its ``forces`` (or None) and final ``status``
-    (S,): step-first arrays of any number of rows (a study's (variant, step) rows too)."""
+    (S,): step-first arrays of any number of rows (a study's (variant, step) rows too).
+    ``time_axis``: (time, note) of the whole sweep where ``k`` holds a segment of it, with the
+    segment's ``step_numbers``."""
     stages = Stages.of(scene)
     X, der = k.sweep.position, k.der
     value, drive = k.drive.value, k.drive
-    time, time_note = _time_axis(scene, value)
+    time, time_note = _time_axis(scene, value) if time_axis is None else time_axis
     return Result(
         scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
         driver_velocity=drive.rate if scene.time is not None else None,
@@ -245,7 +258,7 @@ def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict)
         seconds=seconds, message=message(status),
         solver_method_used=k.sweep.method, solver_note=k.sweep.note,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
-        kinematics=k)
+        kinematics=k, step_numbers=step_numbers)
 
 
 def status_of(model, kinematic_status, residual, stored: list, forces, size=None,
@@ -263,43 +276,166 @@ def status_of(model, kinematic_status, residual, stored: list, forces, size=None
 
 
 def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:
-    """Positions, velocities, accelerations, condition and influence coefficients."""
-    mobility = _mobility(model)
-    tell("positions")
-    t0 = _time.perf_counter()
-    drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
-    scale = model_driver_scale(scene)
-    s, s_dot, s_ddot = drive.value * scale, drive.rate * scale, drive.acceleration * scale
-    # closed-form dyads or the general Newton path, as [solver] method says (see kinematics.solve_sweep);
-    # the dyad path also gives velocities and accelerations here
-    order = 2 if stages.acceleration else 1 if stages.velocity else 0
-    present = np.isfinite(s).all(axis=1)  # False where a logged driver value is missing
-    sweep = (kin.solve_sweep(model, s, s_dot, s_ddot, order) if present.all()
-             else _sweep_where_present(model, s, s_dot, s_ddot, order, present))
-    X = sweep.position
-    link_angle = kin.link_angles_unwrapped(model, X)
-    seconds["positions"] = _time.perf_counter() - t0
+    """Positions, velocities, accelerations, condition and influence coefficients of the whole
+    sweep: :class:`Stage1` with the sweep as one segment."""
+    return Stage1(scene, model, stages, tell, seconds).whole()
 
-    tell("jacobian")
-    t0 = _time.perf_counter()
-    Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
-    der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
-                          velocity=sweep.velocity, acceleration=sweep.acceleration,
-                          need_influence=stages.forces)
-    seconds["jacobian"] = _time.perf_counter() - t0
-    if scene.solver.derivatives == "finite_difference" and stages.velocity:
+
+class Stage1:
+    """Stage 1 of one scene, solved over the whole sweep or segment by segment (a long sweep
+    streamed to its files: :mod:`linkpipe.segments`); segments give the whole sweep's rows to
+    the last bit (``tests/test_segments.py``).
+
+    Made once per sweep: the drivers' motion (S, nd) in internal units, the time axis, the
+    start and the dyads' branches. The closed-form dyads solve segment by segment (their
+    branch margins carried across); where auto must leave them for Newton at some segment
+    (:meth:`segment` returns None), :meth:`use_newton` solves the positions of the whole sweep
+    by the general path, and the segments start again from the first. Link angles are unwrapped
+    across segments (:class:`~linkpipe.kinematics.rates.AngleCarry`), torsion springs' turns
+    set at the sweep's first solved step.
+    """
+
+    def __init__(self, scene: Scene, model, stages: Stages, tell=lambda stage: None,
+                 seconds: dict | None = None):
+        self.scene, self.model, self.stages, self.tell = scene, model, stages, tell
+        self.seconds = seconds if seconds is not None else {}
+        self.mobility = _mobility(model)
+        self.drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
+        scale = model_driver_scale(scene)
+        self.s, self.s_dot, self.s_ddot = (self.drive.value * scale, self.drive.rate * scale,
+                                           self.drive.acceleration * scale)
+        self.time_axis = _time_axis(scene, self.drive.value)
+        self.order = 2 if stages.acceleration else 1 if stages.velocity else 0
+        self.present = np.isfinite(self.s).all(axis=1)  # False where a logged value is missing
+        self.newton: kin.Sweep | None = None
+        self.chain, self.note, self.start = None, "", None
+        method = scene.solver.method
+        first = np.flatnonzero(self.present)[:2]
+        if not len(first):
+            self.newton = _sweep_where_present(model, self.s, self.present)
+        elif method in ("auto", "dyads"):
+            self.chain, self.note, self.start = kin.dyad_plan(model, self.s[first],
+                                                              method == "dyads")
+        if self.chain is None and self.newton is None:
+            self.use_newton()
+        self.restart()
+
+    @property
+    def n_steps(self) -> int:
+        return self.s.shape[0]
+
+    def restart(self) -> None:
+        """Segments from the first step again (what is carried from one segment to the next)."""
+        self.chain_carry: dict = {}
+        self.angle_carry = kin.AngleCarry.start(len(self.model.link_a))
+        self.turns = (np.full(len(self.scene.torsion_springs), np.nan)
+                      if self.scene.torsion_springs else None)
+
+    def use_newton(self) -> None:
+        """The general path's positions of the whole sweep (auto left the dyads, or the scene
+        asks for Newton); segments then slice them."""
         t0 = _time.perf_counter()
-        der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, der["status"],
-                                   stages.acceleration, drive.time))
-        seconds["fd_derivatives"] = _time.perf_counter() - t0
-    velocity = der["velocity"] if stages.velocity else None
-    acceleration = der["acceleration"] if stages.acceleration else None
-    t0 = _time.perf_counter()
-    link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
-                  else (None, None))
-    seconds["jacobian"] += _time.perf_counter() - t0  # the links' rates: derivatives too
-    return Kinematics(mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der, velocity,
-                      acceleration, link_rates)
+        note = self.note or (kin.DYADS_LEFT if self.chain is not None else "")
+        self.chain = None
+        if self.present.all():
+            self.newton = kin.solve_with_newton(self.model, self.s, note, self.start)
+        else:
+            self.newton = _sweep_where_present(self.model, self.s, self.present, note,
+                                               self.start)
+        self._add("positions", t0)
+        self.restart()
+
+    def _add(self, stage: str, t0: float) -> None:
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + _time.perf_counter() - t0
+
+    def whole(self) -> Kinematics:
+        """The whole sweep as one segment."""
+        k = self.segment(0, self.n_steps)
+        if k is None:
+            self.use_newton()
+            k = self.segment(0, self.n_steps)
+        return k
+
+    def _positions(self, rows: slice) -> kin.Sweep | None:
+        """The Sweep of steps ``rows``: the dyads' (None where auto must leave them) or a slice
+        of the general path's."""
+        if self.newton is not None:
+            return kin.Sweep(*(getattr(self.newton, f)[rows] for f in
+                               ("position", "residual", "iterations", "status")),
+                             self.newton.method, self.newton.note)
+        forced = self.scene.solver.method == "dyads"
+        present = self.present[rows]
+        s, sd, sdd = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
+        if present.all():
+            return kin.dyad_sweep(self.model, self.chain, s, sd, sdd, self.order, forced,
+                                  self.chain_carry)
+        idx = np.flatnonzero(present)
+        sub = kin.dyad_sweep(self.model, self.chain, s[idx], sd[idx], sdd[idx], self.order,
+                             forced, self.chain_carry)
+        return None if sub is None else _scattered(self.model, sub, idx, len(present))
+
+    def segment(self, lo: int, hi: int) -> Kinematics | None:
+        """Stage 1 of steps ``lo .. hi - 1``, or None where auto must leave the dyads for
+        Newton (call :meth:`use_newton`, then start again from the first segment)."""
+        model, stages, rows = self.model, self.stages, slice(lo, hi)
+        self.tell("positions")
+        t0 = _time.perf_counter()
+        sweep = self._positions(rows)
+        if sweep is None:
+            return None
+        X = sweep.position
+        link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry)
+        self._add("positions", t0)
+        self.tell("jacobian")
+        t0 = _time.perf_counter()
+        s, s_dot, s_ddot = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
+        Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
+        der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
+                              velocity=sweep.velocity, acceleration=sweep.acceleration,
+                              need_influence=stages.forces)
+        self._add("jacobian", t0)
+        if self.scene.solver.derivatives == "finite_difference" and stages.velocity:
+            if (lo, hi) != (0, self.n_steps):
+                raise ValueError("finite-difference derivatives need the whole sweep")
+            t0 = _time.perf_counter()
+            der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, der["status"],
+                                       stages.acceleration, self.drive.time))
+            self._add("fd_derivatives", t0)
+        velocity = der["velocity"] if stages.velocity else None
+        acceleration = der["acceleration"] if stages.acceleration else None
+        t0 = _time.perf_counter()
+        link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
+                      else (None, None))
+        self._add("jacobian", t0)  # the links' rates: derivatives too
+        offset = None
+        if self.turns is not None:
+            from .forces.springs import torsion_offset
+
+            unset = np.isnan(self.turns)
+            if unset.any():
+                self.turns = np.where(unset, torsion_offset(model, link_angle), self.turns)
+            offset = np.broadcast_to(self.turns, (hi - lo, len(self.turns)))
+        drive = dataclasses.replace(self.drive, **{
+            f.name: getattr(self.drive, f.name)[rows] for f in dataclasses.fields(self.drive)
+            if isinstance(getattr(self.drive, f.name), np.ndarray)})
+        return Kinematics(self.mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der,
+                          velocity, acceleration, link_rates, offset)
+
+
+def _scattered(model, sub: kin.Sweep, idx: np.ndarray, S: int) -> kin.Sweep:
+    """A Sweep of S steps with ``sub``'s rows at ``idx`` (steps that have every driver value);
+    the others no_input, every moving quantity NaN."""
+    X = np.full((S, model.n_points, 2), np.nan)
+    X[:, model.fixed] = model.start_position[model.fixed]
+    full = dict(position=X, residual=np.full(S, np.nan), iterations=np.zeros(S, np.int32),
+                status=np.full(S, NO_INPUT, np.int8))
+    for key in ("position", "residual", "iterations", "status"):
+        full[key][idx] = getattr(sub, key)
+    for key in ("velocity", "acceleration"):
+        if getattr(sub, key) is not None:
+            full[key] = np.full((S, model.n_points, 2), np.nan)
+            full[key][idx] = getattr(sub, key)
+    return kin.Sweep(**full, method=sub.method, note=sub.note)
 
 
 def _with_measurements(result: Result) -> Result:
@@ -319,25 +455,18 @@ def _with_measurements(result: Result) -> Result:
                          '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None
 
 
-def _sweep_where_present(model, s, s_dot, s_ddot, order, present) -> kin.Sweep:
-    """Stage 1 on the steps that have every driver value (the others: status no_input, every
-    moving quantity NaN). The continuation runs from one present step to the next, so a
-    missing sample leaves its neighbours' solutions as they would be without it."""
+def _sweep_where_present(model, s, present, note: str = "", start=None) -> kin.Sweep:
+    """The general path on the steps that have every driver value (the others: status
+    no_input, every moving quantity NaN). The continuation runs from one present step to the
+    next, so a missing sample leaves its neighbours' solutions as they would be without it."""
     S, idx = s.shape[0], np.flatnonzero(present)
-    X = np.full((S, model.n_points, 2), np.nan)
-    X[:, model.fixed] = model.start_position[model.fixed]
-    full = dict(position=X, residual=np.full(S, np.nan), iterations=np.zeros(S, np.int32),
-                status=np.full(S, NO_INPUT, np.int8))
     if not len(idx):
-        return kin.Sweep(**full, method="none", note="no step has every driver value")
-    sub = kin.solve_sweep(model, s[idx], s_dot[idx], s_ddot[idx], order)
-    for key in ("position", "residual", "iterations", "status"):
-        full[key][idx] = getattr(sub, key)
-    for key in ("velocity", "acceleration"):
-        if getattr(sub, key) is not None:
-            full[key] = np.full((S, model.n_points, 2), np.nan)
-            full[key][idx] = getattr(sub, key)
-    return kin.Sweep(**full, method=sub.method, note=sub.note)
+        X = np.full((S, model.n_points, 2), np.nan)
+        X[:, model.fixed] = model.start_position[model.fixed]
+        return kin.Sweep(X, np.full(S, np.nan), np.zeros(S, np.int32),
+                         np.full(S, NO_INPUT, np.int8), method="none",
+                         note="no step has every driver value")
+    return _scattered(model, kin.solve_with_newton(model, s[idx], note, start), idx, S)
 
 
 def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration, time) -> dict:

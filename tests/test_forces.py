@@ -231,18 +231,26 @@ def test_skipped_stages_do_not_run(monkeypatch, method):
     def boom(*a, **k):
         raise AssertionError("this stage must not run")
 
-    orders = []
-    real_stage1 = kin.solve_sweep
+    orders = []  # the kinematic order each stage-1 solve was asked for (Newton: positions)
+    real_dyads, real_newton = kin.dyad_sweep, kin.solve_with_newton
 
-    def recording_stage1(model, s, s_dot, s_ddot, order, *a, **k):
+    def recording_dyads(model, chain, s, s_dot, s_ddot, order, *a, **k):
         orders.append(order)
-        return real_stage1(model, s, s_dot, s_ddot, order, *a, **k)
+        return real_dyads(model, chain, s, s_dot, s_ddot, order, *a, **k)
+
+    def recording_newton(*a, **k):
+        orders.append(0)
+        return real_newton(*a, **k)
+
+    def recording_stage1(monkeypatch):
+        monkeypatch.setattr(kin, "dyad_sweep", recording_dyads)
+        monkeypatch.setattr(kin, "solve_with_newton", recording_newton)
 
     def solve(scene):
         scene = dataclasses.replace(scene, solver=dataclasses.replace(scene.solver, method=method))
         return linkpipe.solve(scene)
 
-    monkeypatch.setattr(kin, "solve_sweep", recording_stage1)
+    recording_stage1(monkeypatch)
     monkeypatch.setattr(linkpipe.forces, "compute_forces", boom)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
     text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
@@ -253,7 +261,7 @@ def test_skipped_stages_do_not_run(monkeypatch, method):
     assert r.solver_method_used == ("newton" if method == "newton" else "dyads")
     # the shear press asks for loads only: forces run, velocities and accelerations still do not
     monkeypatch.undo()
-    monkeypatch.setattr(kin, "solve_sweep", recording_stage1)
+    recording_stage1(monkeypatch)
     monkeypatch.setattr(linkpipe.model.Model, "gamma", boom)
     r = solve(linkpipe.load_scene(CONFIGS / "shear_press.toml"))
     assert r.forces is not None and r.acceleration is None and r.velocity is None
@@ -472,7 +480,8 @@ def test_per_step_constants_are_cut_into_the_same_chunks(tmp_path):
     per_step = dataclasses.replace(base, mass=base.mass * ramp, spring_k=base.spring_k * ramp)
     motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=r.position,
                     velocity=k.velocity, acceleration=k.acceleration, status=k.der["status"],
-                    influence=k.der["influence"], link_angular_acceleration=k.link_rates[1])
+                    influence=k.der["influence"], link_angular_acceleration=k.link_rates[1],
+                    link_angle=k.link_angle, torsion_offset=k.torsion_offset)
     units = dict(force="N", length="m", time="s", mass="kg")
     whole = compute_forces(r.model, motion, units, per_step)
     chunked = compute_forces(r.model, motion, units, per_step, chunk=7)

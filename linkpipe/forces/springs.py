@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kinematics.rates import link_angles_unwrapped
 from ..model import Model
 from ..scene.tables import GROUND
 from .applied import Applied, couple_as_body, link_index, merge_bodies, scatter_pairs
@@ -116,21 +115,16 @@ class TorsionSprings:
     energy: np.ndarray
 
     @classmethod
-    def of(cls, model: Model, X) -> "TorsionSprings":
+    def of(cls, model: Model, link_angle: np.ndarray, offset: np.ndarray) -> "TorsionSprings":
         """The angle is first link minus second, continuous over the sweep (a full turn winds
-        the spring), taken at the first solved step within half a turn of the free angle."""
+        the spring): the links' angles ``link_angle`` (S, n_links), unwrapped along the whole
+        sweep by stage 1, less ``offset`` (S, n_torsion_springs), the whole turns
+        :func:`torsion_offset` takes off at the sweep's first solved step (so that the force
+        stage, run in chunks of steps, sees one continuous angle)."""
         tsprings = model.scene.torsion_springs
-        first = np.array([link_index(model, t.links[0]) for t in tsprings], dtype=np.intp)
-        second = np.array([-1 if t.links[1] == GROUND else link_index(model, t.links[1])
-                           for t in tsprings], dtype=np.intp)
-        theta = link_angles_unwrapped(model, X)  # (S, n_links), NaN at failed steps
-        ground = np.zeros((X.shape[0], 1))
-        angle = theta[:, first] - np.concatenate([theta, ground], axis=1)[:, second]
+        first, second = torsion_links(model)
+        angle = torsion_raw_angle(model, link_angle) - offset
         free = np.deg2rad([t.free_angle for t in tsprings])
-        for j in range(len(tsprings)):
-            finite = np.flatnonzero(np.isfinite(angle[:, j]))
-            if len(finite):
-                angle[:, j] -= 2 * np.pi * np.round((angle[finite[0], j] - free[j]) / (2 * np.pi))
         k = np.array([t.k for t in tsprings], dtype=float)
         torque = k * (angle - free)
         return cls(first, second, angle, torque, 0.5 * k * (angle - free) ** 2)
@@ -144,6 +138,34 @@ class TorsionSprings:
             if b >= 0:
                 out[:, b] += self.torque[:, j]
         return out
+
+
+def torsion_links(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """Each torsion spring's first and second link (indices; -1 for ground)."""
+    tsprings = model.scene.torsion_springs
+    first = np.array([link_index(model, t.links[0]) for t in tsprings], dtype=np.intp)
+    second = np.array([-1 if t.links[1] == GROUND else link_index(model, t.links[1])
+                       for t in tsprings], dtype=np.intp)
+    return first, second
+
+
+def torsion_raw_angle(model: Model, link_angle: np.ndarray) -> np.ndarray:
+    """First link's angle minus second's (..., S, n_torsion_springs), from unwrapped link angles
+    (..., S, n_links)."""
+    first, second = torsion_links(model)
+    ground = np.zeros(link_angle.shape[:-1] + (1,))
+    return link_angle[..., first] - np.concatenate([link_angle, ground], axis=-1)[..., second]
+
+
+def torsion_offset(model: Model, link_angle: np.ndarray) -> np.ndarray:
+    """The whole turns (..., n_torsion_springs) taken off each torsion spring's angle: at the
+    first step where it is finite, the angle is brought within half a turn of the free angle
+    (NaN where no step is finite: the next segment of a sweep in segments decides)."""
+    raw = torsion_raw_angle(model, link_angle)
+    free = np.deg2rad([t.free_angle for t in model.scene.torsion_springs])
+    fin = np.isfinite(raw)
+    first = np.take_along_axis(raw, np.argmax(fin, axis=-2)[..., None, :], axis=-2)[..., 0, :]
+    return np.where(fin.any(axis=-2), 2 * np.pi * np.round((first - free) / (2 * np.pi)), np.nan)
 
 
 def couples_on_bodies(model: Model, couples, X) -> dict:

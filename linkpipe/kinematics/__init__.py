@@ -49,6 +49,22 @@ def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
     reason the path does not apply (auto then runs Newton from ``start``, the assembled first
     step or None); ``forced`` (method = "dyads") raises SceneError where the scene does not
     decompose and keeps the dyads' own branches."""
+    chain, note, start = dyad_plan(model, s, forced)
+    if chain is None:
+        return None, note, start
+    sweep = dyad_sweep(model, chain, s, s_dot, s_ddot, order, forced)
+    return (sweep, "", start) if sweep is not None else (None, DYADS_LEFT, start)
+
+
+#: why auto leaves the dyads for Newton when a step fails the branch check
+DYADS_LEFT = ("auto: a dyad passes near its singular configuration or cannot be assembled at "
+              "some step; general Newton path")
+
+
+def dyad_plan(model: Model, s, forced: bool):
+    """``(chain, "", start)``: the scene's dyads with their branches set at the first step of
+    ``s`` (its first two steps: (2, nd) at least), or ``(None, note, start)`` where the path
+    does not apply (as :func:`solve_with_dyads`)."""
     sc = model.scene.solver
     chain = decompose(model)
     if not chain.ok:
@@ -61,20 +77,26 @@ def solve_with_dyads(model: Model, s, s_dot, s_ddot, order: int, forced: bool):
         return None, f"auto: {chain.reason}; general Newton path", None
     if not forced and sc.jacobian != "analytic":
         return None, f"auto: jacobian = {sc.jacobian!r} asks for Newton; general Newton path", None
-    tol_abs = sc.tol * model.size
-    start = start_branches(model, chain, s)
+    return chain, "", start_branches(model, chain, s)
+
+
+def dyad_sweep(model: Model, chain, s, s_dot, s_ddot, order: int, forced: bool,
+               carry: dict | None = None) -> Sweep | None:
+    """The dyads' Sweep of the steps ``s`` (S, nd), or None where auto must leave them for
+    Newton (a step fails :func:`branch_check`). ``carry``: kept across the segments of one
+    sweep (:func:`solve_chain`), so that segments give the whole sweep's rows and checks."""
+    tol_abs = model.scene.solver.tol * model.size
     sw = solve_chain(chain, s, s_dot, s_ddot, order=order, gaps=not forced,
-                     max_abs_phi=max_abs_phi(model))
+                     max_abs_phi=max_abs_phi(model), carry=carry)
     if not (forced or branch_check(chain, sw)):
-        return None, ("auto: a dyad passes near its singular configuration or cannot be "
-                      "assembled at some step; general Newton path"), start
+        return None
     bad = sw.ok & ~(sw.residual <= 10 * tol_abs)  # a redundant constraint not met
     for arr in (sw.position, sw.velocity, sw.acceleration):
         if arr is not None and bad.any():
             arr[np.ix_(bad, model.moving)] = np.nan
     status = np.where(sw.ok & ~bad, OK, NO_ASSEMBLY).astype(np.int8)
     return Sweep(sw.position, sw.residual, np.zeros(s.shape[0], dtype=np.int32), status,
-                 "dyads", chain.describe(), sw.velocity, sw.acceleration), "", start
+                 "dyads", chain.describe(), sw.velocity, sw.acceleration)
 
 
 def start_branches(model: Model, chain, s: np.ndarray):
@@ -131,13 +153,13 @@ def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarr
     return solve_with_newton(model, s, note, start)
 
 from .pivots import solve_pivot_variants  # noqa: E402
-from .rates import (dense_chunk, dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
+from .rates import (AngleCarry, dense_chunk, dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
                           link_angles_unwrapped, link_rates)
 from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "solve_pivot_variants", "start_branches", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]

@@ -314,7 +314,8 @@ class ChainSweep:
 
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
           order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK,
-          fixed_position: np.ndarray | None = None, period: int = 0, rows=None) -> ChainSweep:
+          fixed_position: np.ndarray | None = None, period: int = 0, rows=None,
+          carry: dict | None = None) -> ChainSweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
@@ -330,7 +331,10 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     steps (variants): no step pair across two runs counts in ``gap``. The dyads' constants
     may be given per row too (a study's variants of other link lengths: arrays (S,),
     :func:`.decompose.chain_at`), and ``rows`` the model's rows with their per-row constants
-    (:class:`linkpipe.model.equations.Rows`, for ``max_abs_phi``).
+    (:class:`linkpipe.model.equations.Rows`, for ``max_abs_phi``). ``carry``: a sweep solved
+    in segments of steps (:mod:`linkpipe.segments`): one dict kept across the calls (each dyad
+    point's last step before), so the step pair across two segments counts in ``gap`` as it
+    does within one call.
     """
     model = plan.model
     S = s.shape[0]
@@ -359,7 +363,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     ch.gap2 = [] if gaps else None
     ch.period = period
     fixed_at = _fixed_columns(fixed_position, fixed)
-    prev = {}  # dyad point -> (x, y, gap^2) at the last step of the chunk before
+    prev = {} if carry is None else carry  # dyad point -> (x, y, gap^2) at the step before
     with np.errstate(invalid="ignore", divide="ignore"):
         for lo in range(0, S, chunk):
             hi = min(S, lo + chunk)

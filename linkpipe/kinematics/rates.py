@@ -3,6 +3,8 @@
 link angles and their rates; the drivers' motion."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..model import Model, driver_scale
@@ -225,32 +227,70 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
     return V, A
 
 
-def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0) -> np.ndarray:
+def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
+                          carry: "AngleCarry | None" = None):
     """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
 
     One vectorised pass: each gap is filled with the link's last angle before it (the first
     one, before its first), so the jump across the gap is unwrapped as between neighbours and
     the filled steps add zero corrections; the gaps are NaN again afterwards. ``period``: the
-    rows are runs of this many steps (a study's variants), each unwrapped on its own."""
+    rows are runs of this many steps (a study's variants), each unwrapped on its own.
+
+    ``carry``: a sweep solved in segments of steps (:mod:`linkpipe.segments`): the
+    :class:`AngleCarry` of the segments before (None for the first); then the return is
+    ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
+    to the last bit (``tests/test_segments.py``)."""
     ang = model.link_angles(X)
+    if carry is not None:
+        return unwrap_runs(ang, carry)
     if period:
-        return link_angles_unwrapped_runs(ang.reshape(-1, period, ang.shape[-1])).reshape(ang.shape)
-    return link_angles_unwrapped_runs(ang)
+        return unwrap_runs(ang.reshape(-1, period, ang.shape[-1]))[0].reshape(ang.shape)
+    return unwrap_runs(ang)[0]
 
 
-def link_angles_unwrapped_runs(ang: np.ndarray) -> np.ndarray:
-    """:func:`link_angles_unwrapped` of angles (..., S, n_links), along the steps axis."""
-    fin = np.isfinite(ang)
-    if fin.all():
-        return np.unwrap(ang, axis=-2)
-    S = ang.shape[-2]
-    rows = np.where(fin, np.arange(S)[:, None], -1)
-    np.maximum.accumulate(rows, axis=-2, out=rows)  # the last finite step at or before each
-    first = np.argmax(fin, axis=-2)  # the first finite step (0 where there is none)
-    rows = np.where(rows < 0, first[..., None, :], rows)
-    out = np.unwrap(np.take_along_axis(ang, rows, axis=-2), axis=-2)
-    out[~fin] = np.nan
-    return out
+@dataclass(frozen=True)
+class AngleCarry:
+    """What unwrapping a segment of steps takes from the segments before it, per link
+    (n_links,): the last finite raw angle (NaN: none yet) and the correction summed up to it."""
+
+    last: np.ndarray
+    correction: np.ndarray
+
+    @classmethod
+    def start(cls, n_links: int) -> "AngleCarry":
+        return cls(np.full(n_links, np.nan), np.zeros(n_links))
+
+
+def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
+    """``(unwrapped, carry)`` of angles (..., S, n_links) along the steps axis, NaN gaps as
+    :func:`link_angles_unwrapped` says: numpy's ``unwrap`` (period 2 pi) written out so that its
+    running sum of corrections can start from a ``carry`` (the steps before; None: none) and
+    go on in the next segment in the same order of additions (``np.unwrap`` itself restarts
+    it: ``tests/test_segments.py`` checks this against ``np.unwrap`` bit for bit)."""
+    lead = ang.shape[:-2] + ang.shape[-1:]
+    before = carry if carry is not None else AngleCarry(np.full(lead, np.nan), np.zeros(lead))
+    ext = np.concatenate([before.last[..., None, :], ang], axis=-2)  # (..., S + 1, L)
+    fin = np.isfinite(ext)
+    if not fin.all():
+        rows = np.where(fin, np.arange(ext.shape[-2])[:, None], -1)
+        np.maximum.accumulate(rows, axis=-2, out=rows)  # the last finite step at or before each
+        first = np.argmax(fin, axis=-2)  # the first finite step (0 where there is none)
+        rows = np.where(rows < 0, first[..., None, :], rows)
+        ext = np.take_along_axis(ext, rows, axis=-2)
+    dd = np.diff(ext, axis=-2)
+    ddmod = np.mod(dd - (-np.pi), 2 * np.pi) + (-np.pi)  # np.unwrap's steps, in its order
+    np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (dd > 0))
+    correction = ddmod - dd
+    np.copyto(correction, 0, where=np.abs(dd) < np.pi)
+    np.copyto(correction, 0, where=np.isnan(dd) & ~fin.any(axis=-2)[..., None, :])
+    summed = np.cumsum(np.concatenate([before.correction[..., None, :], correction], axis=-2),
+                       axis=-2)
+    out = ext[..., 1:, :] + summed[..., 1:, :]
+    out[~fin[..., 1:, :]] = np.nan
+    seen = fin.any(axis=-2)  # a link with no finite angle yet keeps its carry as it was
+    after = AngleCarry(np.where(seen, ext[..., -1, :], before.last),
+                       np.where(seen, summed[..., -1, :], before.correction))
+    return out, after
 
 
 def link_rates(model: Model, X, V, A=None, chunk: int = CHUNK):

@@ -171,7 +171,8 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     motion = Motion(s=rows(k.s), s_dot=rows(k.s_dot), s_ddot=rows(k.s_ddot), position=X,
                     velocity=rows(k.velocity), acceleration=rows(k.acceleration),
                     status=rows(k.der["status"]), influence=rows(k.der["influence"]),
-                    link_angular_acceleration=rows(k.link_rates[1]))
+                    link_angular_acceleration=rows(k.link_rates[1]), link_angle=rows(k.link_angle),
+                    torsion_offset=rows(k.torsion_offset))
     forces = compute_forces(model, motion, units_of(study.scene), ForceConstants(**per_row))
     status = status_of(model, motion.status, rows(k.sweep.residual),
                        [X, rows(k.link_angle), motion.velocity, motion.acceleration,
