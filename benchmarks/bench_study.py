@@ -20,10 +20,16 @@ all variants of a batch at once).
    process, then in each of two processes at once (no Dask): what two processes can gain on
    this machine at this moment (the cores are shared with other jobs).
 4. For comparison, the variant-by-variant path: 500 variants of +-0.5 mm pin tolerances (the
-   pins move and a link length changes: every variant is its own scene).
+   pins move and a link length changes), forced variant by variant (every variant its own
+   scene; the study itself takes the vectorised path: case 6).
 5. Pin tolerances of the pole's pivots only (O2, O4 x and y within +-0.5 mm): the vectorised
    path with the pivots as per-row columns (2,000 variants), against the same study forced
    variant by variant (500 variants): variants/s before -> after.
+6. The shipped tolerance study (configs/studies/basketball_goal_tolerance.toml: both pole
+   pins and the three links' lengths within +-0.5 mm, force numbers; 1,000 variants): the
+   vectorised path (link lengths as per-row constants) against the same study forced variant
+   by variant, both in one process (``--lengths`` runs this case alone): variants/s and the
+   ratio.
 """
 from __future__ import annotations
 
@@ -90,6 +96,24 @@ samples = {samples}
 
 [study.metrics]
 peak_handle = "max(abs(input_force.theta3a))"
+"""
+
+LENGTHS = """
+import dataclasses, json, sys, time
+sys.path.insert(0, {root!r})
+from linkpipe.study import load_study, run_study
+study = load_study({path!r})
+from linkpipe.study.batch import solve_batch
+for warm in (study, dataclasses.replace(study, slots=None)):  # imports, the base scene's solve
+    solve_batch(warm, 0, 10)
+seconds = {{}}
+for name, case in (("one_by_one", dataclasses.replace(study, slots=None,
+                                                      path_note="variant by variant (forced)")),
+                   ("vectorised", study)):
+    t0 = time.perf_counter()
+    run_study(case, {out!r} + "_" + name)
+    seconds[name] = time.perf_counter() - t0
+print(json.dumps(dict(seconds=seconds, variants=study.n_variants, path=study.path_note)))
 """
 
 RUN = """
@@ -195,12 +219,15 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the 10,000-variant case only")
     ap.add_argument("--pivots", action="store_true", help="the pivot tolerance case only")
+    ap.add_argument("--lengths", action="store_true", help="the link-length tolerance case only")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         folder = pathlib.Path(tmp)
         setup(folder)
         if args.pivots:
             return pivots(folder)
+        if args.lengths:
+            return lengths(folder)
         r = case(folder, "v10k", FORCES.format(samples=10, steps=100))
         print(f"10,000 variants in-process: {r['seconds']:.2f} s (target <= 5 s: "
               f"{verdict(r['seconds'] <= 5)}); {r['variants'] / r['seconds']:,.0f} variants/s; "
@@ -222,10 +249,26 @@ def main(argv=None) -> None:
               f"1 worker {w[1]:.2f} s, 2 workers {w[2]:.2f} s; scaling efficiency {100 * eff:.0f} % "
               f"(target >= 80 %: {verdict(eff >= 0.8)}); the machine's own two-process "
               f"efficiency now: {100 * machine_ceiling(folder):.0f} %")
-        r = case(folder, "pins", PINS)
+        r = case(folder, "pins", PINS, one_by_one=True)
         print(f"variant by variant (pin tolerances, {r['variants']} variants): "
               f"{r['seconds']:.2f} s, {r['variants'] / r['seconds']:,.0f} variants/s")
         pivots(folder)
+        lengths(folder)
+
+
+def lengths(folder: pathlib.Path) -> None:
+    """Case 6: the shipped tolerance study (pins and link lengths), variant by variant and
+    vectorised in one process (after one warm run: imports and the base scene's solve)."""
+    path = ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml"
+    code = LENGTHS.format(root=str(ROOT), path=str(path), out=str(folder / "out_lengths"))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    n, t = r["variants"], r["seconds"]
+    rate = {k: n / v for k, v in t.items()}
+    print(f"link-length tolerances ({n:,} variants, one process): variant by variant "
+          f"{t['one_by_one']:.2f} s ({rate['one_by_one']:,.0f}/s) -> vectorised "
+          f"{t['vectorised']:.2f} s ({rate['vectorised']:,.0f}/s): "
+          f"{rate['vectorised'] / rate['one_by_one']:.1f}x; {r['path'][:60]}")
 
 
 def pivots(folder: pathlib.Path) -> None:

@@ -25,7 +25,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 GOAL = ROOT / "configs" / "basketball_goal.toml"
 ROCKER = ROOT / "configs" / "fourbar_crank_rocker.toml"
 
-#: the README's pin tolerances, the pins on the pole only (link lengths: variant by variant)
+#: the README's pin tolerances, the pins on the pole only (with link lengths:
+#: tests/test_study_lengths.py)
 PIN_TOLERANCE = """[study]
 base = "{base}"
 samples = {samples}
@@ -136,13 +137,10 @@ def test_crank_rocker_pivot_grid_equals_one_by_one_runs(tmp_path):
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
 
 
-def test_link_lengths_and_derived_lengths_stay_variant_by_variant(tmp_path):
-    """A link length, or a pivot whose link takes its length from the drawing, changes the
-    model's rows: variant by variant, with the reason in the path note."""
-    study = load_study(write(tmp_path, f'[study]\nbase = "{ROCKER.as_posix()}"\n'
-                             '[study.parameters]\n'
-                             '"links.coupler.lengths.A-B" = { from = 3.4, to = 3.6, steps = 3 }\n'))
-    assert study.slots is None and "changes the kinematics" in study.path_note
+def test_derived_lengths_stay_variant_by_variant(tmp_path):
+    """A pivot whose link takes its length from the drawing changes the model's rows: variant
+    by variant, with the reason in the path note (a link length given in the scene takes the
+    vectorised path: tests/test_study_lengths.py)."""
     data = tomllib.loads(ROCKER.read_text())
     del data["links"][2]["lengths"]
     (tmp_path / "rocker.toml").write_text(tomli_w.dumps(data))

@@ -147,7 +147,8 @@ def _forces_of(model: Model, motion: Motion, units: dict, constants=None, lagran
     if cache is not None and (chunk_key, "influence") in cache:
         influence = cache[(chunk_key, "influence")]
     else:
-        influence = Influence.of(model, motion.position, Xz, motion.s, motion.influence)
+        influence = Influence.of(model, motion.position, Xz, motion.s, motion.influence,
+                                 ctx.constants.model_rows)
         if cache is not None:
             cache[(chunk_key, "influence")] = influence
     terms = _effect_terms(ctx, influence, None if lagrange else cache, chunk_key)
@@ -194,7 +195,8 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
     ok = motion.status == OK
     q_minus_m_qdd = with_couples_as_pairs(model, lagrange_points, lagrange_couples, Xz)
     generalized_q = q_minus_m_qdd[:, model.moving].reshape(n_steps, -1)
-    lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok, ctx.constants.pivots)
+    lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok, ctx.constants.pivots,
+                                    ctx.constants.model_rows)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
                                           motion.status, units, Xz, ctx.constants.size)
@@ -219,7 +221,8 @@ def _reactions(model: Model, ctx: Context, lam, q_minus_m_qdd, bodies, Xz, ok, u
         for li in np.flatnonzero(np.any(loads.couples != 0, axis=0)):
             as_pairs = couple_as_body(model, loads.couples[:, li], int(li), Xz)
             merge_bodies(bodies.setdefault(int(li), {}), as_pairs, -1.0)
-    ground, pin_forces = reactions(model, lam, q_minus_m_qdd, bodies, Xz, ctx.motion.s, ok)
+    ground, pin_forces = reactions(model, lam, q_minus_m_qdd, bodies, Xz, ctx.motion.s, ok,
+                                   ctx.constants.model_rows)
     pairs = joints(model)
     out = {"joint_force": (("step", "joint", "xy"), pin_forces, force_unit)}
     coords = {"joint": [f"{model.point_names[p]}@{scene.links[li].name}" for li, p in pairs]}
@@ -228,7 +231,9 @@ def _reactions(model: Model, ctx: Context, lam, q_minus_m_qdd, bodies, Xz, ok, u
     touched = None
     if undetermined.any() and ok.any():
         i0 = np.flatnonzero(ok)[0]
-        touched = np.abs(model.jacobian_points(Xz[i0:i0 + 1], ctx.motion.s[i0:i0 + 1])[0]).max(axis=2)
+        rows = None if ctx.constants.model_rows is None else ctx.constants.model_rows.take(slice(i0, i0 + 1))
+        touched = np.abs(model.jacobian_points(Xz[i0:i0 + 1], ctx.motion.s[i0:i0 + 1],
+                                               rows)[0]).max(axis=2)
         row_link = body_rows(model)
         unique = [0 if (touched[undetermined & (row_link == li), p] > 0).any() else 1 for li, p in pairs]
         out["joint_force_unique"] = (("joint",), np.array(unique, dtype=np.int8), "1")

@@ -23,14 +23,21 @@ def link_index(model: Model, name: str) -> int:
     return [link.name for link in model.scene.links].index(name)
 
 
-def center_frame(model: Model, link_name: str, center) -> tuple[int, int, float, float, float]:
-    """Return (ia, ib, u, v, L) of a mass centre given as a point name or local (u, v)."""
-    link = model.scene.links[link_index(model, link_name)]
+def center_frame(model: Model, link_name: str, center, rows=None) -> tuple[int, int, float, float, float]:
+    """Return (ia, ib, u, v, L) of a mass centre given as a point name or local (u, v).
+    ``rows``: the model's rows with per-row constants (:class:`linkpipe.model.equations.Rows`:
+    a study's variants of other link lengths): u, v, L then as they give them, (S,) arrays."""
+    li = link_index(model, link_name)
+    link = model.scene.links[li]
     names = model.point_names
     ia, ib = names.index(link.points[0]), names.index(link.points[1])
     X0 = model.start_position
     L0 = float(np.hypot(*(X0[ib] - X0[ia])))
     L = float(link.length) if link.length is not None else L0
+    if rows is not None:  # the link's length as its own rows hold it
+        given = [row[2] for row, k in zip(rows.dist, model.dist_link) if k == li]
+        given += [row[5] for row, k in zip(rows.local, model.loc_link) if k == li]
+        L = given[0] if given else L
     if isinstance(center, str):
         ip = names.index(center)
         if ip == ia:
@@ -38,6 +45,8 @@ def center_frame(model: Model, link_name: str, center) -> tuple[int, int, float,
         if ip == ib:
             return ia, ib, L, 0.0, L
         hit = np.flatnonzero((model.loc_a == ia) & (model.loc_b == ib) & (model.loc_p == ip))
+        if len(hit) and rows is not None:
+            return ia, ib, rows.local[hit[0]][3], rows.local[hit[0]][4], L
         if len(hit):
             return ia, ib, float(model.loc_u[hit[0]]), float(model.loc_v[hit[0]]), L
         e = (X0[ib] - X0[ia]) / L0
@@ -48,8 +57,10 @@ def center_frame(model: Model, link_name: str, center) -> tuple[int, int, float,
 
 
 def body_point(X, ia, ib, u, v, L):
-    """Return a body point ``a + (u I + v R)(b - a)/L`` for stacks (S, P, 2) -> (S, 2)."""
+    """Return a body point ``a + (u I + v R)(b - a)/L`` for stacks (S, P, 2) -> (S, 2) (u, v,
+    L floats or (S,) per step)."""
     d = X[:, ib] - X[:, ia]
+    u, v, L = (x[:, None] if np.ndim(x) else x for x in (u, v, L))
     return X[:, ia] + (u * d + v * perp(d)) / L
 
 
@@ -67,15 +78,16 @@ def scatter_pairs(point_forces, ia, ib, f):
 
 def body_point_loads(force, ia, ib, u, v, L, n_steps: int) -> dict:
     """Return a force (S, 2) at body point (u, v) distributed onto the basic points, N_G^T f,
-    as {point: (S, 2)} (the two points a and b only)."""
+    as {point: (S, 2)} (the two points a and b only; u, v, L floats or (S,) per step)."""
     force = np.broadcast_to(force, (n_steps, 2))
-    C = (u * np.eye(2) + v * _R90) / L  # r_G = (I - C) r_a + C r_b
+    # r_G = (I - C) r_a + C r_b, C = (u I + v R90) / L entry by entry
+    c00, c01, c10, c11 = u / L, -v / L, v / L, u / L
     # force @ M written out: BLAS' threaded matmul of (S, 2) x (2, 2) is slow on a busy machine
     out = {}
-    for idx, M in ((ia, np.eye(2) - C), (ib, C)):
+    for idx, M in ((ia, (1.0 - c00, 0.0 - c01, 0.0 - c10, 1.0 - c11)), (ib, (c00, c01, c10, c11))):
         f = np.empty((n_steps, 2))
-        f[:, 0] = force[:, 0] * M[0, 0] + force[:, 1] * M[1, 0]
-        f[:, 1] = force[:, 0] * M[0, 1] + force[:, 1] * M[1, 1]
+        f[:, 0] = force[:, 0] * M[0] + force[:, 1] * M[2]
+        f[:, 1] = force[:, 0] * M[1] + force[:, 1] * M[3]
         out[idx] = f
     return out
 

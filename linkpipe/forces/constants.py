@@ -22,7 +22,9 @@ class ForceConstants:
     (S, n_points, 2), the drawn positions (a spring's start length); ``size`` the
     mechanism's length scale, a float or (S,) (the leverage an input must have); ``pivots``
     True where the mechanism's own fixed points differ row by row (a study's variants that move
-    them: the Jacobian is read off the positions, :func:`linkpipe.kinematics.rates.entries_at`)."""
+    them: the Jacobian is read off the positions, :func:`linkpipe.kinematics.rates.entries_at`);
+    ``model_rows`` the model's rows with their constants per step where a study's variants differ in
+    link lengths (:class:`linkpipe.model.equations.Rows` of (S,) arrays; None: the model's own)."""
 
     spring_k: np.ndarray
     spring_free_length: np.ndarray
@@ -36,6 +38,7 @@ class ForceConstants:
     start_position: np.ndarray
     size: float | np.ndarray
     pivots: bool = False
+    model_rows: object = None
 
     @classmethod
     def of(cls, model) -> "ForceConstants":
@@ -64,6 +67,8 @@ class ForceConstants:
 
     def rows(self, steps: slice) -> "ForceConstants":
         """The constants at a slice of the steps (fields without a step axis as they are)."""
-        return ForceConstants(pivots=self.pivots, **{
+        return ForceConstants(pivots=self.pivots,
+                              model_rows=None if self.model_rows is None else self.model_rows.take(steps),
+                              **{
             name: value[steps] if np.ndim(value) == base + 1 else value
             for name, base in self.BASE_NDIM.items() for value in (getattr(self, name),)})

@@ -45,10 +45,12 @@ class Context:
         X = motion.position
         V, A = motion.velocity, motion.acceleration
         zeros = np.zeros_like(X) if V is None or A is None else None
-        masses = tuple((m, center_frame(model, m.link, m.center)) for m in model.scene.masses)
+        constants = constants if constants is not None else ForceConstants.of(model)
+        masses = tuple((m, center_frame(model, m.link, m.center, constants.model_rows))
+                       for m in model.scene.masses)
         return cls(model, motion, units, frozenset(model.scene.effects), X,
                    V if V is not None else zeros, A if A is not None else zeros, masses,
-                   constants if constants is not None else ForceConstants.of(model), lagrange)
+                   constants, lagrange)
 
     @property
     def n_steps(self) -> int:

@@ -13,13 +13,13 @@ from ..kinematics.linalg import CHUNK
 
 
 
-def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False):
+def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, rows=None):
     """Return (λ (S, n_rows) NaN where not ok, undetermined (n_rows,) bool).
 
     Square Jacobians go through the sparse engine's transposed block solve; redundant scenes
     (more rows than unknowns) take the minimum-norm solution, and the rows a self-stress can
-    change are flagged ``undetermined``. ``pivots``: the fixed points of Xz differ row by row
-    (:class:`.constants.ForceConstants`)."""
+    change are flagged ``undetermined``. ``pivots``: the fixed points of Xz differ row by row,
+    ``rows``: the model's rows with per-row constants (:class:`.constants.ForceConstants`)."""
     n_steps = Xz.shape[0]
     lam = np.full((n_steps, model.n_rows), np.nan)
     undetermined = np.zeros(model.n_rows, dtype=bool)
@@ -30,12 +30,12 @@ def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False):
         idx = np.flatnonzero(ok)
         for lo in range(0, len(idx), CHUNK):
             ii = idx[lo:lo + CHUNK]
-            E = (entries_at(eng, Xz[ii], s[ii]) if pivots
-                 else eng.entries(model.q_of(Xz[ii]), s[ii]))
+            E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
+                 if pivots or rows is not None else eng.entries(model.q_of(Xz[ii]), s[ii]))
             rhs = list(np.ascontiguousarray(generalized_q[ii].T))
             lam[ii] = np.stack(eng.solve_transpose(E, rhs), axis=1)
         return lam, undetermined
-    J = model.jacobian(Xz[ok], s[ok])
+    J = model.jacobian(Xz[ok], s[ok], None if rows is None else rows.take(ok))
     JT = np.swapaxes(J, 1, 2)
     if J.shape[1] == J.shape[2]:
         lam[ok] = np.linalg.solve(JT, generalized_q[ok][..., None])[..., 0]
@@ -100,7 +100,7 @@ def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict,
     return out, coords, undefined
 
 
-def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
+def reactions(model: Model, lam, point_forces, bodies, X, s, ok, rows=None):
     """Return ground reactions (S, n_fixed, 2) and pin forces on bodies (S, n_joints, 2).
 
     Ground: a fixed point is a coordinate held by one more constraint; its multiplier mu follows
@@ -108,7 +108,8 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
     (``point_forces`` (S, P, 2) holds ``Q - M Xdd`` at every point, fixed ones included).
     Pins: the force the pin at point P exerts on body k is ``(M_k Xdd - Q_k)_P + sum over the
     body's own rows of lambda_r dPhi_r/dX_P`` (``bodies``: {link: {point: M_k Xdd - Q_k (S, 2)}}),
-    for the pairs of :func:`joints`. NaN at steps that are not ok.
+    for the pairs of :func:`joints`. NaN at steps that are not ok. ``rows``: the model's rows
+    with per-row constants (:meth:`Model.jacobian_terms`).
     """
     fixed = np.flatnonzero(model.fixed)
     fixed_slot = {int(p): k for k, p in enumerate(fixed)}
@@ -124,7 +125,8 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
         lam_c = lam[ii]
         Rc = -point_forces[ii][:, fixed]
         Fc = np.zeros((len(ii), len(pairs), 2))
-        extra = motor_terms(model, X[ii], s[ii], lam_c)
+        rows_c = None if rows is None else rows.take(ii)
+        extra = motor_terms(model, X[ii], s[ii], lam_c, rows_c)
         for (li, p), k in pair_slot.items():
             motor = extra.get(li, {}).get(p)
             body = bodies.get(li, {}).get(p)
@@ -132,7 +134,7 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
                 Fc[:, k] = motor + body[ii]
             elif motor is not None or body is not None:
                 Fc[:, k] = motor if body is None else body[ii]
-        for r, p, gx, gy in model.jacobian_terms(X[ii], s[ii]):
+        for r, p, gx, gy in model.jacobian_terms(X[ii], s[ii], rows_c):
             lr = lam_c[:, r]
             k = fixed_slot.get(p)
             if k is not None:
@@ -147,7 +149,7 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok):
     return R, F
 
 
-def motor_terms(model: Model, X, s, lam) -> dict:
+def motor_terms(model: Model, X, s, lam, rows=None) -> dict:
     """Return {link: {point: (S, 2)}}: the part of each relative angle row ``lambda_r dPhi_r/dX`` that
     acts on each of the two links a motor turns against each other (the driven vector's points
     on the first, the reference vector's on the second; ground takes its part through the
@@ -159,7 +161,7 @@ def motor_terms(model: Model, X, s, lam) -> dict:
         return X[:, p, 0], X[:, p, 1]
 
     for j in np.flatnonzero(model.drv_kind == eq.RELATIVE):
-        driver, r = model.rows.drivers[j], model.n_constraints + j
+        driver, r = (rows or model.rows).drivers[j], model.n_constraints + j
         terms = list(eq.relative_gradient(driver, xy, np.cos(s[:, j]), np.sin(s[:, j])))
         for name, part in zip(model.scene.drivers[j].bodies, (terms[:2], terms[2:])):
             if name not in links:

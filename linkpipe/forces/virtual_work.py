@@ -23,11 +23,12 @@ class Influence:
     phi_s: np.ndarray
 
     @classmethod
-    def of(cls, model: Model, X, Xz, s, dq_ds) -> "Influence":
+    def of(cls, model: Model, X, Xz, s, dq_ds, rows=None) -> "Influence":
         """From ``dq_ds`` (S, n_q, nd) = ``-J^-1 Phi_s`` over the driver rows (defined at rate 0;
-        :func:`linkpipe.kinematics.derivatives` solves it)."""
+        :func:`linkpipe.kinematics.derivatives` solves it); ``rows``: the model's rows with
+        per-step constants (:meth:`Model.phi_s`)."""
         n_steps, n_drivers = X.shape[0], model.n_drivers
-        phi_s = model.phi_s(Xz, s)
+        phi_s = model.phi_s(Xz, s, rows)
         points = np.zeros((n_steps, model.n_points, 2, n_drivers))
         points[:, model.moving] = dq_ds.reshape(n_steps, -1, 2, n_drivers)
         d = X[:, model.link_b] - X[:, model.link_a]  # dtheta/ds = cross(d, dd/ds) / L^2

@@ -12,11 +12,14 @@ from ..model import Model
 from ..model import equations as eq
 
 
-def affine_coefficients(model: Model, angle: np.ndarray, drawings: np.ndarray):
+def affine_coefficients(model: Model, angle: np.ndarray, drawings: np.ndarray,
+                        rows: eq.Rows | None = None):
     """``(keys, C (K, n_features, e), keep (K, e))`` of drawings (K, n_points, 2) (only their
-    fixed points count): ``keys`` the (row, column) of every structural entry outside the
-    relative angle rows, sorted; C each entry's coefficients, rounding noise cleaned; keep
-    where an entry has a non-zero coefficient."""
+    fixed points count) and, with ``rows``, the K drawings' own constants of the model's rows
+    (:class:`.equations.Rows` of (K,) arrays: a study's variants of other link lengths):
+    ``keys`` the (row, column) of every structural entry outside the relative angle rows,
+    sorted; C each entry's coefficients, rounding noise cleaned; keep where an entry has a
+    non-zero coefficient."""
     n, nd, na = model.n_q, model.n_drivers, len(angle)
     K, n_probes = drawings.shape[0], 1 + n + 2 * na
     probe_q = np.zeros((n_probes, n))
@@ -32,7 +35,8 @@ def affine_coefficients(model: Model, angle: np.ndarray, drawings: np.ndarray):
     relative_rows = {model.n_constraints + int(j)
                      for j in np.flatnonzero(model.drv_kind == eq.RELATIVE)}
     values: dict = {}  # (row, col) -> (K n_probes,), terms added in the model's order
-    terms = model.jacobian_terms(X.reshape(K * n_probes, model.n_points, 2), np.tile(probe_s, (K, 1)))
+    terms = model.jacobian_terms(X.reshape(K * n_probes, model.n_points, 2), np.tile(probe_s, (K, 1)),
+                                 None if rows is None else rows.take(np.repeat(np.arange(K), n_probes)))
     for r, p, gx, gy in terms:
         if p not in slot:
             continue
@@ -58,26 +62,32 @@ def affine_coefficients(model: Model, angle: np.ndarray, drawings: np.ndarray):
     return keys, C, keep
 
 
-def same_pattern(eng, drawings: np.ndarray) -> np.ndarray:
-    """(K,) True where a drawing's engine would have the engine's own entries and non-zero
+def same_pattern(eng, drawings: np.ndarray, rows: eq.Rows | None = None) -> np.ndarray:
+    """(K,) True where a drawing's engine (with its own ``rows``' constants, as
+    :func:`affine_coefficients` takes them) would have the engine's own entries and non-zero
     feature coefficients (then :func:`entries_at` gives its entries to the last bit; the
     constant term may differ: it is added after the first feature's product either way)."""
-    keys, C, keep = affine_coefficients(eng.model, eng.angle, drawings)
+    keys, C, keep = affine_coefficients(eng.model, eng.angle, drawings, rows)
     _, C0, keep0 = affine_coefficients(eng.model, eng.angle, eng.model.start_position[None])
     return (keep == keep0).all(axis=1) & ((C[:, 1:] != 0) == (C0[:, 1:] != 0)).all(axis=(1, 2))
 
 
-def entries_at(eng, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+def entries_at(eng, X: np.ndarray, s: np.ndarray, rows: eq.Rows | None = None) -> np.ndarray:
     """The engine's Jacobian entries (nnz, S) at positions X (S, n_points, 2) whose fixed
-    points may differ row by row, values s (S, nd): each row's own drawing's coefficients
-    (:func:`affine_coefficients`) on the engine's pattern, summed in :meth:`Engine.entries_T`'s
-    order; the relative angle rows from the equations."""
+    points may differ row by row, values s (S, nd), and the model's rows with per-row
+    constants ``rows`` (or the model's own): each row's own drawing's and constants'
+    coefficients (:func:`affine_coefficients`) on the engine's pattern, summed in
+    :meth:`Engine.entries_T`'s order; the relative angle rows from the equations."""
     model = eng.model
     fixed = np.flatnonzero(model.fixed)
-    drawings, which = _runs(X[:, fixed].reshape(X.shape[0], -1))
+    per_row = [] if rows is None else rows.arrays()
+    n_fixed = 2 * len(fixed)
+    runs, which, first = _runs(np.column_stack([X[:, fixed].reshape(X.shape[0], -1)] + per_row))
+    drawings = runs[:, :n_fixed]
     full = np.repeat(model.start_position[None], len(drawings), axis=0)
     full[:, fixed] = drawings.reshape(len(drawings), -1, 2)
-    keys, C, _ = affine_coefficients(model, eng.angle, full)
+    keys, C, _ = affine_coefficients(model, eng.angle, full,
+                                     None if rows is None else rows.take(first))
     column = {k: e for e, k in enumerate(keys)}
     qT = np.ascontiguousarray(model.q_of(X).T)
     sT = np.ascontiguousarray(s.T)
@@ -86,7 +96,7 @@ def entries_at(eng, X: np.ndarray, s: np.ndarray) -> np.ndarray:
         th = sT[eng.angle]
         feats += list(np.cos(th)) + list(np.sin(th))
     E = np.empty((len(eng.rows), X.shape[0]))
-    relative_entries(eng, E, lambda p: (X[:, p, 0], X[:, p, 1]), sT)
+    relative_entries(eng, E, lambda p: (X[:, p, 0], X[:, p, 1]), sT, rows)
     for e, (_, terms) in enumerate(eng._terms):
         if e in eng._direct:
             continue
@@ -104,24 +114,27 @@ def entries_at(eng, X: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def _runs(F: np.ndarray):
-    """``(values (K, f), which (S,))`` of rows F (S, f) in runs of equal rows (a study's
-    variants: each variant's steps in a row): each run's value and every row's run."""
+    """``(values (K, f), which (S,), first (K,))`` of rows F (S, f) in runs of equal rows (a
+    study's variants: each variant's steps in a row): each run's value, every row's run and
+    each run's first row."""
     new = np.ones(F.shape[0], dtype=bool)
     new[1:] = (F[1:] != F[:-1]).any(axis=1)
-    return F[new], np.cumsum(new) - 1
+    return F[new], np.cumsum(new) - 1, np.flatnonzero(new)
 
 
-def relative_entries(eng, E: np.ndarray, xy, sT: np.ndarray) -> None:
+def relative_entries(eng, E: np.ndarray, xy, sT: np.ndarray, rows: eq.Rows | None = None) -> None:
     """Fill the engine's entries E (nnz, S) of the relative angle rows from the equations, the
-    points read through ``xy(p) -> (x, y)`` (fixed points as floats or row by row)."""
+    points read through ``xy(p) -> (x, y)`` (fixed points as floats or row by row; ``rows``:
+    the model's rows with per-row constants, or its own)."""
     md = eng.model
+    drivers = (rows or md.rows).drivers
     slot = {int(p): k for k, p in enumerate(md.moving)}
     for j in eng.relative:
         r = md.n_constraints + j
         c, sn = np.cos(sT[j]), np.sin(sT[j])
         for e in eng._relative_slots[j]:
             E[e] = 0.0
-        for _, p, gx, gy in eq.driver_jacobian_terms(md.rows.drivers[j], r, xy, c, sn):
+        for _, p, gx, gy in eq.driver_jacobian_terms(drivers[j], r, xy, c, sn):
             if p in slot:
                 E[eng.entry_of[(r, 2 * slot[p])]] += gx
                 E[eng.entry_of[(r, 2 * slot[p] + 1)]] += gy

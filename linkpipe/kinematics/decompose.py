@@ -2,6 +2,7 @@
 scene's graph: which points each dyad places from which known points, circles and lines."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -12,7 +13,8 @@ from ..model import equations as eq
 
 @dataclass
 class Body:
-    """One link as a rigid body: its point indices and their local coordinates (n, 2)."""
+    """One link as a rigid body: its point indices and their local coordinates (n, 2), or
+    (V, n, 2) for V variants of the model's numbers (:func:`bodies_of` with ``rows``)."""
 
     name: str
     points: list[int]
@@ -62,6 +64,24 @@ class Dyad:
     line2: Line | None = None
     sign: float = 1.0
     ambiguous: bool = False
+    # where the constants come from (:func:`chain_at`): linear (body, i, j, by_distance);
+    # angle (body, a, b, c) with the targets' local indices in ``local_targets``; circles and
+    # circle_line ((body, c, p) or None for a driven radius, one per circle)
+    source: tuple = ()
+    local_targets: list[int] = field(default_factory=list)
+
+    def take(self, rows) -> "Dyad":
+        """The dyad with each constant given per row (arrays) taken at ``rows`` (an index or a
+        slice of the row axis); itself where every constant is a plain number."""
+        def at(x):
+            return x[rows] if isinstance(x, np.ndarray) else x
+
+        if not any(isinstance(x, np.ndarray) for x in
+                   (self.r1, self.r2, *(c for pair in self.w + self.ab for c in pair))):
+            return self
+        return dataclasses.replace(self, r1=at(self.r1), r2=at(self.r2),
+                                   w=[(at(x), at(y)) for x, y in self.w],
+                                   ab=[(at(x), at(y)) for x, y in self.ab])
 
     def describe(self, names) -> str:
         tg = ",".join(names[p] for p in self.targets)
@@ -95,36 +115,150 @@ class DyadChain:
             return f"does not decompose: {self.reason}"
         return " -> ".join(st.describe(self.model.point_names) for st in self.steps)
 
+    def take(self, rows) -> "DyadChain":
+        """The chain with its per-row constants taken at ``rows`` (:meth:`Dyad.take`)."""
+        return DyadChain(self.model, [st.take(rows) for st in self.steps], self.reason)
 
-def bodies_of(model: Model) -> list[Body]:
-    """Return every link as a body with local coordinates (a at 0, b at (L, 0), others (u, v))."""
+
+def bodies_of(model: Model, rows=None) -> list[Body]:
+    """Return every link as a body with local coordinates (a at 0, b at (L, 0), others (u, v)),
+    read off the model's rows; ``rows``: V variants' rows (:func:`linkpipe.model.build.variant_rows`),
+    each body's local coordinates then (V, n, 2)."""
     scene = model.scene
+    rows = model.rows if rows is None else rows
     names = model.point_names
     index = {n: i for i, n in enumerate(names)}
     X0 = model.start_position
-    loc = {(int(a), int(b), int(p)): (float(u), float(v)) for a, b, p, u, v in zip(
-        model.loc_a, model.loc_b, model.loc_p, model.loc_u, model.loc_v)}
+    length = {int(li): L for (_, _, L), li in zip(rows.dist, model.dist_link)}
+    loc = {}
+    for (_, _, p, u, v, L), li in zip(rows.local, model.loc_link):
+        length.setdefault(int(li), L)
+        loc[(int(li), p)] = (u, v)
     out = []
-    for link in scene.links:
+    for li, link in enumerate(scene.links):
         pts = [index[p] for p in link.points]
         ia, ib = pts[0], pts[1]
         d0 = X0[ib] - X0[ia]
         L0 = float(np.hypot(*d0))
-        L = float(link.length) if link.length is not None else L0
+        L = length.get(li, float(link.length) if link.length is not None else L0)
         e = d0 / L0
         ep = np.array([-e[1], e[0]])
         local = [(0.0, 0.0), (L, 0.0)]
         for ip in pts[2:]:
-            if (ia, ib, ip) in loc:
-                local.append(loc[(ia, ib, ip)])
-            elif link.points[pts.index(ip)] in link.local:
-                u, v = link.local[link.points[pts.index(ip)]]
-                local.append((float(u), float(v)))
-            else:
+            if (li, ip) in loc:
+                local.append(loc[(li, ip)])
+            else:  # a fixed point of a fixed link: no rows
                 r = X0[ip] - X0[ia]
                 local.append((float(r @ e), float(r @ ep)))
-        out.append(Body(link.name, pts, np.array(local, dtype=float)))
+        out.append(Body(link.name, pts, _stacked_local(local)))
     return out
+
+
+def _stacked_local(local: list) -> np.ndarray:
+    """Local coordinates [(u, v), ...] of n points -> (n, 2), or (V, n, 2) where some are (V,)."""
+    if not any(isinstance(x, np.ndarray) for pair in local for x in pair):
+        return np.array(local, dtype=float)
+    n_variants = max(len(x) for pair in local for x in pair if isinstance(x, np.ndarray))
+    return np.stack([np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n_variants,))
+                               for x in pair], axis=-1) for pair in local], axis=-2)
+
+
+# The dyads' constants from their bodies' local coordinates (..., 2): written once, elementwise,
+# on one body (floats) or on V variants of it at once (:func:`chain_at`).
+
+def linear_coefficients(li, lj, lk):
+    """(alpha, beta) of a point at lk from the known points at li, lj of one body:
+    p = p_i + alpha d + beta perp(d), d = p_j - p_i; the complex quotient (lk - li) / (lj - li),
+    divided as CPython divides complex numbers (Smith's method)."""
+    ar, ai = lk[..., 0] - li[..., 0], lk[..., 1] - li[..., 1]
+    br, bi = lj[..., 0] - li[..., 0], lj[..., 1] - li[..., 1]
+    big = np.abs(br) >= np.abs(bi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(big, bi / br, br / bi)
+        denom = np.where(big, br + bi * ratio, br * ratio + bi)
+        alpha = np.where(big, (ar + ai * ratio) / denom, (ar * ratio + ai) / denom)
+        beta = np.where(big, (ai - ar * ratio) / denom, (ai * ratio - ar) / denom)
+    return _plain(alpha), _plain(beta)
+
+
+def angle_arm(la, lb, lc, lk):
+    """(wx, wy): the arm from the pin at lc to lk in the frame of an angle driver from la to lb
+    (the body turned so that the driver's direction is the x axis)."""
+    phi0 = np.arctan2(lb[..., 1] - la[..., 1], lb[..., 0] - la[..., 0])
+    c0, s0 = np.cos(-phi0), np.sin(-phi0)
+    rx, ry = lk[..., 0] - lc[..., 0], lk[..., 1] - lc[..., 1]
+    return _plain(c0 * rx - s0 * ry), _plain(s0 * rx + c0 * ry)
+
+
+def circle_radius(lc, lp):
+    """The radius of the circle a body pinned at lc draws with its point at lp."""
+    return _plain(np.hypot(lp[..., 0] - lc[..., 0], lp[..., 1] - lc[..., 1]))
+
+
+def _plain(x):
+    """A float for one body, the (V,) array for variants."""
+    return float(x) if np.ndim(x) == 0 else x
+
+
+def chain_at(chain: DyadChain, bodies: list[Body]):
+    """The chain's dyads with the constants of V variants' bodies (:func:`bodies_of` with
+    their rows): ``(chain, same (V,) bool)``, each constant a (V,) array, ``same`` True where
+    the variant's own :func:`decompose` takes these very dyads (each choice the greedy
+    placement made from the numbers, made alike: a body's frame pair still apart, the pair
+    chosen as the farthest still the farthest, a circle's radius still positive)."""
+    by_name = {b.name: b for b in bodies}
+    n_variants = max([b.local.shape[0] for b in bodies if b.local.ndim == 3] + [1])
+    same = np.ones(n_variants, dtype=bool)
+    steps = []
+    for st in chain.steps:
+        if st.kind == "linear":
+            name, i, j, by_distance = st.source
+            local = by_name[name].local
+            li, lj = local[..., i, :], local[..., j, :]
+            same &= np.hypot(*np.moveaxis(lj - li, -1, 0)) != 0.0
+            if by_distance:
+                same &= _still_farthest(local, [k for k, p in enumerate(by_name[name].points)
+                                                if p not in st.targets], i, j)
+            ab = [linear_coefficients(li, lj, local[..., k, :]) for k in st.local_targets]
+            steps.append(dataclasses.replace(st, ab=ab))
+        elif st.kind == "angle":
+            name, a, b, c = st.source
+            local = by_name[name].local
+            w = [angle_arm(local[..., a, :], local[..., b, :], local[..., c, :], local[..., k, :])
+                 for k in st.local_targets]
+            steps.append(dataclasses.replace(st, w=w))
+        elif st.kind in ("circles", "circle_line"):
+            radii = []
+            for src, r in zip(st.source, (st.r1, st.r2)):
+                if src is None:
+                    radii.append(r)
+                    continue
+                name, c, p = src
+                local = by_name[name].local
+                radius = circle_radius(local[..., c, :], local[..., p, :])
+                same &= radius > 0
+                radii.append(radius)
+            steps.append(dataclasses.replace(st, r1=radii[0], r2=radii[1] if len(radii) > 1 else st.r2))
+        else:
+            steps.append(st)
+    return DyadChain(chain.model, steps, chain.reason), same
+
+
+def _still_farthest(local, known: list[int], i: int, j: int):
+    """(V,) True where the pair (i, j) of known points is still the one ``max`` picks among
+    (distance, x, y) of every known pair (as :meth:`_Placer.by_two_known_points` does)."""
+    def dist(x, y):
+        d = local[..., x, :] - local[..., y, :]
+        return np.hypot(d[..., 0], d[..., 1])
+
+    chosen = dist(i, j)
+    ok = np.ones(np.shape(chosen), dtype=bool)
+    for x in known:
+        for y in known:
+            if x < y and (x, y) != (i, j):
+                other = dist(x, y)
+                ok &= (chosen > other) | ((chosen == other) & ((i, j) > (x, y)))
+    return ok
 
 
 def decompose(model: Model) -> DyadChain:
@@ -182,16 +316,17 @@ class _Placer:
                 pairs = [(np.hypot(*(b.local[x] - b.local[y])), x, y) for x in kk for y in kk if x < y]
                 _, i, j = max(pairs)
             li, lj = b.local[i], b.local[j]
-            dl = complex(*(lj - li))
-            if abs(dl) == 0.0:
+            if abs(complex(*(lj - li))) == 0.0:
                 continue
-            tg, ab = [], []
+            tg, ab, ks = [], [], []
             for k, p in enumerate(b.points):
                 if not self.known[p]:
-                    z = complex(*(b.local[k] - li)) / dl
                     tg.append(p)
-                    ab.append((z.real, z.imag))
-            self.steps.append(Dyad("linear", tg, i=b.points[i], j=b.points[j], ab=ab))
+                    ks.append(k)
+                    ab.append(linear_coefficients(li, lj, b.local[k]))
+            self.steps.append(Dyad("linear", tg, i=b.points[i], j=b.points[j], ab=ab,
+                                   source=(b.name, i, j, not (0 in kk and 1 in kk)),
+                                   local_targets=ks))
             self.known[tg] = True
             progress = True
         return progress
@@ -207,17 +342,16 @@ class _Placer:
                 kk = self.known_of(b)
                 if not (a in b.points and bpt in b.points) or len(kk) != 1:
                     continue
-                la, lb = b.local[b.points.index(a)], b.local[b.points.index(bpt)]
-                phi0 = np.arctan2(*(lb - la)[::-1])
-                c0, s0 = np.cos(-phi0), np.sin(-phi0)
+                ia_, ib_ = b.points.index(a), b.points.index(bpt)
                 ck = kk[0]
-                tg, ws = [], []
+                tg, ws, ks = [], [], []
                 for k, p in enumerate(b.points):
                     if not self.known[p]:
-                        r = b.local[k] - b.local[ck]
                         tg.append(p)
-                        ws.append((float(c0 * r[0] - s0 * r[1]), float(s0 * r[0] + c0 * r[1])))
-                self.steps.append(Dyad("angle", tg, c=b.points[ck], driver=jd, w=ws))
+                        ks.append(k)
+                        ws.append(angle_arm(b.local[ia_], b.local[ib_], b.local[ck], b.local[k]))
+                self.steps.append(Dyad("angle", tg, c=b.points[ck], driver=jd, w=ws,
+                                       source=(b.name, ia_, ib_, ck), local_targets=ks))
                 self.known[tg] = True
                 self.used_driver[jd] = True
                 progress = True
@@ -235,12 +369,14 @@ class _Placer:
                 st = Dyad("lines", [p], line1=lines[0][0], line2=lines[1][0])
                 use = lines[:2]
             elif len(lines) == 1 and circles:
-                (c1, r1, j1), = circles[:1]
-                st = Dyad("circle_line", [p], c1=c1, r1=r1, r1_driver=j1, line1=lines[0][0])
+                (c1, r1, j1, src1), = circles[:1]
+                st = Dyad("circle_line", [p], c1=c1, r1=r1, r1_driver=j1, line1=lines[0][0],
+                          source=(src1,))
                 use = lines[:1] + [(None, "d", j1)] * (j1 >= 0)
             elif len(circles) >= 2:
-                (c1, r1, j1), (c2, r2, j2) = circles[:2]
-                st = Dyad("circles", [p], c1=c1, r1=r1, c2=c2, r2=r2, r1_driver=j1, r2_driver=j2)
+                (c1, r1, j1, src1), (c2, r2, j2, src2) = circles[:2]
+                st = Dyad("circles", [p], c1=c1, r1=r1, c2=c2, r2=r2, r1_driver=j1, r2_driver=j2,
+                          source=(src1, src2))
                 use = [(None, "d", j) for j in (j1, j2) if j >= 0]
             else:
                 continue
@@ -251,26 +387,28 @@ class _Placer:
             return True
         return False
 
-    def _circles_of(self, p: int) -> list[tuple[int, float, int]]:
-        """(centre, radius, -1) of each body through p pinned at one known point, and (centre,
-        0.0, driver) of each unused distance driver from a known point to p (distinct centres)."""
+    def _circles_of(self, p: int) -> list[tuple[int, float, int, tuple | None]]:
+        """(centre, radius, -1, (body, centre's, p's local index)) of each body through p
+        pinned at one known point, and (centre, 0.0, driver, None) of each unused distance
+        driver from a known point to p (distinct centres)."""
         circles = []
         for b in self.bodies:
             if p in b.points:
                 kk = self.known_of(b)
                 if len(kk) == 1:
                     c = b.points[kk[0]]
-                    r = float(np.hypot(*(b.local[b.points.index(p)] - b.local[kk[0]])))
-                    if r > 0 and all(c != cc for cc, _, _ in circles):
-                        circles.append((c, r, -1))
+                    kp = b.points.index(p)
+                    r = circle_radius(b.local[kk[0]], b.local[kp])
+                    if r > 0 and all(c != cc for cc, _, _, _ in circles):
+                        circles.append((c, r, -1, (b.name, kk[0], kp)))
         model = self.model
         for jd in np.flatnonzero(model.drv_kind == eq.DISTANCE):
             ends = (int(model.drv_a[jd]), int(model.drv_b[jd]))
             if self.used_driver[jd] or p not in ends:
                 continue
             c = ends[1] if ends[0] == p else ends[0]
-            if self.known[c] and all(c != cc for cc, _, _ in circles):
-                circles.append((c, 0.0, int(jd)))
+            if self.known[c] and all(c != cc for cc, _, _, _ in circles):
+                circles.append((c, 0.0, int(jd), None))
         return circles
 
     def _lines_of(self, p: int) -> list[tuple[Line, str, int]]:

@@ -314,7 +314,7 @@ class ChainSweep:
 
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
           order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK,
-          fixed_position: np.ndarray | None = None, period: int = 0,
+          fixed_position: np.ndarray | None = None, period: int = 0, rows=None,
           carry: dict | None = None) -> ChainSweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
@@ -328,7 +328,10 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     ``fixed_position`` (S, n_points, 2): the fixed points' positions row by row (a study's
     variants that move pivots, on one (variant, step) row axis; ``max_abs_phi`` then also gets
     the fixed points); default the model's drawing. ``period``: the rows are runs of this many
-    steps (variants): no step pair across two runs counts in ``gap``. ``carry``: a sweep solved
+    steps (variants): no step pair across two runs counts in ``gap``. The dyads' constants
+    may be given per row too (a study's variants of other link lengths: arrays (S,),
+    :func:`.decompose.chain_at`), and ``rows`` the model's rows with their per-row constants
+    (:class:`linkpipe.model.equations.Rows`, for ``max_abs_phi``). ``carry``: a sweep solved
     in segments of steps (:mod:`linkpipe.segments`): one dict kept across the calls (each dyad
     point's last step before), so the step pair across two segments counts in ``gap`` as it
     does within one call.
@@ -366,7 +369,8 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             hi = min(S, lo + chunk)
             n = hi - lo
             ch.s = [c[lo:hi] for c in cols]
-            total = _position_pass(plan, ch, fixed_at, lo, hi, bufs[0], moving)
+            part = plan.take(slice(lo, hi))  # per-row constants cut to the chunk
+            total = _position_pass(part, ch, fixed_at, lo, hi, bufs[0], moving)
             X[lo:hi] = bufs[0][:n]
             if moving:
                 ok[lo:hi] = np.isfinite(total)
@@ -374,15 +378,17 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
                 _branch_margins(ch, gap, prev, lo, hi)
             if max_abs_phi is not None:
                 pts = {p: (ch.px[p], ch.py[p]) for p in moving + list(fixed_at)}
-                residual[lo:hi] = max_abs_phi(pts, np.stack(ch.s) if nd else np.zeros((0, n)), ch.trig)
+                sT = np.stack(ch.s) if nd else np.zeros((0, n))
+                residual[lo:hi] = (max_abs_phi(pts, sT, ch.trig) if rows is None else
+                                   max_abs_phi(pts, sT, ch.trig, rows.take(slice(lo, hi))))
             if order >= 1:
                 ch.sd = [c if isinstance(c, float) else c[lo:hi] for c in dcols]
                 ch.vx, ch.vy = [None] * P, [None] * P
-                V[lo:hi] = _derivative_pass(plan, ch, 1, moving, bufs[1], n)
+                V[lo:hi] = _derivative_pass(part, ch, 1, moving, bufs[1], n)
             if order >= 2:
                 ch.sdd = [c if isinstance(c, float) else c[lo:hi] for c in ddcols]
                 ch.ax, ch.ay = [None] * P, [None] * P
-                A[lo:hi] = _derivative_pass(plan, ch, 2, moving, bufs[2], n)
+                A[lo:hi] = _derivative_pass(part, ch, 2, moving, bufs[2], n)
     bad = ~ok
     if bad.any():
         X[np.ix_(bad, moving)] = np.nan

@@ -9,6 +9,11 @@ checks it), so each variant's equations are the model's with its own fixed point
 are read from the positions X (S, n_points, 2) row by row everywhere except in the sparse
 engine's affine map, whose entries then take the coefficients each variant's own engine has
 (:func:`.affine.entries_at`, read off :meth:`Model.jacobian_terms` at probe configurations).
+Variants that also differ in link lengths (or local coordinates) carry their own constants
+the same way: the model's rows with per-row arrays (:class:`linkpipe.model.equations.Rows`,
+built by the model's own code, :func:`linkpipe.model.build.variant_rows`), read by every
+equation, the engine's coefficients and the dyads' constants (:func:`.decompose.chain_at`)
+row by row.
 
 A variant is solved here only where its own run (``linkpipe.solve``) would take the same path
 with the same branches (:func:`solve_pivot_variants` returns which): its drawing is assembled
@@ -39,27 +44,35 @@ from .vectorised import max_abs_phi
 
 def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, sizes: np.ndarray,
                          s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray, order: int,
-                         need_influence: bool):
+                         need_influence: bool, rows=None):
     """Stage 1 of V variants whose drawings ``pivots`` (V, n_points, 2) differ in their fixed
     points, of length scales ``sizes`` (V,); the sweep ``s``, ``s_dot``, ``s_ddot`` (S, nd) in
-    internal units; ``chain`` the base scene's dyads with its branches set.
+    internal units; ``chain`` the base scene's dyads with its branches set. Variants that also
+    differ in link lengths (or local coordinates) give ``rows``, their model's rows with (V,)
+    arrays where they differ (:func:`linkpipe.model.build.variant_rows`), and ``chain`` with
+    their dyads' (V,) constants (:func:`.decompose.chain_at`; which variants decompose alike
+    is the caller's to check).
 
     Returns ``(usable (V,) bool, arrays)``: which variants' own runs take these dyads with these
     branches (module doc), and on the V x S rows (variant, step): s, s_dot, s_ddot (R, nd),
-    position, residual, status, link_angle, the derivative stage's dict and link rates."""
+    position, residual, status, link_angle, the derivative stage's dict, link rates and
+    ``rows`` (the model's rows at the R rows, or None)."""
     V, S = pivots.shape[0], s.shape[0]
     sc = model.scene.solver
     sR, sdR, sddR = (np.tile(a, (V, 1)) for a in (s, s_dot, s_ddot))
     fixed_rows = np.repeat(pivots, S, axis=0)
-    sw = solve_chain(chain, sR, sdR, sddR, order=order, gaps=True, max_abs_phi=max_abs_phi(model),
-                     fixed_position=fixed_rows, period=S)
+    variant_of_row = np.repeat(np.arange(V), S)
+    rows_R = None if rows is None else rows.take(variant_of_row)
+    sw = solve_chain(chain.take(variant_of_row), sR, sdR, sddR, order=order, gaps=True,
+                     max_abs_phi=max_abs_phi(model), fixed_position=fixed_rows, period=S,
+                     rows=rows_R)
     size_rows = np.repeat(sizes, S)
     usable = sw.ok.reshape(V, S).all(axis=1) & (sw.gap.reshape(V, S) > 0).all(axis=1)
     usable &= carry_steps(model, pivots, s[0], sizes)[1] <= 1.0
     usable &= _on_base_branches(chain, sw.position[::S], pivots, s[0], sizes)
     eng = engine(model)
     if eng is not None:  # the variant's own engine: the same entries and coefficient pattern
-        usable &= same_pattern(eng, pivots)
+        usable &= same_pattern(eng, pivots, rows)
     bad = sw.ok & ~(sw.residual <= 10 * sc.tol * size_rows)  # a redundant constraint not met
     for arr in (sw.position, sw.velocity, sw.acceleration):
         if arr is not None and bad.any():
@@ -69,13 +82,14 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
     der = derivatives(model, Xz, sR, sdR, sddR, status, order >= 2, velocity=sw.velocity,
                       acceleration=sw.acceleration, need_influence=need_influence,
-                      fixed_per_row=True)
+                      fixed_per_row=True, rows=rows_R)
     velocity = der["velocity"] if order >= 1 else None
     acceleration = der["acceleration"] if order >= 2 else None
     rates = link_rates(model, X, velocity, acceleration) if order >= 1 else (None, None)
     return usable, dict(s=sR, s_dot=sdR, s_ddot=sddR, position=X, residual=sw.residual,
                         status=status, link_angle=link_angles_unwrapped(model, X, period=S),
-                        der=der, velocity=velocity, acceleration=acceleration, link_rates=rates)
+                        der=der, velocity=velocity, acceleration=acceleration, link_rates=rates,
+                        rows=rows_R)
 
 
 def _on_base_branches(chain: DyadChain, X: np.ndarray, drawn: np.ndarray, s0: np.ndarray,

@@ -21,7 +21,7 @@ from ..status import OK, SINGULAR
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
                 need_influence: bool = True, chunk: int = CHUNK, dense: bool = False,
-                fixed_per_row: bool = False):
+                fixed_per_row: bool = False, rows=None):
     """Velocities, accelerations, condition and influence coefficients of a solved sweep: the
     one place they are solved, from one factorisation of each ok step's Jacobian.
 
@@ -38,7 +38,9 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
 
     ``fixed_per_row``: the fixed points of X differ row by row (a study's variants that move
     pivots): the engine's entries are read off the model's terms at X itself
-    (:func:`entries_at`) instead of its affine map of the drawing.
+    (:func:`entries_at`) instead of its affine map of the drawing. ``rows``: the model's rows
+    with per-row constants (:class:`linkpipe.model.equations.Rows`; a study's variants of other
+    link lengths), read at X's rows the same way.
 
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
     acceleration_residual, status, influence (S, n_q, n_drivers) NaN where not ok, or None.
@@ -46,7 +48,8 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     rcond = model.scene.solver.singular_rcond
     eng = None if dense else engine(model)
     factorise = (_dense_factors if eng is None else
-                 _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond, fixed_per_row))
+                 _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond,
+                                 fixed_per_row or rows is not None))
     S = X.shape[0]
     status = status.copy()
     condition = np.full(S, np.nan)
@@ -61,7 +64,8 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         if not len(idx):
             continue
         Xc, sc_ = X[idx], s[idx]
-        cond, regular_steps = factorise(model, Xc, sc_)
+        rows_c = None if rows is None else rows.take(idx)
+        cond, regular_steps = factorise(model, Xc, sc_, rows_c)
         condition[idx] = cond
         sing = is_singular(cond, rcond)
         status[idx[sing]] = SINGULAR
@@ -71,9 +75,10 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
             continue
         solve, driver_columns, times_jacobian = regular_steps(good)
         Xg, sg = Xc[good], sc_[good]
+        rows_g = None if rows_c is None else rows_c.take(good)
         if influence is not None:
-            influence[gi] = driver_columns(model.phi_s(Xg, sg))
-        phit = -model.phi_t(Xg, sg, s_dot[gi])  # (g, m)
+            influence[gi] = driver_columns(model.phi_s(Xg, sg, rows_g))
+        phit = -model.phi_t(Xg, sg, s_dot[gi], rows_g)  # (g, m)
         # coordinates first, steps last (n, g): the engine's contiguous layout
         qd = solve(phit) if velocity is None else model.q_of(velocity[gi]).T
         vres[gi] = np.abs(times_jacobian(qd) - phit.T).max(axis=0)
@@ -81,7 +86,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         if velocity is None:
             V[gi] = Vg
         if need_acceleration:
-            g = model.gamma(Xg, Vg, sg, s_dot[gi], s_ddot[gi])  # (g, m)
+            g = model.gamma(Xg, Vg, sg, s_dot[gi], s_ddot[gi], rows_g)  # (g, m)
             qdd = solve(g) if acceleration is None else model.q_of(acceleration[gi]).T
             ares[gi] = np.abs(times_jacobian(qdd) - g.T).max(axis=0)
             if acceleration is None:
@@ -127,8 +132,8 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
     status never rests on an estimate. ``fixed_per_row``: as :func:`derivatives` says."""
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
 
-    def factorise(model: Model, X, s):
-        E = entries_at(eng, X, s) if fixed_per_row else eng.entries(model.q_of(X), s)
+    def factorise(model: Model, X, s, rows=None):
+        E = entries_at(eng, X, s, rows) if fixed_per_row else eng.entries(model.q_of(X), s)
         if with_inverse:
             inv = eng.inverse(E)  # (n, m, k)
             cond = eng.condition(E, inv)
@@ -176,9 +181,9 @@ def engine_condition(eng, E: np.ndarray, rcond: float, threshold: float = SINGUL
                                rcond, threshold, within)
 
 
-def _dense_factors(model: Model, X, s):
+def _dense_factors(model: Model, X, s, rows=None):
     """The dense factorisation of a chunk, as :func:`_engine_factors` returns it."""
-    J = model.jacobian(X, s)
+    J = model.jacobian(X, s, rows)
     cond, inv = condition_and_inverse(J)  # inv (k, n, m)
 
     def regular_steps(rows):

@@ -133,13 +133,15 @@ class Engine:
             out[r] = row
         return out
 
-    def max_abs_phi(self, X2, sT: np.ndarray, trig: dict | None = None) -> np.ndarray:
-        """Return max |Phi| over the rows (S,), arguments as :meth:`phi`, without forming Phi.
+    def max_abs_phi(self, X2, sT: np.ndarray, trig: dict | None = None,
+                    rows: eq.Rows | None = None) -> np.ndarray:
+        """Return max |Phi| over the rows (S,), arguments as :meth:`phi`, without forming Phi
+        (``rows``: the model's rows with per-row constants, :meth:`Model.phi`).
 
         NaN anywhere in a step gives NaN (``np.maximum`` propagates it).
         """
         res = np.zeros(self._n_steps(X2, sT))
-        for row in self._phi_rows(X2, sT, trig):
+        for row in self._phi_rows(X2, sT, trig, rows):
             if isinstance(row, np.ndarray):
                 np.maximum(res, np.abs(row, out=row), out=res)  # every row is a fresh array
             else:  # a row between fixed points only: a constant
@@ -152,7 +154,7 @@ class Engine:
             return len(next(iter(X2.values()))[0]) if X2 else sT.shape[1]
         return X2.shape[2]
 
-    def _phi_rows(self, X2, sT: np.ndarray, trig: dict | None):
+    def _phi_rows(self, X2, sT: np.ndarray, trig: dict | None, rows: eq.Rows | None = None):
         """Yield Phi's rows in order (:func:`linkpipe.model.equations.phi_rows`), each an (S,)
         array (or a float when it is constant), on contiguous coordinate arrays; fixed points
         enter as scalars."""
@@ -164,7 +166,7 @@ class Engine:
             def xy(p):
                 return fx[p] if p in fx else (X2[p, 0], X2[p, 1])
         cos_s, sin_s = self._trig(sT, trig)
-        return eq.phi_rows(self.model.rows, xy, sT, cos_s, sin_s)
+        return eq.phi_rows(rows or self.model.rows, xy, sT, cos_s, sin_s)
 
     def _trig(self, sT, trig=None):
         """Return the drivers' cos and sin (lists by driver; None for coordinate drivers)."""

@@ -279,19 +279,22 @@ def _sequential_from_before(model, s, q, a, b, start):
     return qs[a - p:], rs[a - p:], its[a - p:], sts[a - p:]
 
 
-def residuals(model: Model, X: np.ndarray, s: np.ndarray, chunk: int = CHUNK) -> np.ndarray:
-    """Return max |Phi| (S,) at positions X (S, n_points, 2), in cache-sized chunks."""
+def residuals(model: Model, X: np.ndarray, s: np.ndarray, chunk: int = CHUNK,
+              rows=None) -> np.ndarray:
+    """Return max |Phi| (S,) at positions X (S, n_points, 2), in cache-sized chunks (``rows``:
+    the model's rows with per-row constants, :meth:`Model.phi`)."""
     S = X.shape[0]
     out = np.empty(S)
     for lo in range(0, S, chunk):
         hi = min(S, lo + chunk)
-        F = model.phi(X[lo:hi], s[lo:hi])
+        F = model.phi(X[lo:hi], s[lo:hi], None if rows is None else rows.take(slice(lo, hi)))
         out[lo:hi] = np.abs(F).max(axis=1) if F.shape[1] else 0.0
     return out
 
 
 def max_abs_phi(model: Model):
-    """Return ``f(points {moving p: (x (S,), y (S,))}, sT (nd, S), trig=None) -> (S,)``: max |Phi|.
+    """Return ``f(points {moving p: (x (S,), y (S,))}, sT (nd, S), trig=None, rows=None) -> (S,)``:
+    max |Phi| (``rows``: the model's rows with per-row constants).
 
     The engine's in-place row accumulation when the model has an engine, else the dense
     :func:`residuals` on the points put back into (S, n_points, 2).
@@ -299,7 +302,8 @@ def max_abs_phi(model: Model):
     eng = engine(model)
     if eng is not None:
         return eng.max_abs_phi
-    return lambda pts, sT, trig=None: residuals(model, _points_array(model, pts, sT.shape[1]), sT.T)
+    return lambda pts, sT, trig=None, rows=None: residuals(
+        model, _points_array(model, pts, sT.shape[1]), sT.T, rows=rows)
 
 
 def _points_array(model: Model, pts: dict, S: int) -> np.ndarray:

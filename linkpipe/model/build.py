@@ -9,6 +9,7 @@ drivers, lengths for coordinate drivers). The constraint rows themselves are wri
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -130,56 +131,61 @@ class Model:
 
     # ------------------------------------------------------------------ constraints
     # Each method assembles the rows that model/equations.py writes, on stacked arrays.
-    def phi(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+    # ``rows``: the rows' constants when they differ row by row (a study's variants on one
+    # (variant, step) row axis: :meth:`equations.Rows.take` of them at X's rows); default the
+    # model's own.
+    def phi(self, X: np.ndarray, s: np.ndarray, rows: eq.Rows | None = None) -> np.ndarray:
         """Return the constraint residuals ``(S, n_rows)`` at positions X and driver values s."""
         xy, cos_s, sin_s = _stacked(X, s)
         out = np.empty((X.shape[0], self.n_rows))
-        for r, row in enumerate(eq.phi_rows(self.rows, xy, s.T, cos_s, sin_s)):
+        for r, row in enumerate(eq.phi_rows(rows or self.rows, xy, s.T, cos_s, sin_s)):
             out[:, r] = row
         return out
 
-    def jacobian_points(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def jacobian_points(self, X: np.ndarray, s: np.ndarray,
+                        rows: eq.Rows | None = None) -> np.ndarray:
         """Return dPhi/dX ``(S, n_rows, n_points, 2)`` over all point coordinates."""
         xy, cos_s, sin_s = _stacked(X, s)
         J = np.zeros((X.shape[0], self.n_rows, self.n_points, 2))
-        for r, p, gx, gy in eq.jacobian_terms(self.rows, xy, cos_s, sin_s):
+        for r, p, gx, gy in eq.jacobian_terms(rows or self.rows, xy, cos_s, sin_s):
             J[:, r, p, 0] += gx
             J[:, r, p, 1] += gy
         return J
 
-    def jacobian_terms(self, X: np.ndarray, s: np.ndarray):
+    def jacobian_terms(self, X: np.ndarray, s: np.ndarray, rows: eq.Rows | None = None):
         """Yield Phi_X's non-zero terms ``(row, point, dphi/dx (S,), dphi/dy (S,))`` (floats where
         constant; a point may recur in a row: add them) at positions X (S, P, 2): the sparse
         form of :meth:`jacobian_points`, for work that must not form it densely."""
         xy, cos_s, sin_s = _stacked(X, s)
-        return eq.jacobian_terms(self.rows, xy, cos_s, sin_s)
+        return eq.jacobian_terms(rows or self.rows, xy, cos_s, sin_s)
 
-    def jacobian(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def jacobian(self, X: np.ndarray, s: np.ndarray, rows: eq.Rows | None = None) -> np.ndarray:
         """Return Phi_q ``(S, n_rows, n_q)``: the Jacobian with respect to the unknowns."""
-        J = self.jacobian_points(X, s).reshape(X.shape[0], self.n_rows, -1)
+        J = self.jacobian_points(X, s, rows).reshape(X.shape[0], self.n_rows, -1)
         return J[:, :, self.q_columns]
 
-    def phi_t(self, X: np.ndarray, s: np.ndarray, s_dot: np.ndarray) -> np.ndarray:
+    def phi_t(self, X: np.ndarray, s: np.ndarray, s_dot: np.ndarray,
+              rows: eq.Rows | None = None) -> np.ndarray:
         """Return dPhi/dt ``(S, n_rows)`` (non-zero only in driver rows)."""
         out = np.zeros((X.shape[0], self.n_rows))
-        out[:, self.driver_rows] = self.phi_s(X, s) * s_dot
+        out[:, self.driver_rows] = self.phi_s(X, s, rows) * s_dot
         return out
 
-    def phi_s(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+    def phi_s(self, X: np.ndarray, s: np.ndarray, rows: eq.Rows | None = None) -> np.ndarray:
         """Return dPhi_driver/ds ``(S, n_drivers)`` (each driver row depends on its own value)."""
         xy, cos_s, sin_s = _stacked(X, s)
         out = np.empty((X.shape[0], self.n_drivers))
-        for j, row in enumerate(eq.phi_s_rows(self.rows, xy, s.T, cos_s, sin_s)):
+        for j, row in enumerate(eq.phi_s_rows(rows or self.rows, xy, s.T, cos_s, sin_s)):
             out[:, j] = row
         return out
 
-    def gamma(self, X, V, s, s_dot, s_ddot) -> np.ndarray:
+    def gamma(self, X, V, s, s_dot, s_ddot, rows: eq.Rows | None = None) -> np.ndarray:
         """Return the acceleration right-hand side ``(S, n_rows)``: Phi_q qdd = gamma."""
         xy, cos_s, sin_s = _stacked(X, s)
         vxy, _, _ = _stacked(V, s[:, :0])
         out = np.empty((X.shape[0], self.n_rows))
-        rows = eq.gamma_rows(self.rows, xy, vxy, s.T, s_dot.T, s_ddot.T, cos_s, sin_s)
-        for r, row in enumerate(rows):
+        values = eq.gamma_rows(rows or self.rows, xy, vxy, s.T, s_dot.T, s_ddot.T, cos_s, sin_s)
+        for r, row in enumerate(values):
             out[:, r] = row
         return out
 
@@ -285,18 +291,26 @@ def mechanism_size(scene: Scene, X0: np.ndarray):
     return float(size) if size.ndim == 0 else size
 
 
-def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray):
+def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray,
+               lengths: dict | None = None, local: dict | None = None, reach: list | None = None):
     """Each link's distance row (between its first two points, unless both are fixed) and two
-    local rows per further point; returns (dist, loc) as dicts of lists."""
+    local rows per further point; returns (dist, loc) as dicts of lists.
+
+    ``lengths`` {link name: L (V,)} and ``local`` {(link name, point): (u (V,), v (V,))}: V
+    variants' own numbers in place of the scene's (:func:`variant_rows`); their rows' numbers
+    are then arrays. ``reach``: a list that collects each further point's distance from the
+    frame's first point over the frame's length instead of refusing a far one here."""
     dist = {k: [] for k in ("a", "b", "len", "link")}
     loc = {k: [] for k in ("a", "b", "p", "u", "v", "len", "link")}
+    lengths, local = lengths or {}, local or {}
     for li, link in enumerate(scene.links):
         ia, ib = index[link.points[0]], index[link.points[1]]
         if all(fixed[index[p]] for p in link.points):
             continue  # a drawn piece of ground: no unknowns, no rows
         d0 = X0[ib] - X0[ia]
         L0 = float(np.hypot(*d0))
-        L = float(link.length) if link.length is not None else L0
+        L = (lengths[link.name] if link.name in lengths
+             else float(link.length) if link.length is not None else L0)
         if not fixed[ia] or not fixed[ib]:
             for key, val in zip(("a", "b", "len", "link"), (ia, ib, L, li)):
                 dist[key].append(val)
@@ -306,20 +320,52 @@ def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray):
             ip = index[pname]
             if fixed[ip] and fixed[ia] and fixed[ib]:
                 continue
-            if pname in link.local:
+            if (link.name, pname) in local:
+                u, v = local[(link.name, pname)]
+            elif pname in link.local:
                 u, v = link.local[pname]
             else:
                 r = X0[ip] - X0[ia]
                 u, v = float(r @ e), float(r @ ep)
-            _check_reach(scene, link, pname, float(np.hypot(u, v)) / L)
+            if reach is None:
+                _check_reach(scene, link, pname, float(np.hypot(u, v)) / L)
+            else:
+                reach.append(np.hypot(u, v) / L)
             for key, val in zip(("a", "b", "p", "u", "v", "len", "link"), (ia, ib, ip, u, v, L, li)):
                 loc[key].append(val)
     return dist, loc
 
 
+def variant_rows(model: Model, lengths: dict | None = None, local: dict | None = None):
+    """The rows of V variants of the model's scene that differ in link lengths (``lengths``
+    {link name: (V,)}, the distance of each link's first two points) and in further points'
+    local coordinates (``local`` {(link name, point): (u (V,), v (V,))}), built by the code
+    that builds the model's own (:func:`_link_rows`): ``(rows, ok)`` with rows an
+    :class:`equations.Rows` whose varied numbers are (V,) arrays, and ok (V,) True where a
+    variant passes the model's checks (no further point out of its frame's reach)."""
+    scene = model.scene
+    index = {n: i for i, n in enumerate(model.point_names)}
+    reach: list = []
+    dist, loc = _link_rows(scene, index, model.start_position, model.fixed, lengths, local, reach)
+    n_variants = max([len(x) for x in (lengths or {}).values()]
+                     + [len(np.atleast_1d(uv[0])) for uv in (local or {}).values()] + [1])
+    ok = np.ones(n_variants, dtype=bool)
+    for value in reach:
+        ok &= ~_too_far(scene, value)
+    arrays = {f.name: getattr(model, f.name) for f in dataclasses.fields(model)}
+    arrays.update(dist_len=dist["len"], loc_u=loc["u"], loc_v=loc["v"], loc_len=loc["len"])
+    return eq.rows_of(**arrays), ok
+
+
+def _too_far(scene: Scene, reach):
+    """True where a further point ``reach`` times its frame's length from the frame's first
+    point makes every step singular (the Jacobian's condition grows as reach^2)."""
+    return reach * math.sqrt(scene.solver.singular_rcond) >= 1.0
+
+
 def _check_reach(scene: Scene, link, pname: str, reach: float) -> None:
     """A further point far beyond the frame's second point makes every step singular."""
-    if not reach * math.sqrt(scene.solver.singular_rcond) >= 1.0:  # reach^2 rcond < 1, unsquared
+    if not _too_far(scene, reach):  # reach^2 rcond < 1, unsquared
         return
     # the Jacobian's condition grows as reach^2: every step would count as singular
     raise SceneError(

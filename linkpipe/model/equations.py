@@ -57,6 +57,23 @@ class Rows:
     def n_rows(self) -> int:
         return self.n_constraints + len(self.drivers)
 
+    FAMILIES = ("dist", "local", "sfix", "smov", "drivers")
+
+    def arrays(self) -> list:
+        """Every number given per row (a study's variants on one (variant, step) row axis:
+        1-D arrays over the rows), in row-family order; [] for a model's own rows."""
+        return [x for family in self.FAMILIES for row in getattr(self, family) for x in row
+                if hasattr(x, "shape")]
+
+    def take(self, rows) -> "Rows":
+        """These rows' constants at ``rows`` (an index or slice of the row axis): each number
+        given per row indexed, plain numbers as they are (the model's own rows: itself)."""
+        if not self.arrays():
+            return self
+        return Rows(**{family: tuple(tuple(x[rows] if hasattr(x, "shape") else x for x in row)
+                                     for row in getattr(self, family))
+                       for family in self.FAMILIES})
+
 
 def phi_rows(rows: Rows, xy, s, cos_s, sin_s):
     """Yield Φ's rows in order: the residual of every constraint and driver."""
@@ -275,17 +292,23 @@ def alignment_rows(rows: Rows, xy, cos_s, sin_s):
             yield j, cos_s[j] * (rx * dx + ry * dy) + sin_s[j] * (rx * dy - ry * dx)
 
 
+def _number(x):
+    """A length of a row: a plain float, or 1-D values over variants or rows, kept an array."""
+    return float(x) if getattr(x, "ndim", 0) == 0 else x
+
+
 def rows_of(dist_a, dist_b, dist_len, loc_a, loc_b, loc_p, loc_u, loc_v, loc_len, sfix_p, sfix_c,
             sfix_n, smov_p, smov_d, smov_e, smov_len, drv_kind, drv_a, drv_b, drv_axis, drv_c,
             drv_d, drv_len, **_) -> Rows:
-    """Return the :class:`Rows` of a model's index arrays (plain ints and floats)."""
+    """Return the :class:`Rows` of a model's index arrays (plain ints and floats; a length or
+    local coordinate given as values over variants, ``loc_u[k]`` an array, stays an array)."""
     return Rows(
-        dist=tuple((int(a), int(b), float(L)) for a, b, L in zip(dist_a, dist_b, dist_len)),
-        local=tuple((int(a), int(b), int(p), float(u), float(v), float(L)) for a, b, p, u, v, L
+        dist=tuple((int(a), int(b), _number(L)) for a, b, L in zip(dist_a, dist_b, dist_len)),
+        local=tuple((int(a), int(b), int(p), _number(u), _number(v), _number(L)) for a, b, p, u, v, L
                     in zip(loc_a, loc_b, loc_p, loc_u, loc_v, loc_len)),
-        sfix=tuple((int(p), float(c[0]), float(c[1]), float(n[0]), float(n[1]))
+        sfix=tuple((int(p), _number(c[0]), _number(c[1]), _number(n[0]), _number(n[1]))
                    for p, c, n in zip(sfix_p, sfix_c, sfix_n)),
-        smov=tuple((int(p), int(d), int(e), float(L))
+        smov=tuple((int(p), int(d), int(e), _number(L))
                    for p, d, e, L in zip(smov_p, smov_d, smov_e, smov_len)),
-        drivers=tuple((int(k), int(a), int(b), int(x), int(c), int(d), float(L)) for k, a, b, x, c, d, L
+        drivers=tuple((int(k), int(a), int(b), int(x), int(c), int(d), _number(L)) for k, a, b, x, c, d, L
                       in zip(drv_kind, drv_a, drv_b, drv_axis, drv_c, drv_d, drv_len)))

@@ -1,16 +1,25 @@
-"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots).
+"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots) or
+change its links' lengths.
 
 A parameter ``points.<P>.x | y`` of a fixed point that links, sliders or drivers use changes
 the kinematics, but on a scene that takes the closed-form dyads (``[solver] method`` auto) it
 changes nothing else of the model where the scene gives the lengths and local coordinates of
 the links at that point (checked at both ends of each parameter's range: the model's rows and
-mass-centre frames must equal the base scene's). All variants of a batch then run as one
-stage 1 on V x S rows (variant, step) with the pivots as per-row columns
+mass-centre frames must equal the base scene's). A parameter ``links.<name>.lengths.A-B`` (the
+distance of a link's first two points) changes the model's constants: each variant's are
+built by the model's own code at once for the batch (:func:`linkpipe.model.build.variant_rows`:
+the rows with (V,) arrays where they differ; the dyads' constants from them by
+:func:`linkpipe.kinematics.decompose.chain_at`), checked at both ends of each parameter's range
+against the model the variant's own scene builds (rows and mass-centre frames equal to the
+bit). All variants of a batch then run as one stage 1 on V x S rows (variant, step) with the
+pivots as per-row columns and the constants as per-row values
 (:func:`linkpipe.kinematics.pivots.solve_pivot_variants`), then one force stage on the same
-rows, force parameters of the study as per-row constants (:mod:`.vector`). A variant whose own
-run would take another path or other branches (or not assemble) is solved by its own run
+rows, force parameters of the study and the model's constants as per-row constants
+(:mod:`.vector`, :class:`linkpipe.forces.constants.ForceConstants`). A variant whose own
+run would take another path or other branches (or not assemble), or whose own scene would
+decompose into other dyads or fail the model's checks, is solved by its own run
 (:func:`linkpipe.study.batch.solve_variant`) and its rows put in place: every row is its own
-run's (``tests/test_study_pivots.py``).
+run's (``tests/test_study_pivots.py``, ``tests/test_study_lengths.py``).
 """
 from __future__ import annotations
 
@@ -23,7 +32,8 @@ from ..forces import compute_forces
 from ..forces.applied import center_frame
 from ..forces.constants import ForceConstants
 from ..forces.springs import torsion_offset
-from ..model.build import build_model
+from ..kinematics.decompose import bodies_of, chain_at
+from ..model.build import build_model, variant_rows
 from ..pipeline import Kinematics, Stages, result_of, status_of
 from ..result import Motion, units_of
 from ..status import NO_ASSEMBLY
@@ -43,6 +53,22 @@ def changed_constants(study, trial) -> str:
     for m in study.scene.masses:
         if center_frame(model, m.link, m.center) != center_frame(base, m.link, m.center):
             return f"the mass centre of {m.link} is taken from the drawing"
+    return ""
+
+
+def unlike_own_model(study, trial, link: str, value: float) -> str:
+    """What of the model a trial scene (link ``link``'s length at ``value``) builds otherwise
+    than :func:`variant_rows` builds it for that value ("": nothing, the vectorised path
+    applies)."""
+    base, own = build_model(study.scene), build_model(trial)
+    rows, _ = variant_rows(base, {link: np.array([float(value)])})
+    rows = rows.take(0)  # the one variant's numbers
+    for family in rows.FAMILIES:
+        if getattr(rows, family) != getattr(own.rows, family):
+            return f"the model's {family} rows are not the variant's own"
+    for m in study.scene.masses:
+        if center_frame(base, m.link, m.center, rows) != center_frame(own, m.link, m.center):
+            return f"the mass centre frame of {m.link} is not the variant's own"
     return ""
 
 
@@ -79,9 +105,11 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     per_row = vector.per_row_constants(study, model, slots, study.values[lo:hi], S)
     stages = Stages.of(scene)
     order = 2 if stages.acceleration else 1 if stages.velocity else 0
-    usable, a = kin.solve_pivot_variants(model, base_chain(study), per_row["start_position"][::S],
+    chain, rows, alike = variant_model(study, slots, study.values[lo:hi])
+    usable, a = kin.solve_pivot_variants(model, chain, per_row["start_position"][::S],
                                          per_row["size"][::S],
-                                         k.s, k.s_dot, k.s_ddot, order, stages.forces)
+                                         k.s, k.s_dot, k.s_ddot, order, stages.forces, rows)
+    usable &= alike
     der = a["der"]
     turns = None
     if scene.torsion_springs:  # each variant's own turns, at its own first solved step
@@ -93,7 +121,8 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
                         status=der["status"], influence=der["influence"],
                         link_angular_acceleration=a["link_rates"][1], link_angle=a["link_angle"],
                         torsion_offset=turns)
-        forces = compute_forces(model, motion, units_of(scene), ForceConstants(**per_row, pivots=True))
+        forces = compute_forces(model, motion, units_of(scene),
+                                ForceConstants(**per_row, pivots=True, model_rows=a["rows"]))
     stored = [a["position"], a["link_angle"], a["velocity"], a["acceleration"], *a["link_rates"]]
     status = status_of(model, der["status"], a["residual"], stored, forces, per_row["size"])
     drive = dataclasses.replace(k.drive, **{f.name: np.tile(v, (V,) + (1,) * (v.ndim - 1))
@@ -109,6 +138,20 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     for v in np.flatnonzero(~usable):
         _own_run(study, lo + int(v), out, v)
     return out["status"], out
+
+
+def variant_model(study, slots, values: np.ndarray):
+    """``(chain, rows, alike (V,))`` of variants with parameter ``values`` (V, n_parameters):
+    the base scene's dyads (branches set) with the variants' constants, the model's rows with
+    (V,) arrays where link lengths vary (None where none does), and where each variant's own
+    model passes the model's checks and decomposes into these dyads (all True without lengths)."""
+    lengths = {slot[1]: values[:, j] for j, slot in enumerate(slots) if slot[0] == "length"}
+    if not lengths:
+        return base_chain(study), None, np.ones(values.shape[0], dtype=bool)
+    model = vector.base_result(study).model
+    rows, checked = variant_rows(model, lengths)
+    chain, alike = chain_at(base_chain(study), bodies_of(model, rows))
+    return chain, rows, checked & alike
 
 
 def _own_run(study, variant: int, out: dict, row: int) -> None:

@@ -153,7 +153,12 @@ def load_study(path, catalog_of=None) -> Study:
     note = (f"variant by variant: {why}" if slots is None else
             "vectorised: the pivots as per-row columns, stage 1 and the force stage on all "
             "variants of a batch at once (a variant on another path or branch: its own run)"
-            if any(s[0] == "pivot" for s in slots) else
+            if any(s[0] == "pivot" for s in slots) and not any(s[0] == "length" for s in slots) else
+            "vectorised: the link lengths as per-row constants"
+            + (" and the pivots as per-row columns" if any(s[0] == "pivot" for s in slots) else "")
+            + ", stage 1 and the force stage on all variants of a batch at once (a variant on "
+            "another path or branch, or with other dyads: its own run)"
+            if any(s[0] == "length" for s in slots) else
             "vectorised: stage 1 solved once, the force stage on all variants of a batch at once")
     return dataclasses.replace(study, slots=None if slots is None else tuple(slots), path_note=note)
 
