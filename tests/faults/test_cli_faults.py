@@ -19,7 +19,12 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 CRANK_ROCKER = ROOT / "configs" / "fourbar_crank_rocker.toml"
 
 
-def _long_scene(tmp_path, steps=3_000_000):
+#: steps of a run that lasts past the last signal's delay (the crank-rocker at about 1.5 M
+#: steps/s end to end, streamed in segments)
+LONG_STEPS = 8_000_000
+
+
+def _long_scene(tmp_path, steps=LONG_STEPS):
     """The crank-rocker with a long sweep (seconds of work) and a name of its own."""
     text = CRANK_ROCKER.read_text().replace("steps = 361", f"steps = {steps}")
     text = text.replace('name = "fourbar_crank_rocker"', 'name = "long"')
@@ -82,7 +87,7 @@ def test_a_signal_stops_the_run_at_once_and_keeps_earlier_outputs(tmp_path, sign
     if (out / "long.h5").read_bytes() != b"the previous run's file":
         # the signal came while the .rrd was written: the .h5 was complete and renamed before
         with h5py.File(out / "long.h5") as f:
-            assert f["position"].shape[0] == 3_000_000 and f.attrs["steps_ok"] == 3_000_000
+            assert f["position"].shape[0] == LONG_STEPS and f.attrs["steps_ok"] == LONG_STEPS
     left = sorted(p.name for p in out.iterdir() if not p.name.endswith(".lock"))
     assert left == ["long.h5"]  # no temporaries, no .rrd (an advisory lock file may stay)
 
