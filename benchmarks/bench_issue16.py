@@ -9,9 +9,10 @@
    pylinkage + numba's warm kernel (``step_fast_with_kinematics``) in this process, best of 3.
    Target: pylinkage's seconds / linkpipe's marginal seconds >= 2.
 2. Force stage memory: the basketball goal (springs, gravity, inertia) at 200k and 1M steps,
-   peak resident memory of each run (fresh process: solve + .h5). Target: 1M <= 1.5 x 200k.
-3. 10M-step kinematics (the crank-rocker, positions, velocities, accelerations): peak memory.
-   Target <= 2 GB. (--quick: 2M steps, the target scaled to 0.4 GB.)
+   peak resident memory of each ``run`` (fresh process, the sweep streamed in segments), to
+   .h5 alone and to .h5 and .rrd. Target: 1M <= 1.5 x 200k.
+3. 10M-step kinematics (the crank-rocker, positions, velocities, accelerations, ``run`` to
+   .h5): peak memory. Target <= 2 GB. (--quick: 2M steps, the target scaled to 0.4 GB.)
 4. Chains of N four-bar loops, N = 8..64, 2k steps: benchmarks/bench_scale.py's exponents,
    peak at N = 64 and threads verdicts (run as a subprocess; its own lines).
 5. Recordings: the 360k-step crank-rocker with every effect and the basketball goal at 200k
@@ -74,29 +75,31 @@ def cli_target(folder: pathlib.Path, steps: int) -> None:
           f"{verdict(ratio >= 2)}")
 
 
-def peak_mb(config: str, steps: int) -> float:
-    """Peak resident memory (MB) of solve + .h5 in a fresh process (bench_memory's child)."""
+def peak_mb(config: str, steps: int, *flags: str) -> float:
+    """Peak resident memory (MB) of ``python -m linkpipe run`` (``.h5``, the sweep streamed in
+    segments) in a fresh process."""
     code = ("import sys, json, resource, pathlib, tempfile; sys.path[:0] = [{r!r}, {b!r}];"
-            "import linkpipe; from linkpipe.stores import hdf5; from bench_memory import scene_text;"
+            "from linkpipe.__main__ import main; from bench_memory import scene_text;"
             "d = pathlib.Path(tempfile.mkdtemp()); p = d / 's.toml';"
-            "p.write_text(scene_text({c!r}, {n}, '')); r = linkpipe.solve(str(p));"
-            "hdf5.write(r, d / 's.h5');"
+            "p.write_text(scene_text({c!r}, {n}, '')); "
+            "assert main(['run', str(p), '--out', str(d), '--quiet', *{f!r}]) == 0;"
             "print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))").format(
-        r=str(ROOT), b=str(ROOT / "benchmarks"), c=config, n=steps)
+        r=str(ROOT), b=str(ROOT / "benchmarks"), c=config, n=steps, f=list(flags))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def memory_targets(quick: bool) -> None:
     small, large = (40_000, 200_000) if quick else (200_000, 1_000_000)
-    a, b = peak_mb("basketball_goal", small), peak_mb("basketball_goal", large)
-    print(f"2. force stage memory, basketball goal (springs, gravity, inertia): {small:,} steps "
-          f"{a:.0f} MB, {large:,} steps {b:.0f} MB: {b / a:.2f}x, target <= 1.5x: "
-          f"{verdict(b / a <= 1.5)}")
+    for flags, what in ((("--no-rrd",), ".h5"), ((), ".h5 and .rrd")):
+        a, b = peak_mb("basketball_goal", small, *flags), peak_mb("basketball_goal", large, *flags)
+        print(f"2. force stage memory, basketball goal (springs, gravity, inertia), run to {what}: "
+              f"{small:,} steps {a:.0f} MB, {large:,} steps {b:.0f} MB: {b / a:.2f}x, target "
+              f"<= 1.5x: {verdict(b / a <= 1.5)}")
     steps, limit = (2_000_000, 0.4) if quick else (10_000_000, 2.0)
-    peak = peak_mb("fourbar_crank_rocker", steps) / 1024
-    print(f"3. {steps:,}-step kinematics (crank-rocker, pos+vel+acc, .h5): peak {peak:.2f} GB, "
-          f"target <= {limit} GB: {verdict(peak <= limit)}")
+    peak = peak_mb("fourbar_crank_rocker", steps, "--no-rrd") / 1024
+    print(f"3. {steps:,}-step kinematics (crank-rocker, pos+vel+acc, run to .h5): peak "
+          f"{peak:.2f} GB, target <= {limit} GB: {verdict(peak <= limit)}")
 
 
 def recording_targets(folder: pathlib.Path, quick: bool) -> None:

@@ -1,6 +1,9 @@
-"""The memory estimate against measured peaks (issue 16): each case in a fresh process runs
-``linkpipe.solve`` and writes the ``.h5``, then prints the process's peak resident memory next
-to ``pipeline.memory_needed`` (the upper bound ``run`` and ``check`` refuse a sweep by).
+"""The memory estimate against measured peaks (issue 16): each case in a fresh process, twice:
+``linkpipe.solve`` writing the ``.h5`` from the whole Result (what a Python user of the API
+holds), and ``python -m linkpipe run --no-rrd`` (the sweep streamed in segments:
+``linkpipe.segments``); each prints the process's peak resident memory next to
+``pipeline.memory_needed`` (the upper bound ``run`` and ``check`` refuse a sweep by: of the
+whole sweep for the API, of one segment and what stays whole for ``run``).
 
     .venv/bin/python benchmarks/bench_memory.py            # about a minute
     .venv/bin/python benchmarks/bench_memory.py --scale 0.1   # a tenth of the steps
@@ -43,7 +46,7 @@ def scene_text(config: str, steps: int, extra: str) -> str:
     return text
 
 
-def child(name: str, scale: float) -> None:
+def child(name: str, scale: float, mode: str) -> None:
     import linkpipe
     from linkpipe.pipeline import memory_needed
     from linkpipe.stores import hdf5
@@ -52,28 +55,40 @@ def child(name: str, scale: float) -> None:
     path = folder / "s.toml"
     path.write_text(scene_text(config, int(steps * scale), extra))
     scene = linkpipe.load_scene(str(path))
-    result = linkpipe.solve(scene)
-    hdf5.write(result, folder / "s.h5")
+    if mode == "run":
+        from linkpipe.__main__ import main as cli
+        from linkpipe.segments import steps_per_segment
+
+        segment = steps_per_segment(scene)
+        code = cli(["run", str(path), "--out", str(folder), "--quiet", "--no-rrd"])
+        message, estimate = f"exit {code}", memory_needed(scene, segment)
+    else:
+        result = linkpipe.solve(scene)
+        hdf5.write(result, folder / "s.h5")
+        message, estimate = result.message, memory_needed(scene)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    print(json.dumps(dict(steps=scene.n_steps, peak=peak, estimate=memory_needed(scene),
-                          message=result.message)))
+    print(json.dumps(dict(steps=scene.n_steps, peak=peak, estimate=estimate, message=message)))
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--scale", type=float, default=1.0)
     p.add_argument("--child")
+    p.add_argument("--mode", choices=("solve", "run"), default="solve")
     args = p.parse_args(argv)
     if args.child:
-        return child(args.child, args.scale) or 0
-    print(f"{'case':<28}{'steps':>11}{'peak MB':>10}{'estimate MB':>13}{'ratio':>7}  verdict")
+        return child(args.child, args.scale, args.mode) or 0
+    print(f"{'case':<28}{'how':>6}{'steps':>11}{'peak MB':>10}{'estimate MB':>13}{'ratio':>7}  verdict")
     for name in CASES:
-        out = subprocess.run([sys.executable, __file__, "--child", name, "--scale", str(args.scale)],
-                             capture_output=True, text=True, check=True)
-        r = json.loads(out.stdout.strip().splitlines()[-1])
-        ratio = r["estimate"] / r["peak"]
-        print(f"{name:<28}{r['steps']:>11,}{r['peak'] / 2**20:>10.0f}{r['estimate'] / 2**20:>13.0f}"
-              f"{ratio:>7.2f}  {'upper bound' if ratio >= 1 else 'BELOW THE PEAK'}")
+        for mode in ("solve", "run"):
+            out = subprocess.run([sys.executable, __file__, "--child", name, "--scale",
+                                  str(args.scale), "--mode", mode],
+                                 capture_output=True, text=True, check=True)
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            ratio = r["estimate"] / r["peak"]
+            print(f"{name:<28}{mode:>6}{r['steps']:>11,}{r['peak'] / 2**20:>10.0f}"
+                  f"{r['estimate'] / 2**20:>13.0f}{ratio:>7.2f}  "
+                  f"{'upper bound' if ratio >= 1 else 'BELOW THE PEAK'}")
     return 0
 
 
