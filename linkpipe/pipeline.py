@@ -124,8 +124,11 @@ def preflight(scene: Scene):
     """Check what can be checked before solving; return (model, mobility).
 
     The scene's memory need, its degrees of freedom against its drivers, and that the start
-    assembles at the first driver value (SceneError otherwise): what ``check`` reports."""
-    check_memory(scene)
+    assembles at the first driver value (SceneError otherwise): what ``check`` reports. The
+    memory is that of ``run``, which streams a long sweep in segments (:mod:`.segments`)."""
+    from .segments import steps_per_segment
+
+    check_memory(scene, steps_per_segment(scene))
     model = build_model(scene)
     mob = _mobility(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
