@@ -76,14 +76,16 @@ def cli_target(folder: pathlib.Path, steps: int) -> None:
 
 
 def peak_mb(config: str, steps: int, *flags: str) -> float:
-    """Peak resident memory (MB) of ``python -m linkpipe run`` (``.h5``, the sweep streamed in
+    """Peak resident memory (MB, VmHWM: ru_maxrss survives exec on Linux, so a child would
+    report its parent's peak) of ``python -m linkpipe run`` (``.h5``, the sweep streamed in
     segments) in a fresh process."""
-    code = ("import sys, json, resource, pathlib, tempfile; sys.path[:0] = [{r!r}, {b!r}];"
+    code = ("import sys, json, pathlib, tempfile; sys.path[:0] = [{r!r}, {b!r}];"
             "from linkpipe.__main__ import main; from bench_memory import scene_text;"
+            "from bench_sweep import peak_rss_mb;"
             "d = pathlib.Path(tempfile.mkdtemp()); p = d / 's.toml';"
             "p.write_text(scene_text({c!r}, {n}, '')); "
             "assert main(['run', str(p), '--out', str(d), '--quiet', *{f!r}]) == 0;"
-            "print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))").format(
+            "print(json.dumps(peak_rss_mb()))").format(
         r=str(ROOT), b=str(ROOT / "benchmarks"), c=config, n=steps, f=list(flags))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])

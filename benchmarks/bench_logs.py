@@ -29,7 +29,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_sweep import EFFECTS  # noqa: E402  (the same every-effect tables as its pipeline case)
+from bench_sweep import EFFECTS, peak_rss_mb  # noqa: E402  (the same every-effect tables as its pipeline case)
 
 
 def scene_text(measure: bool = False, k=200.0, mass=3.0, load=20.0) -> str:
@@ -61,8 +61,6 @@ def child_run(rows: int, folder: pathlib.Path) -> None:
     """In a fresh process: the log is already written (by the parent: its pandas frame is not
     this process's memory); imports are paid before the clock starts (scipy.interpolate, which
     the log driver's spline imports on first use: a fixed ~0.4 s per process, not per row)."""
-    import resource
-
     import scipy.interpolate  # noqa: F401
 
     import linkpipe
@@ -75,7 +73,7 @@ def child_run(rows: int, folder: pathlib.Path) -> None:
     result = linkpipe.solve(scene)
     hdf5.write(result, folder / "s.h5")
     t_work = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = peak_rss_mb()
     print(json.dumps(dict(rows=rows, read=t_read, work=t_work, peak_mb=peak,
                           message=result.message, seconds=result.seconds)))
 

@@ -20,7 +20,6 @@ import argparse
 import json
 import pathlib
 import re
-import resource
 import subprocess
 import sys
 import tempfile
@@ -66,7 +65,9 @@ def child(name: str, scale: float, mode: str) -> None:
         result = linkpipe.solve(scene)
         hdf5.write(result, folder / "s.h5")
         message, estimate = result.message, memory_needed(scene)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    from bench_sweep import peak_rss_mb  # VmHWM: ru_maxrss survives exec on Linux
+
+    peak = peak_rss_mb() * 2**20
     print(json.dumps(dict(steps=scene.n_steps, peak=peak, estimate=estimate, message=message)))
 
 

@@ -30,9 +30,10 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 #: one case, run in a fresh process: prints a JSON line
 CASE = r"""
-import json, resource, sys, time
+import json, sys, time
 sys.path.insert(0, {bench!r})
 from bench_threads import chain_text  # (puts this checkout first on sys.path)
+from bench_sweep import peak_rss_mb  # VmHWM: ru_maxrss survives exec on Linux
 sys.path.insert(0, {repo!r})  # import linkpipe from {repo!r}
 import linkpipe
 import scipy.sparse.linalg  # noqa: F401  imported by the sparse path: not timed
@@ -55,7 +56,7 @@ r = linkpipe.solve(scene, threads=threads)
 seconds = time.perf_counter() - t0
 assert linkpipe.__file__.startswith({repo!r}), linkpipe.__file__
 print(json.dumps(dict(seconds=seconds, stages=r.seconds, message=r.message,
-                      rss=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+                      rss=peak_rss_mb() * 2**20,
                       linear_algebra=getattr(r, "linear_algebra_used", ""))))
 """
 

@@ -117,8 +117,10 @@ print(json.dumps(dict(seconds=seconds, variants=study.n_variants, path=study.pat
 """
 
 RUN = """
-import dataclasses, json, resource, sys, time
+import dataclasses, json, sys, time
 sys.path.insert(0, {root!r})
+sys.path.insert(0, {root!r} + '/benchmarks')
+from bench_sweep import peak_rss_mb  # VmHWM: ru_maxrss survives exec on Linux
 from linkpipe.study import load_study, run_study
 t0 = time.perf_counter()
 study = load_study({path!r})
@@ -126,7 +128,7 @@ if {one_by_one!r}:  # the variant-by-variant path forced (the "before" of a vect
     study = dataclasses.replace(study, slots=None, path_note="variant by variant (forced)")
 path = run_study(study, {out!r}, {executor!r}, workers={workers})
 seconds = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+peak = peak_rss_mb()
 print(json.dumps(dict(seconds=seconds, peak_mb=peak, variants=study.n_variants,
                       path=study.path_note)))
 """
