@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import pathlib
 import re
+import subprocess
 import sys
 
 import h5py
@@ -236,3 +237,37 @@ def test_segment_size_and_memory_estimate():
     assert per_step_segmented < 0.5 * per_step_whole
     short = _crank_turns(1001, 1)
     assert steps_per_segment(short) == short.n_steps
+
+
+def test_run_streams_a_long_sweep_to_the_whole_sweeps_file_and_a_strided_recording(tmp_path, capsys):
+    """``python -m linkpipe run`` on a sweep of several segments (the crank-rocker with every
+    effect, 100,001 steps, segments of 32,768): the .h5 is the whole sweep's, bit for bit; the
+    recording keeps every 51st step (--rrd-max-steps 2,000) on the sweep's own step numbers,
+    verifies, and the summary says so; the summary's totals are the whole sweep's."""
+    from rerun.chunk import RrdReader
+
+    from linkpipe.__main__ import main
+
+    text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+    path = tmp_path / "long.toml"
+    path.write_text(re.sub(r"steps = \d+", "steps = 100001", text).replace(
+        'name = "fourbar_crank_rocker"', 'name = "long"') + EFFECTS)
+    scene = linkpipe.load_scene(path)
+    assert 100_001 > steps_per_segment(scene) >= 16384
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--rrd-max-steps", "2000"]) == 0
+    printed = capsys.readouterr().out
+    whole = linkpipe.solve(scene)
+    hdf5.write(whole, tmp_path / "whole.h5")
+    _files_equal(tmp_path / "whole.h5", tmp_path / "out" / "long.h5")
+    assert f"long: {whole.message} (100001 steps, 100001 ok, 0 failed)" in printed
+    assert "recording: every 51st step (1,961 of 100,001; --rrd-max-steps 2,000)" in printed
+    lo, hi = np.nanmin(whole.forces["input_force"][1]), np.nanmax(whole.forces["input_force"][1])
+    assert f"input force crank: {lo:.6g} .. {hi:.6g}" in printed
+    rrd = tmp_path / "out" / "long.rrd"
+    verify = subprocess.run([str(pathlib.Path(sys.executable).with_name("rerun")), "rrd", "verify",
+                             str(rrd)], capture_output=True, text=True)
+    assert verify.returncode == 0, verify.stderr
+    store = RrdReader(rrd).stream().collect()
+    df = store.reader(index="step", contents="/solver/residual").to_pandas()
+    steps = df["step"].to_numpy()[df["/solver/residual:Scalars:scalars"].notna().to_numpy()]
+    np.testing.assert_array_equal(np.sort(steps.astype(np.int64)), np.arange(0, 100_001, 51))

@@ -114,7 +114,8 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     if stride * base > 1:
         rows = np.arange(0, result.n_steps, stride)
         why = " and ".join(w for w in (base_why, why if stride > 1 else "") if w)
-        kept = f"every {stride * base}th step ({len(rows):,} of {result.totals.n_steps:,}; {why})"
+        kept = (f"every {_ordinal(stride * base)} step ({len(rows):,} of "
+                f"{result.totals.n_steps:,}; {why})")
         info = f"This recording keeps {kept}; the .h5 keeps every step."
         result = result.strided(rows)
     scene = result.scene
@@ -140,6 +141,12 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     if spawn or connect:
         stream.disconnect()
     return kept
+
+
+def _ordinal(n: int) -> str:
+    """1st, 2nd, 3rd, 4th, ..., 11th, 12th, 13th, ..., 21st, ..."""
+    tail = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n:,}{tail}"
 
 
 def log_result(stream: rr.RecordingStream, result) -> None:
