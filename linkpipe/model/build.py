@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scene import Scene, sides
+from ..scene.geometry import drawing_extent, frame_too_close
 from . import equations as eq
 
 
@@ -393,6 +394,11 @@ def variant_rows(model: Model, lengths: dict | None = None, distances: dict | No
         arrays["drv_len"] = _driver_rows(scene, index, X0, apart)["len"]
         for value in apart:
             ok &= value
+        extent = drawing_extent(X0)
+        for link in scene.links:  # the frame checks of the scene's links, on each drawing
+            a, b = X0[:, index[link.points[0]]], X0[:, index[link.points[1]]]
+            ok &= ~frame_too_close(np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]), extent)
+            ok &= (a != b).any(axis=1)
     return eq.rows_of(**arrays), ok
 
 
