@@ -1,5 +1,5 @@
-"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots) or
-change its links' lengths.
+"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots),
+change its links' lengths or a plate's side lengths, or draw its moving points elsewhere.
 
 A parameter ``points.<P>.x | y`` of a fixed point that links, sliders or drivers use changes
 the kinematics, but on a scene that takes the closed-form dyads (``[solver] method`` auto) it
@@ -11,7 +11,13 @@ built by the model's own code at once for the batch (:func:`linkpipe.model.build
 the rows with (V,) arrays where they differ; the dyads' constants from them by
 :func:`linkpipe.kinematics.decompose.chain_at`), checked at both ends of each parameter's range
 against the model the variant's own scene builds (rows and mass-centre frames equal to the
-bit). All variants of a batch then run as one stage 1 on V x S rows (variant, step) with the
+bit). A side length that places a further point of a plate (``links.<name>.lengths.A-P``)
+and a moving point's drawn coordinate (``points.<P>.x | y``: its start guess, and the lengths,
+local coordinates and plate sides the scene takes from the drawing) are built the same way:
+:func:`variant_rows` places each variant's plates again with the code that placed the
+scene's at load (:func:`linkpipe.scene.sides.placement` on (V,) arrays) and builds its rows
+from its own drawing; the placement's and the model's checks are (V,) masks, a variant that
+fails them being its own run (its scene refuses it: no_assembly rows). All variants of a batch then run as one stage 1 on V x S rows (variant, step) with the
 pivots as per-row columns and the constants as per-row values
 (:func:`linkpipe.kinematics.pivots.solve_pivot_variants`), then one force stage on the same
 rows, force parameters of the study and the model's constants as per-row constants

@@ -13,11 +13,13 @@ run's (``tests/test_study.py`` checks every stored variable against one-by-one r
 Before taking this path a study's extreme values of each parameter are parsed as a scene
 (every check of a scene applies; the value must reach the scene unchanged); a moved anchor
 gives each variant its own mechanism size (the length scale of its tolerances), as its own
-scene would. A coordinate of a pivot (a fixed point the mechanism uses) or a link's length
-(``links.<name>.lengths.<first>-<second>``, the distance of its first two points) takes the
-geometry path of :mod:`.pivots` (stage 1 too on all variants at once, each variant's model
-constants as per-row values) where the scene and the change allow it. Anything else runs
-variant by variant (:func:`linkpipe.study.batch.solve_batch`), giving the same rows.
+scene would. A coordinate of a pivot (a fixed point the mechanism uses), a link's length
+(``links.<name>.lengths.<first>-<second>``, the distance of its first two points), a side
+length that places a further point of a plate (``links.<name>.lengths.<A>-<P>``) or a drawn
+coordinate of a moving point takes the geometry path of :mod:`.pivots` (stage 1 too on all
+variants at once, each variant's model constants as per-row values) where the scene and the
+change allow it. Anything else runs variant by variant
+(:func:`linkpipe.study.batch.solve_batch`), giving the same rows.
 """
 from __future__ import annotations
 
