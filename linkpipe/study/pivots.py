@@ -90,8 +90,8 @@ def passes_checks(study, slot, value: float) -> bool:
     """Whether the variant with one parameter (``slot``) at ``value`` passes the model's and
     the placement's checks as :func:`variant_rows` tells them (a study's extreme value that
     its own scene refuses must be refused here too, its variants then being their own runs)."""
-    _, ok = variant_rows(build_model(study.scene),
-                         *rows_inputs(build_model(study.scene), [slot], np.array([[float(value)]])))
+    base = build_model(study.scene)
+    _, ok = variant_rows(base, *rows_inputs(base, [slot], np.array([[float(value)]])))
     return bool(ok[0])
 
 
