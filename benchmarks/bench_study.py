@@ -30,6 +30,13 @@ all variants of a batch at once).
    vectorised path (link lengths as per-row constants) against the same study forced variant
    by variant, both in one process (``--lengths`` runs this case alone): variants/s and the
    ratio.
+7. Plate side lengths: the shear press's lever (B-P, A-P within +-0.5 mm, its frame length
+   A-B and the cutting force; 2,000 variants of 9 steps), vectorised (each variant's lever
+   placed again, its model rows built at once) against the same study forced variant by
+   variant, in one process (``--plates`` runs cases 7 and 8 alone).
+8. Drawn coordinates of moving points: the basketball goal with every effect, its moving
+   points B, C and H drawn within +-0.05 ft (the start guess; 1,000 variants), vectorised
+   against forced variant by variant, in one process.
 """
 from __future__ import annotations
 
@@ -93,6 +100,35 @@ samples = {samples}
 "points.O2.y" = {{ uniform = [-1.00164, -0.99836] }}
 "points.O4.x" = {{ uniform = [-0.00164, 0.00164] }}
 "points.O4.y" = {{ uniform = [-2.00164, -1.99836] }}
+
+[study.metrics]
+peak_handle = "max(abs(input_force.theta3a))"
+"""
+
+PLATES = """[study]
+base = "{base}"
+seed = 7
+samples = 2000
+
+[study.parameters]
+"links.lever.lengths.B-P" = {{ uniform = [0.4495, 0.4505] }}
+"links.lever.lengths.A-P" = {{ uniform = [0.6495, 0.6505] }}
+"links.lever.lengths.A-B" = {{ uniform = [0.2295, 0.2305] }}
+"loads.cutting_force.force.1" = {{ uniform = [400.0, 600.0] }}
+
+[study.metrics]
+peak_handle = "max(abs(input_force.handle))"
+"""
+
+DRAWN = """[study]
+base = "goal_every_effect.toml"
+seed = 8
+samples = 1000
+
+[study.parameters]
+"points.B.x" = {{ uniform = [{Bx0!r}, {Bx1!r}] }}
+"points.C.y" = {{ uniform = [{Cy0!r}, {Cy1!r}] }}
+"points.H.x" = {{ uniform = [{Hx0!r}, {Hx1!r}] }}
 
 [study.metrics]
 peak_handle = "max(abs(input_force.theta3a))"
@@ -222,6 +258,8 @@ def main(argv=None) -> None:
     ap.add_argument("--quick", action="store_true", help="the 10,000-variant case only")
     ap.add_argument("--pivots", action="store_true", help="the pivot tolerance case only")
     ap.add_argument("--lengths", action="store_true", help="the link-length tolerance case only")
+    ap.add_argument("--plates", action="store_true",
+                    help="the plate side-length and drawn-point cases only")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         folder = pathlib.Path(tmp)
@@ -230,6 +268,8 @@ def main(argv=None) -> None:
             return pivots(folder)
         if args.lengths:
             return lengths(folder)
+        if args.plates:
+            return plates(folder)
         r = case(folder, "v10k", FORCES.format(samples=10, steps=100))
         print(f"10,000 variants in-process: {r['seconds']:.2f} s (target <= 5 s: "
               f"{verdict(r['seconds'] <= 5)}); {r['variants'] / r['seconds']:,.0f} variants/s; "
@@ -256,21 +296,43 @@ def main(argv=None) -> None:
               f"{r['seconds']:.2f} s, {r['variants'] / r['seconds']:,.0f} variants/s")
         pivots(folder)
         lengths(folder)
+        plates(folder)
 
 
-def lengths(folder: pathlib.Path) -> None:
-    """Case 6: the shipped tolerance study (pins and link lengths), variant by variant and
-    vectorised in one process (after one warm run: imports and the base scene's solve)."""
-    path = ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml"
-    code = LENGTHS.format(root=str(ROOT), path=str(path), out=str(folder / "out_lengths"))
+def one_process(folder: pathlib.Path, path: pathlib.Path, label: str) -> None:
+    """A study variant by variant (forced) and vectorised in one process (after one warm run
+    of each: imports and the base scene's solve): variants/s and the ratio."""
+    code = LENGTHS.format(root=str(ROOT), path=str(path), out=str(folder / f"out_{label}"))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     r = json.loads(proc.stdout.strip().splitlines()[-1])
     n, t = r["variants"], r["seconds"]
     rate = {k: n / v for k, v in t.items()}
-    print(f"link-length tolerances ({n:,} variants, one process): variant by variant "
+    print(f"{label} ({n:,} variants, one process): variant by variant "
           f"{t['one_by_one']:.2f} s ({rate['one_by_one']:,.0f}/s) -> vectorised "
           f"{t['vectorised']:.2f} s ({rate['vectorised']:,.0f}/s): "
           f"{rate['vectorised'] / rate['one_by_one']:.1f}x; {r['path'][:60]}")
+
+
+def lengths(folder: pathlib.Path) -> None:
+    """Case 6: the shipped tolerance study (pins and link lengths)."""
+    one_process(folder, ROOT / "configs" / "studies" / "basketball_goal_tolerance.toml",
+                "link-length tolerances")
+
+
+def plates(folder: pathlib.Path) -> None:
+    """Cases 7 and 8: a plate's side lengths (the shear press's lever) and the basketball
+    goal's moving points drawn elsewhere."""
+    path = folder / "plates.toml"
+    path.write_text(PLATES.format(base=(ROOT / "configs" / "shear_press.toml").as_posix()))
+    one_process(folder, path, "plate side lengths")
+    path = folder / "drawn.toml"
+    import linkpipe  # the drawing of the base, for the ranges
+
+    points = {p.name: p for p in linkpipe.load_scene(str(GOAL)).points}
+    path.write_text(DRAWN.format(Bx0=points["B"].x - 0.05, Bx1=points["B"].x + 0.05,
+                                 Cy0=points["C"].y - 0.05, Cy1=points["C"].y + 0.05,
+                                 Hx0=points["H"].x - 0.05, Hx1=points["H"].x + 0.05))
+    one_process(folder, path, "drawn moving points")
 
 
 def pivots(folder: pathlib.Path) -> None:

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import Model, _R90
+from ..model import Model
+from ..scene.sides import drawn_local
 
 
 @dataclass(frozen=True)
@@ -49,9 +50,7 @@ def center_frame(model: Model, link_name: str, center, rows=None) -> tuple[int, 
             return ia, ib, rows.local[hit[0]][3], rows.local[hit[0]][4], L
         if len(hit):
             return ia, ib, float(model.loc_u[hit[0]]), float(model.loc_v[hit[0]]), L
-        e = (X0[ib] - X0[ia]) / L0
-        r = X0[ip] - X0[ia]
-        return ia, ib, float(r @ e), float(r @ (_R90 @ e)), L
+        return (ia, ib) + drawn_local(*X0[ia], *X0[ib], *X0[ip]) + (L,)
     u, v = center
     return ia, ib, float(u), float(v), L
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..model import Model
 from ..model import equations as eq
+from ..scene.sides import drawn_local
 
 
 @dataclass
@@ -138,18 +139,14 @@ def bodies_of(model: Model, rows=None) -> list[Body]:
     for li, link in enumerate(scene.links):
         pts = [index[p] for p in link.points]
         ia, ib = pts[0], pts[1]
-        d0 = X0[ib] - X0[ia]
-        L0 = float(np.hypot(*d0))
+        L0 = float(np.hypot(*(X0[ib] - X0[ia])))
         L = length.get(li, float(link.length) if link.length is not None else L0)
-        e = d0 / L0
-        ep = np.array([-e[1], e[0]])
         local = [(0.0, 0.0), (L, 0.0)]
         for ip in pts[2:]:
             if (li, ip) in loc:
                 local.append(loc[(li, ip)])
             else:  # a fixed point of a fixed link: no rows
-                r = X0[ip] - X0[ia]
-                local.append((float(r @ e), float(r @ ep)))
+                local.append(drawn_local(*X0[ia], *X0[ib], *X0[ip]))
         out.append(Body(link.name, pts, _stacked_local(local)))
     return out
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from . import sides
 from .keys import _Table, _show, _suggest, _type_name
 from .tables import Link, Point, Slider
@@ -15,15 +17,27 @@ MIN_LENGTH = 1e-100
 FRAME_RTOL = 1e-9
 
 
+def drawing_extent(X0):
+    """The drawing's extent: its largest |coordinate|; X0 (P, 2) -> float, (V, P, 2) -> (V,)."""
+    return np.abs(X0).max(axis=(-2, -1))
+
+
+def frame_too_close(apart, extent):
+    """True where a link's first two points, ``apart`` from each other, are too close to span
+    its frame in a drawing of ``extent`` (floats or arrays; at the same place is a separate
+    error: :meth:`GeometryTables.link_tables`)."""
+    return (0 < apart) & (apart <= FRAME_RTOL * extent)
+
+
 class GeometryTables:
     """The ``[points]``, ``[[links]]`` and ``[[sliders]]`` readers of :class:`~.parse._Parser`."""
 
     def _check_frame(self, table, names) -> None:
         """The first two points of a link must be apart (relative to the drawing's extent)."""
         pa, pb = self.points[names[0]], self.points[names[1]]
-        extent = max(max(abs(p.x), abs(p.y)) for p in self.points.values())
-        apart = math.hypot(pb.x - pa.x, pb.y - pa.y)
-        if 0 < apart <= FRAME_RTOL * extent:
+        extent = drawing_extent(np.array([[p.x, p.y] for p in self.points.values()]))
+        apart = float(np.hypot(pb.x - pa.x, pb.y - pa.y))
+        if frame_too_close(apart, extent):
             raise table.error("points", f'points "{names[0]}" and "{names[1]}" are {apart:g} '
                               f"apart, {apart / extent:.1g} of the drawing's extent: too close "
                               "to span the link's frame",
@@ -67,7 +81,8 @@ class GeometryTables:
             length, distances = self.link_lengths(table, names)
             local = self.link_local(table, names)
             local.update(self.local_from_distances(table, names, length, distances, local))
-            link = Link(table.data["name"], names, length, local)
+            side = dict(table.data.get("side", {})) if distances else {}
+            link = Link(table.data["name"], names, length, local, distances, side)
             self.links[link.name] = link
         if not self.links:
             raise self.error("links", None, "no links: the scene needs at least one [[links]]",

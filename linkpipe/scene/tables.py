@@ -32,13 +32,18 @@ class Link:
 
     ``length``: the exact distance of the first two points from ``lengths``, or None (take it
     from the start configuration). ``local``: explicit local coordinates ``{name: (u, v)}`` of
-    further points (others are taken from the start configuration).
+    further points (others are taken from the start configuration), those placed by two
+    side lengths included. ``distances``: the side lengths that placed further points,
+    ``{(earlier point, later point): (key, d)}`` as ``lengths`` gives them, and ``side`` {point:
+    "left" | "right"} where given (:mod:`.sides`: a study's variants place them again).
     """
 
     name: str
     points: tuple[str, ...]
     length: float | None = None
     local: dict[str, tuple[float, float]] = field(default_factory=dict)
+    distances: dict[tuple[str, str], tuple[str, float]] = field(default_factory=dict)
+    side: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots) or
-change its links' lengths.
+"""The vectorised path of a study whose variants move the mechanism's fixed points (pivots),
+change its links' lengths or a plate's side lengths, or draw its moving points elsewhere.
 
 A parameter ``points.<P>.x | y`` of a fixed point that links, sliders or drivers use changes
 the kinematics, but on a scene that takes the closed-form dyads (``[solver] method`` auto) it
@@ -11,7 +11,13 @@ built by the model's own code at once for the batch (:func:`linkpipe.model.build
 the rows with (V,) arrays where they differ; the dyads' constants from them by
 :func:`linkpipe.kinematics.decompose.chain_at`), checked at both ends of each parameter's range
 against the model the variant's own scene builds (rows and mass-centre frames equal to the
-bit). All variants of a batch then run as one stage 1 on V x S rows (variant, step) with the
+bit). A side length that places a further point of a plate (``links.<name>.lengths.A-P``)
+and a moving point's drawn coordinate (``points.<P>.x | y``: its start guess, and the lengths,
+local coordinates and plate sides the scene takes from the drawing) are built the same way:
+:func:`variant_rows` places each variant's plates again with the code that placed the
+scene's at load (:func:`linkpipe.scene.sides.placement` on (V,) arrays) and builds its rows
+from its own drawing; the placement's and the model's checks are (V,) masks, a variant that
+fails them being its own run (its scene refuses it: no_assembly rows). All variants of a batch then run as one stage 1 on V x S rows (variant, step) with the
 pivots as per-row columns and the constants as per-row values
 (:func:`linkpipe.kinematics.pivots.solve_pivot_variants`), then one force stage on the same
 rows, force parameters of the study and the model's constants as per-row constants
@@ -56,12 +62,45 @@ def changed_constants(study, trial) -> str:
     return ""
 
 
-def unlike_own_model(study, trial, link: str, value: float) -> str:
-    """What of the model a trial scene (link ``link``'s length at ``value``) builds otherwise
-    than :func:`variant_rows` builds it for that value ("": nothing, the vectorised path
-    applies)."""
+#: the slots of the geometry path: a pivot, a frame length, a plate's side length, a drawn
+#: coordinate of a moving point
+GEOMETRY = ("pivot", "length", "side", "drawn")
+#: the slots whose variants' model rows are built again (:func:`variant_rows`)
+REBUILT = ("length", "side", "drawn")
+
+
+def rows_inputs(model, slots, values: np.ndarray) -> tuple[dict, dict, np.ndarray | None]:
+    """``(lengths, distances, drawn)`` of :func:`variant_rows` for variants with parameter
+    ``values`` (V, n_parameters): frame lengths {link: (V,)}, side lengths {(link, key): (V,)}
+    and, where a moving point's drawn coordinate varies, every variant's drawing (V,
+    n_points, 2) with each varied coordinate (of any point) set; else None."""
+    lengths = {slot[1]: values[:, j] for j, slot in enumerate(slots) if slot[0] == "length"}
+    distances = {(slot[1], slot[2]): values[:, j] for j, slot in enumerate(slots)
+                 if slot[0] == "side"}
+    drawn = None
+    if any(slot[0] == "drawn" for slot in slots):
+        drawn = np.repeat(model.start_position[None], values.shape[0], axis=0)
+        for j, slot in enumerate(slots):
+            if slot[0] in ("point", "pivot", "drawn"):
+                drawn[:, slot[1], slot[2]] = values[:, j]
+    return lengths, distances, drawn
+
+
+def passes_checks(study, slot, value: float) -> bool:
+    """Whether the variant with one parameter (``slot``) at ``value`` passes the model's and
+    the placement's checks as :func:`variant_rows` tells them (a study's extreme value that
+    its own scene refuses must be refused here too, its variants then being their own runs)."""
+    base = build_model(study.scene)
+    _, ok = variant_rows(base, *rows_inputs(base, [slot], np.array([[float(value)]])))
+    return bool(ok[0])
+
+
+def unlike_own_model(study, trial, slot, value: float) -> str:
+    """What of the model a trial scene (one parameter, ``slot``, at ``value``: a frame length,
+    a side length or a drawn coordinate) builds otherwise than :func:`variant_rows` builds it
+    for that value ("": nothing, the vectorised path applies)."""
     base, own = build_model(study.scene), build_model(trial)
-    rows, _ = variant_rows(base, {link: np.array([float(value)])})
+    rows, _ = variant_rows(base, *rows_inputs(base, [slot], np.array([[float(value)]])))
     rows = rows.take(0)  # the one variant's numbers
     for family in rows.FAMILIES:
         if getattr(rows, family) != getattr(own.rows, family):
@@ -143,13 +182,15 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
 def variant_model(study, slots, values: np.ndarray):
     """``(chain, rows, alike (V,))`` of variants with parameter ``values`` (V, n_parameters):
     the base scene's dyads (branches set) with the variants' constants, the model's rows with
-    (V,) arrays where link lengths vary (None where none does), and where each variant's own
-    model passes the model's checks and decomposes into these dyads (all True without lengths)."""
-    lengths = {slot[1]: values[:, j] for j, slot in enumerate(slots) if slot[0] == "length"}
-    if not lengths:
-        return base_chain(study), None, np.ones(values.shape[0], dtype=bool)
+    (V,) arrays where frame lengths, side lengths or drawn coordinates of moving points vary
+    (None where none does: pivots only), and where each variant's own scene passes the
+    placement's and the model's checks and decomposes into these dyads (all True without
+    them)."""
     model = vector.base_result(study).model
-    rows, checked = variant_rows(model, lengths)
+    lengths, distances, drawn = rows_inputs(model, slots, values)
+    if not lengths and not distances and drawn is None:
+        return base_chain(study), None, np.ones(values.shape[0], dtype=bool)
+    rows, checked = variant_rows(model, lengths, distances, drawn)
     chain, alike = chain_at(base_chain(study), bodies_of(model, rows))
     return chain, rows, checked & alike
 

@@ -150,15 +150,21 @@ def load_study(path, catalog_of=None) -> Study:
     study = Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
                   batch, digest.hexdigest())
     slots, why = vector.plan(study)
+    kinds = {s[0] for s in slots or ()}
+    rebuilt = [what for kind, what in (("length", "the link lengths"),
+                                       ("side", "the plates' side lengths"),
+                                       ("drawn", "the moving points' drawn coordinates"))
+               if kind in kinds]
     note = (f"variant by variant: {why}" if slots is None else
             "vectorised: the pivots as per-row columns, stage 1 and the force stage on all "
             "variants of a batch at once (a variant on another path or branch: its own run)"
-            if any(s[0] == "pivot" for s in slots) and not any(s[0] == "length" for s in slots) else
-            "vectorised: the link lengths as per-row constants"
-            + (" and the pivots as per-row columns" if any(s[0] == "pivot" for s in slots) else "")
+            if "pivot" in kinds and not rebuilt else
+            "vectorised: " + " and ".join(rebuilt) + " as per-row constants"
+            + (" and the pivots as per-row columns" if "pivot" in kinds else "")
             + ", stage 1 and the force stage on all variants of a batch at once (a variant on "
-            "another path or branch, or with other dyads: its own run)"
-            if any(s[0] == "length" for s in slots) else
+            "another path or branch, with other dyads or failing its scene's checks: its own "
+            "run)"
+            if rebuilt else
             "vectorised: stage 1 solved once, the force stage on all variants of a batch at once")
     return dataclasses.replace(study, slots=None if slots is None else tuple(slots), path_note=note)
 

@@ -13,11 +13,13 @@ run's (``tests/test_study.py`` checks every stored variable against one-by-one r
 Before taking this path a study's extreme values of each parameter are parsed as a scene
 (every check of a scene applies; the value must reach the scene unchanged); a moved anchor
 gives each variant its own mechanism size (the length scale of its tolerances), as its own
-scene would. A coordinate of a pivot (a fixed point the mechanism uses) or a link's length
-(``links.<name>.lengths.<first>-<second>``, the distance of its first two points) takes the
-geometry path of :mod:`.pivots` (stage 1 too on all variants at once, each variant's model
-constants as per-row values) where the scene and the change allow it. Anything else runs
-variant by variant (:func:`linkpipe.study.batch.solve_batch`), giving the same rows.
+scene would. A coordinate of a pivot (a fixed point the mechanism uses), a link's length
+(``links.<name>.lengths.<first>-<second>``, the distance of its first two points), a side
+length that places a further point of a plate (``links.<name>.lengths.<A>-<P>``) or a drawn
+coordinate of a moving point takes the geometry path of :mod:`.pivots` (stage 1 too on all
+variants at once, each variant's model constants as per-row values) where the scene and the
+change allow it. Anything else runs variant by variant
+(:func:`linkpipe.study.batch.solve_batch`), giving the same rows.
 """
 from __future__ import annotations
 
@@ -44,15 +46,21 @@ _BASE: dict = {}  # study fingerprint -> the base Result (stage 1 solved once pe
 
 def slot_of(scene, path: tuple):
     """``(field, index...)`` of a parameter's place in :class:`ForceConstants` (``("point",
-    p, axis)`` for an anchor coordinate; ``("length", link)`` for the distance of a link's
-    first two points, its frame: :mod:`.pivots`), or None when it is not a force number."""
+    p, axis)`` for a point's coordinate (:func:`plan` tells anchors, pivots and moving points
+    apart); ``("length", link)`` for the distance of a link's first two points, its frame;
+    ``("side", link, key)`` for a side length that places a further point of a plate:
+    :mod:`.pivots`), or None when it is not a force number."""
     table = path[0]
     if table == "points" and len(path) == 3 and path[2] in ("x", "y"):
         return ("point", scene.point_names.index(path[1]), "xy".index(path[2]))
     if table == "links" and len(path) == 4 and path[2] == "lengths":
         link = scene.links[path[1]]
         frame = {f"{link.points[0]}-{link.points[1]}", f"{link.points[1]}-{link.points[0]}"}
-        return ("length", link.name) if path[3] in frame else None
+        if path[3] in frame:
+            return ("length", link.name)
+        if any(key == path[3] for key, _ in link.distances.values()):  # a plate's side length
+            return ("side", link.name, path[3])
+        return None
     keys = FORCE_KEYS.get(table, {})
     if table == "gravity" and len(path) == 3 and path[1] == "g":
         return ("gravity", path[2])
@@ -68,7 +76,10 @@ def _scene_value(scene, slot) -> float:
     field, *index = slot
     if field == "length":
         return next(link.length for link in scene.links if link.name == index[0])
-    if field in ("point", "pivot"):
+    if field == "side":
+        link = next(link for link in scene.links if link.name == index[0])
+        return next(d for key, d in link.distances.values() if key == index[1])
+    if field in ("point", "pivot", "drawn"):
         p = scene.points[index[0]]
         return p.x if index[1] == 0 else p.y
     if field == "gravity":
@@ -100,23 +111,25 @@ def plan(study) -> tuple[list | None, str]:
         if slot is None:
             return None, f"{p.address} changes the kinematics"
         why = _anchor_reason(scene, slot[1]) if slot[0] == "point" else ""
-        if why.endswith("moves"):
-            return None, f"{p.address}: {why}"
-        if why:  # a pivot: the mechanism's own fixed point
+        if why.endswith("moves"):  # a drawn coordinate of a moving point
+            slot, why = ("drawn",) + slot[1:], ""
+        elif why:  # a pivot: the mechanism's own fixed point
             slot = ("pivot",) + slot[1:]
         for value in (study.values[:, j].min(), study.values[:, j].max()):
             try:
                 trial = scene_with(scene, study.data, [p], [value])
             except SceneError as exc:
+                if slot[0] in pivots.REBUILT and not pivots.passes_checks(study, slot, value):
+                    continue  # the placement's own checks refuse it too: that variant's own run
                 return None, f"{p.address} = {value:g} fails the scene's checks ({exc.message})"
             if _scene_value(trial, slot) != value:
                 return None, f"{p.address}: the scene does not take the value as written"
             if why and pivots.changed_constants(study, trial):
                 return None, f"{p.address}: {why} and {pivots.changed_constants(study, trial)}"
-            if slot[0] == "length" and pivots.unlike_own_model(study, trial, slot[1], value):
-                return None, f"{p.address}: {pivots.unlike_own_model(study, trial, slot[1], value)}"
+            if slot[0] in pivots.REBUILT and pivots.unlike_own_model(study, trial, slot, value):
+                return None, f"{p.address}: {pivots.unlike_own_model(study, trial, slot, value)}"
         slots.append(slot)
-    moved = any(s[0] in ("pivot", "length") for s in slots)
+    moved = any(s[0] in pivots.GEOMETRY for s in slots)
     why = pivots.path_reason(study) if moved else "" if scene.effects else "the scene has no forces"
     return (None, why) if why else (slots, "")
 
@@ -140,12 +153,12 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
                for f in dataclasses.fields(ForceConstants)
                if f.name not in ("size", "pivots", "model_rows")}
     for j, (field, *index) in enumerate(slots):
-        if field == "length":  # a constant of the model's rows (:mod:`.pivots`)
+        if field in ("length", "side"):  # a constant of the model's rows (:mod:`.pivots`)
             continue
-        if field in ("point", "pivot"):
+        if field in ("point", "pivot", "drawn"):
             field = "start_position"
         per_row[field][(slice(None),) + tuple(index)] = np.repeat(values[:, j], S)
-    if any(s[0] in ("point", "pivot", "length") for s in slots):  # a moved point may widen the drawing
+    if any(s[0] in ("point",) + pivots.GEOMETRY for s in slots):  # a moved point may widen the drawing
         per_row["size"] = np.repeat(mechanism_size(study.scene, per_row["start_position"][::S]), S)
     else:
         per_row["size"] = model.size
@@ -155,7 +168,7 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
 def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     """``(status (V, S), {variable: (V, S, ...)})`` of variants ``lo .. hi - 1``: every
     step-first variable a one-by-one run stores."""
-    if any(s[0] in ("pivot", "length") for s in slots):
+    if any(s[0] in pivots.GEOMETRY for s in slots):
         return pivots.variant_arrays(study, slots, lo, hi)
     base = base_result(study)
     k, model = base.kinematics, base.model
