@@ -14,6 +14,10 @@ from .errors import LinkpipeError, SceneError
 from .report import describe, fit_table, stage_table, summary
 
 
+#: --rrd-max-steps's default (stores/rrd's MAX_STEPS, without importing rerun to read it)
+RRD_MAX_STEPS = 100_000
+
+
 def _parser(prog: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description="Planar linkage analysis pipeline.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -27,7 +31,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="print only errors")
     run.add_argument("-v", "--verbose", action="store_true",
                      help="also print a table of where the time went, stage by stage")
-    run.add_argument("--rrd-max-steps", type=_threads, default=100_000, metavar="N",
+    run.add_argument("--rrd-max-steps", type=_threads, default=RRD_MAX_STEPS, metavar="N",
                      help="the most steps a recording keeps; past it a uniform stride (the "
                           ".h5 keeps every step; 0: no limit; default 100,000)")
     run.add_argument("--rrd-max-mb", type=_megabytes, default=50.0, metavar="MB",
@@ -229,7 +233,7 @@ def _run(args) -> int:
             t0 = time.perf_counter()
             segment = steps_per_segment(scene)
             # before the progress bar: a sweep too big for memory is a scene error
-            check_memory(scene, segment)
+            check_memory(scene, segment, _recorded_steps(scene, args))
             bar = _progress_bar(scene, args)
             out.mkdir(parents=True, exist_ok=True)
             from .stores import output_lock
@@ -240,12 +244,31 @@ def _run(args) -> int:
                 bar.close()
             if not args.quiet:
                 total = time.perf_counter() - t0
-                print(summary(result, written, total, None, kept))
+                print(summary(result, written, total, kept))
                 if args.verbose:
                     print(stage_table(result.seconds, total, result.totals.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
         print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
     return outcome.code
+
+
+def _recorded_steps(scene, args) -> int:
+    """The most rows a streamed run keeps for its recording (0 without one): a bound for the
+    memory check (the size cap usually keeps fewer)."""
+    if args.no_rrd and not (args.spawn or args.connect):
+        return 0
+    return min(scene.n_steps, args.rrd_max_steps) if args.rrd_max_steps else scene.n_steps
+
+
+def _recording_plan(max_steps: int, max_bytes: int):
+    """``plan(first segment, n_steps) -> (stride, why)``: a streamed recording's stride of
+    steps, set on its first segment (``stores.rrd.plan`` with the command line's caps)."""
+    from .stores import rrd
+
+    def plan(first_segment, n_steps):
+        return rrd.plan(first_segment, max_steps, max_bytes, n_steps)
+
+    return plan
 
 
 def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
@@ -258,6 +281,8 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
 
     name = scene.name
     recording = not args.no_rrd or args.spawn or args.connect
+    max_bytes = int(args.rrd_max_mb * 10**6)
+    plan = _recording_plan(args.rrd_max_steps, max_bytes) if recording else None
     written, kept = [], None
     with contextlib.ExitStack() as files:
         sinks = []
@@ -266,9 +291,12 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
 
             sinks.append(files.enter_context(hdf5.SweepWriter(out / f"{name}.h5", scene.n_steps)))
             written.append(str(out / f"{name}.h5"))
-        result = stream(scene, sinks, max_steps=args.rrd_max_steps if recording else None,
-                        progress=bar.stage if bar else None, threads=args.threads or None,
-                        segment=segment, between=stop_if_interrupted)
+        result = stream(scene, sinks, recording=plan, progress=bar.stage if bar else None,
+                        threads=args.threads or None, segment=segment,
+                        between=stop_if_interrupted, check=False)
+        t0 = time.perf_counter()  # then the file closed, on disk (fsync) and renamed into place
+    if sinks:
+        result.seconds["hdf5"] += time.perf_counter() - t0
     if recording:
         from .stores import rrd
 
@@ -277,7 +305,7 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
         t0 = time.perf_counter()
         target = None if args.no_rrd else out / f"{name}.rrd"
         kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
-                         max_steps=args.rrd_max_steps, max_bytes=int(args.rrd_max_mb * 10**6))
+                         max_steps=args.rrd_max_steps, max_bytes=max_bytes)
         result.seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))
@@ -289,7 +317,8 @@ PROGRESS_MIN_STEPS = 20_000  # sweeps at least this long get a progress bar
 
 class _StageBar:
     """A tqdm bar over one scene's steps, its postfix the stage at work (a sweep in segments
-    moves the bar at the end of each segment; a whole one at its end)."""
+    moves the bar at the end of each segment, back to 0 where it starts again on the general
+    path; a whole one at its end)."""
 
     def __init__(self, scene):
         from tqdm import tqdm
@@ -300,8 +329,8 @@ class _StageBar:
 
     def stage(self, name, done: int | None = None):
         if done is not None:
-            self.bar.update(done - self.bar.n)
-        self.bar.set_postfix_str(name)
+            self.bar.n = done
+        self.bar.set_postfix_str(name)  # (refreshes the bar)
 
     def close(self):
         self.bar.update(self.bar.total - self.bar.n)
@@ -316,11 +345,14 @@ def _progress_bar(scene, args):
 
 def _check(args) -> int:
     from .pipeline import preflight
+    from .segments import steps_per_segment
 
     outcome = _Outcome()
     for scene in _load_all(args.scenes, outcome):
         with _reporting(scene.path, outcome):
-            model, mob = preflight(scene)  # memory, degrees of freedom, the start assembles
+            # memory (as run's defaults need it), degrees of freedom, the start assembles
+            model, mob = preflight(scene, steps_per_segment(scene),
+                                   min(scene.n_steps, RRD_MAX_STEPS))
             print(describe(scene, mob))
     return outcome.code
 

@@ -14,8 +14,9 @@ from . import kinematics as kin
 from .model import build_model, check_mobility
 from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
-from .result import Motion, Result, Totals, units_of
-from .status import FLAG_MEANINGS, NO_INPUT, OK, assign, finite_rows
+from .result import Motion, Result, units_of
+from .status import NO_INPUT, OK, assign, code_counts, finite_rows
+from .status import message as status_message
 from .errors import MemoryRefused, SceneError
 from .scene import Scene, load_scene
 
@@ -80,14 +81,17 @@ def whole_sweep_bytes_per_step(scene: Scene) -> int:
     return 8 * (6 * nd + 2) + 1 + 8 * (2 * P + n_q + 1) + 5
 
 
-def memory_needed(scene: Scene, segment: int | None = None) -> int:
+def memory_needed(scene: Scene, segment: int | None = None, recorded_steps: int = 0) -> int:
     """An upper bound of a run's peak memory in bytes (checked against measured peaks in
     benchmarks/bench_memory.py): the whole sweep's arrays, or with ``segment`` (steps) a run in
-    segments: one segment's arrays and what stays whole."""
+    segments: one segment's arrays, what stays whole, and the ``recorded_steps`` rows it keeps
+    for its recording (the fixed part holds a recording of up to the default 100,000 rows of a
+    small scene; more rows, or larger ones, count here)."""
     if segment is None or segment >= scene.n_steps:
         return int(scene.n_steps * bytes_per_step(scene) * TRANSIENT_FACTOR) + FIXED_BYTES
     return int(segment * bytes_per_step(scene) * TRANSIENT_FACTOR
-               + scene.n_steps * whole_sweep_bytes_per_step(scene)) + FIXED_BYTES
+               + scene.n_steps * whole_sweep_bytes_per_step(scene)
+               + recorded_steps * bytes_per_step(scene)) + FIXED_BYTES
 
 
 def available_memory() -> int | None:
@@ -102,12 +106,12 @@ def available_memory() -> int | None:
     return None
 
 
-def check_memory(scene: Scene, segment: int | None = None) -> None:
+def check_memory(scene: Scene, segment: int | None = None, recorded_steps: int = 0) -> None:
     """MemoryRefused (a SceneError) when the sweep would need more memory than is available
     (before any work: a run that the kernel kills half-way writes nothing). What the steps
     need is compared with the memory still free: the fixed part of the estimate (libraries,
     the recording) is held already or bounded, and no number of steps could remove it."""
-    need = memory_needed(scene, segment)
+    need = memory_needed(scene, segment, recorded_steps)
     avail = available_memory()
     if avail is not None and need - FIXED_BYTES > avail:
         first = scene.drivers[0] if scene.drivers else None
@@ -120,15 +124,14 @@ def check_memory(scene: Scene, segment: int | None = None) -> None:
                          + ", or split the sweep into several scenes")
 
 
-def preflight(scene: Scene):
+def preflight(scene: Scene, segment: int | None = None, recorded_steps: int = 0):
     """Check what can be checked before solving; return (model, mobility).
 
-    The scene's memory need, its degrees of freedom against its drivers, and that the start
-    assembles at the first driver value (SceneError otherwise): what ``check`` reports. The
-    memory is that of ``run``, which streams a long sweep in segments (:mod:`.segments`)."""
-    from .segments import steps_per_segment
-
-    check_memory(scene, steps_per_segment(scene))
+    The scene's memory need (of a run in segments of ``segment`` steps keeping
+    ``recorded_steps`` rows for its recording: :func:`memory_needed`), its degrees of freedom
+    against its drivers, and that the start assembles at the first driver value (SceneError
+    otherwise): what ``check`` reports."""
+    check_memory(scene, segment, recorded_steps)
     model = build_model(scene)
     mob = _mobility(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
@@ -196,8 +199,9 @@ class Kinematics:
     velocity: np.ndarray | None
     acceleration: np.ndarray | None
     link_rates: tuple
-    #: (S, n_torsion_springs) the whole turns each torsion spring's angle drops (a broadcast
-    #: view), or None without torsion springs (:func:`linkpipe.forces.springs.torsion_offset`)
+    #: (S, n_torsion_springs) the multiple of 2 pi (rad) each torsion spring's angle drops (a
+    #: broadcast view), or None without torsion springs
+    #: (:func:`linkpipe.forces.springs.torsion_offset`)
     torsion_offset: np.ndarray | None = None
     #: what the force stage may keep between calls on this stage 1 without the Lagrange side
     #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
@@ -548,5 +552,4 @@ def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]
 
 def message(status: np.ndarray) -> str:
     """One line: how many steps are ok, and what the others are."""
-    found = np.bincount(np.asarray(status, dtype=np.intp), minlength=len(FLAG_MEANINGS))
-    return Totals(len(status), tuple(int(n) for n in found), np.nan, np.nan, 0, 0).message
+    return status_message(code_counts(status))

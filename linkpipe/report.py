@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def summary(result, written=(), seconds_total=None, writer_seconds=None,
-            recording_kept=None) -> str:
+def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run``."""
     sc, totals = result.scene, result.totals
     lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
@@ -64,8 +63,7 @@ def summary(result, written=(), seconds_total=None, writer_seconds=None,
         lines.append(f"  recording: {recording_kept}; the .h5 keeps every step")
     if written:
         lines.append("  wrote " + ", ".join(written))
-    stage_seconds = {**result.seconds, **(writer_seconds or {})}
-    secs = ", ".join(f"{k} {v:.3f}" for k, v in stage_seconds.items())
+    secs = ", ".join(f"{k} {v:.3f}" for k, v in result.seconds.items())
     if seconds_total is not None:
         secs += f"; total {seconds_total:.3f}"
     lines.append(f"  seconds: {secs}")

@@ -12,8 +12,17 @@ import numpy as np
 
 from .model import Mobility, Model
 from .scene import Scene
-from .status import FLAG_MEANINGS, OK, counts
+from .status import FLAG_MEANINGS, OK, code_counts, counts, named_counts
+from .status import message as status_message
 
+
+
+def stride_of(n_steps: int, max_steps: int | None) -> int:
+    """The uniform stride of steps that keeps at most ``max_steps`` of ``n_steps`` (1: every
+    step; ``max_steps`` 0/None: no cap): a recording's rows of a long sweep."""
+    if not max_steps or n_steps <= max_steps:
+        return 1
+    return -(-n_steps // max_steps)
 
 
 @dataclass(frozen=True)
@@ -44,8 +53,8 @@ class Motion:
     kinematic status; ``influence`` (S, n_q, n_drivers) the influence coefficients dq/ds, NaN
     where the step is not ok;
     ``link_angular_acceleration`` (S, n_links) rad/s^2 or None; ``link_angle`` (S, n_links)
-    unwrapped along the whole sweep and ``torsion_offset`` (S, n_torsion_springs) the whole
-    turns each torsion spring's angle drops (:func:`linkpipe.forces.springs.torsion_offset`;
+    unwrapped along the whole sweep and ``torsion_offset`` (S, n_torsion_springs) the multiple
+    of 2 pi (rad) each torsion spring's angle drops (:func:`linkpipe.forces.springs.torsion_offset`;
     a view of one row broadcast is fine), or None where the scene has no torsion springs.
     """
 
@@ -124,7 +133,7 @@ class Totals:
 
     @classmethod
     def of(cls, result: "Result") -> "Totals":
-        found = np.bincount(np.asarray(result.status, dtype=np.intp), minlength=len(FLAG_MEANINGS))
+        found = code_counts(result.status)
         solved = np.isfinite(result.position).all(axis=(1, 2))
         lo = hi = None
         if result.forces and "input_force" in result.forces:
@@ -134,7 +143,7 @@ class Totals:
                 hi = np.where(np.isfinite(f), f, -np.inf).max(axis=0, initial=-np.inf)
             lo, hi = np.where(np.isinf(lo), np.nan, lo), np.where(np.isinf(hi), np.nan, hi)
         vres, ares = result.velocity_residual, result.acceleration_residual
-        return cls(result.n_steps, tuple(int(n) for n in found), _nanmax(result.residual),
+        return cls(result.n_steps, found, _nanmax(result.residual),
                    _nanmax(result.residual[solved]), int(result.iterations.sum()),
                    int(result.iterations.max()) if result.n_steps else 0,
                    None if vres is None else _nanmax(vres), None if ares is None else _nanmax(ares),
@@ -167,15 +176,12 @@ class Totals:
 
     def counts(self) -> dict[str, int]:
         """``{name: number of steps}`` for the codes that occur, in code order."""
-        return {FLAG_MEANINGS[c]: n for c, n in enumerate(self.status_counts) if n}
+        return named_counts(self.status_counts)
 
     @property
     def message(self) -> str:
         """One line: how many steps are ok, and what the others are."""
-        if self.n_ok == self.n_steps:
-            return f"all {self.n_steps} steps ok"
-        return f"{self.n_ok}/{self.n_steps} steps ok; " + ", ".join(
-            f"{n} {k}" for k, n in self.counts().items() if k != "ok")
+        return status_message(self.status_counts)
 
 
 @dataclass(frozen=True)

@@ -70,19 +70,11 @@ def steps_per_segment(scene: Scene) -> int:
     return min(scene.n_steps, segment_steps(scene))
 
 
-def stride_of(n_steps: int, max_steps: int | None) -> int:
-    """The uniform stride of steps that keeps at most ``max_steps`` of ``n_steps`` (1: every
-    step; ``max_steps`` 0/None: no cap)."""
-    if not max_steps or n_steps <= max_steps:
-        return 1
-    return -(-n_steps // max_steps)
-
-
 def segments(scene: Scene, segment: int, seconds: dict, progress=None):
     """Yield the Result of each segment of ``segment`` steps of ``scene``'s sweep, in step
     order (``step_numbers`` set), or :data:`RESTART` where the sweep goes to the general path
     after some segments (the segments then come again from the first step)."""
-    tell = progress if callable(progress) else (lambda stage, done=0: None)
+    tell = progress if callable(progress) else (lambda stage, done=None: None)
     stages = Stages.of(scene)
     t0 = _time.perf_counter()
     model = build_model(scene)
@@ -114,20 +106,25 @@ def segments(scene: Scene, segment: int, seconds: dict, progress=None):
 
 
 class Sampled:
-    """The rows of a streamed sweep its recording keeps (every ``stride``-th step) and the whole
-    sweep's :class:`Totals` and per-sweep flags (the ``*_unique`` variables: the minimum over
-    the segments, as the force stage takes it over its chunks)."""
+    """The rows of a streamed sweep its recording keeps (every ``stride``-th step: ``plan(first
+    segment's Result, n_steps) -> (stride, why)`` decides on the first segment) and the whole
+    sweep's :class:`Totals` and per-sweep flags (the ``*_unique`` variables, which a segment
+    without an ok step does not give: the minimum over the segments that give them, as the
+    force stage takes them over its chunks)."""
 
-    def __init__(self, n_steps: int, stride: int, why: str = ""):
-        self.n_steps, self.stride, self.why = n_steps, stride, why
+    def __init__(self, n_steps: int, plan):
+        self.n_steps, self.plan = n_steps, plan
         self.restart()
 
     def restart(self) -> None:
         self.parts: list[Result] = []
         self.totals: Totals | None = None
         self.flags: dict = {}
+        self.stride, self.why = None, ""
 
     def add(self, part: Result) -> None:
+        if self.stride is None:
+            self.stride, self.why = self.plan(part, self.n_steps)
         lo = int(part.step_numbers[0])
         self.parts.append(part.strided(np.arange((-lo) % self.stride, part.n_steps, self.stride)))
         totals = Totals.of(part)
@@ -137,66 +134,76 @@ class Sampled:
         combine_flags(self.flags, part.forces or {})
 
     def result(self, seconds: dict) -> Result:
-        """The kept rows as one Result, with the whole sweep's totals and flags."""
+        """The kept rows as one Result, with the whole sweep's totals and flags. Its rows'
+        own figures (``n_steps``, ``n_ok``, ``status_counts()``) are the kept rows'; the
+        sweep's are ``totals`` (and ``message``)."""
         first = self.parts[0]
         rows = {name: np.concatenate([getattr(p, name) for p in self.parts])
                 for name in Result.PER_STEP if getattr(first, name) is not None}
         forces = None
         if first.forces:
-            forces = {name: (dims, np.concatenate([p.forces[name][1] for p in self.parts])
-                             if dims[:1] == ("step",) else self.flags[name][1], unit)
-                      for name, (dims, _, unit) in first.forces.items()}
+            forces = {name: (dims, np.concatenate([p.forces[name][1] for p in self.parts]), unit)
+                      for name, (dims, _, unit) in first.forces.items() if dims[:1] == ("step",)}
+            forces.update(self.flags)
         return replace(first, **rows, forces=forces, seconds=seconds, message=self.totals.message,
                        step_numbers=np.concatenate([p.step_numbers for p in self.parts]),
                        sweep_totals=self.totals,
                        sampled=(self.stride, self.why) if self.stride > 1 else None)
 
 
-def stream(scene: Scene, sinks=(), max_steps: int | None = None, progress=None,
+def stream(scene: Scene, sinks=(), recording=None, progress=None,
            threads: int | None = DEFAULT_THREADS, segment: int | None = None,
-           between=None) -> Result:
+           between=None, check: bool = True) -> Result:
     """Solve ``scene`` in segments (:func:`steps_per_segment`, or ``segment`` steps), handing
     each segment's Result to every sink (``sink.add(part)``; ``sink.restart()`` at
     :data:`RESTART`; ``sink.finish(result)`` at the end, ``sink.stage`` names its seconds);
-    return the rows a recording keeps (at most ``max_steps``, a uniform stride; None: one row,
-    no recording) with the whole sweep's totals and seconds (:class:`Sampled`).
+    return the rows a recording keeps with the whole sweep's totals and seconds
+    (:class:`Sampled`). ``recording``: ``plan(first segment, n_steps) -> (stride, why)``, the
+    recording's stride of steps (``linkpipe.stores.rrd.plan`` with the CLI's caps), or None
+    for no recording (one row kept).
 
     A sweep solved whole (one segment, :func:`why_whole`) is :func:`linkpipe.solve`'s Result:
     every row, its measurements compared. ``between``: called after each segment (the CLI
-    stops there on a signal whose exception a finaliser swallowed)."""
+    stops there on a signal whose exception a finaliser swallowed). ``check``: the memory
+    check first (the CLI makes it itself, before its progress bar)."""
     segment = segment or steps_per_segment(scene)
     S = scene.n_steps
     seconds: dict[str, float] = {}
+    tell = progress if callable(progress) else (lambda stage, done=None: None)
+    stages = {sink.stage for sink in sinks}
     if segment >= S:
         result = solve(scene, progress=progress, threads=threads)
         seconds = dict(result.seconds)
-        _hand(sinks, "add", result, seconds)
-        _hand(sinks, "finish", result, seconds)
+        _hand(sinks, "add", result, seconds, tell)
+        _hand(sinks, "finish", result, seconds, tell)
         return replace(result, seconds=seconds)
-    check_memory(scene, segment)
-    stride = stride_of(S, max_steps) if max_steps is not None else S
-    kept = Sampled(S, stride, f"--rrd-max-steps {max_steps:,}" if max_steps else "")
+    if check:
+        check_memory(scene, segment, S if recording is not None else 0)
+    kept = Sampled(S, recording if recording is not None else (lambda part, n: (n, "")))
     pools = (contextlib.nullcontext() if threads is None
              else threadpool_limits(limits=threads, user_api="blas"))
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"), pools:
-        for part in segments(scene, segment, seconds, progress):
+        for part in segments(scene, segment, seconds, tell):
             if part is RESTART:
                 kept.restart()
                 for sink in sinks:
                     sink.restart()
+                tell("the general path, from the first step", 0)
                 continue
             kept.add(part)
-            _hand(sinks, "add", part, seconds)
+            _hand(sinks, "add", part, seconds, tell)
             if between is not None:
                 between()
-    result = kept.result(seconds)
-    _hand(sinks, "finish", result, seconds)
-    return result
+    # the file's seconds_<stage> are the solve's (as a whole sweep's file), the writers' after
+    result = kept.result({k: v for k, v in seconds.items() if k not in stages})
+    _hand(sinks, "finish", result, seconds, tell)
+    return replace(result, seconds=seconds)
 
 
-def _hand(sinks, method: str, result: Result, seconds: dict) -> None:
+def _hand(sinks, method: str, result: Result, seconds: dict, tell) -> None:
     """Call ``method`` of every sink with ``result``, timing it under the sink's stage name."""
     for sink in sinks:
+        tell(sink.stage)
         t0 = _time.perf_counter()
         getattr(sink, method)(result)
         seconds[sink.stage] = seconds.get(sink.stage, 0.0) + _time.perf_counter() - t0

@@ -46,8 +46,27 @@ def worst(*statuses: np.ndarray) -> np.ndarray:
 
 def counts(status: np.ndarray) -> dict[str, int]:
     """Return ``{name: number of steps}`` for the codes that occur, in code order."""
-    found = np.bincount(np.asarray(status, dtype=np.intp), minlength=len(Status))
+    return named_counts(code_counts(status))
+
+
+def code_counts(status: np.ndarray) -> tuple[int, ...]:
+    """The number of steps of each code (n_codes,), in code order."""
+    return tuple(int(n) for n in np.bincount(np.asarray(status, dtype=np.intp),
+                                             minlength=len(Status)))
+
+
+def named_counts(found) -> dict[str, int]:
+    """``{name: number of steps}`` of the codes that occur, from :func:`code_counts`."""
     return {FLAG_MEANINGS[c]: int(n) for c, n in enumerate(found) if n}
+
+
+def message(found) -> str:
+    """One line from :func:`code_counts`: how many steps are ok, and what the others are."""
+    n_steps, n_ok = sum(found), found[OK]
+    if n_ok == n_steps:
+        return f"all {n_steps} steps ok"
+    return f"{n_ok}/{n_steps} steps ok; " + ", ".join(
+        f"{n} {k}" for k, n in named_counts(found).items() if k != "ok")
 
 
 def assign(stage_statuses, residual: np.ndarray, tol_abs: float, stored,

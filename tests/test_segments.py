@@ -19,7 +19,7 @@ from hypothesis import given, settings, strategies as st
 import linkpipe
 from linkpipe.kinematics.rates import AngleCarry, unwrap_runs
 from linkpipe.pipeline import memory_needed
-from linkpipe.result import Totals
+from linkpipe.result import Totals, stride_of
 from linkpipe.segments import RESTART, segment_steps, segments, steps_per_segment, stream
 from linkpipe.stores import hdf5
 
@@ -71,7 +71,9 @@ def _files_equal(a: pathlib.Path, b: pathlib.Path, exact: bool = True) -> None:
 
 def _streamed(scene, path, segment, max_steps=None):
     with hdf5.SweepWriter(path, scene.n_steps) as writer:
-        return stream(scene, [writer], max_steps=max_steps, segment=segment)
+        plan = None if max_steps is None else (
+            lambda part, n: (stride_of(n, max_steps), f"--rrd-max-steps {max_steps:,}"))
+        return stream(scene, [writer], recording=plan, segment=segment)
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
@@ -226,12 +228,12 @@ def test_unwrap_in_segments_equals_numpy_unwrap_of_the_whole(seed, S, L, gap, cu
 
 
 def test_segment_size_and_memory_estimate():
-    """Segments are powers of two from 8,192 to 131,072 steps; the memory estimate of a
+    """Segments are powers of two from 16,384 to 131,072 steps; the memory estimate of a
     segmented run grows with the sweep only by what stays whole (driver motion, Newton's
     positions), a whole run's by every stored array."""
     small, large = _crank_turns(200_001, 1), _crank_turns(2_000_001, 1)
     seg = steps_per_segment(large)
-    assert seg & (seg - 1) == 0 and 2**13 <= seg <= 2**17
+    assert seg & (seg - 1) == 0 and 2**14 <= seg <= 2**17
     per_step_whole = (memory_needed(large) - memory_needed(small)) / 1_800_000
     per_step_segmented = (memory_needed(large, seg) - memory_needed(small, seg)) / 1_800_000
     assert per_step_segmented < 0.5 * per_step_whole
@@ -271,3 +273,103 @@ def test_run_streams_a_long_sweep_to_the_whole_sweeps_file_and_a_strided_recordi
     df = store.reader(index="step", contents="/solver/residual").to_pandas()
     steps = df["step"].to_numpy()[df["/solver/residual:Scalars:scalars"].notna().to_numpy()]
     np.testing.assert_array_equal(np.sort(steps.astype(np.int64)), np.arange(0, 100_001, 51))
+
+
+DOUBLE_PARALLELOGRAM_LOGGED = """
+[scene]
+name = "dpl"
+units = { length = "m", mass = "kg", time = "s", force = "N" }
+
+[points]
+O2 = { x = 0.0, y = 0.0, fixed = true }
+O4 = { x = 2.0, y = 0.0, fixed = true }
+O6 = { x = 1.0, y = 0.6, fixed = true }
+A  = { x = 1.0, y = 0.0 }
+B  = { x = 3.0, y = 0.0 }
+E  = { x = 2.0, y = 0.6 }
+
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = { "O2-A" = 1.0 }
+
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = { "O4-B" = 1.0 }
+
+[[links]]
+name = "fifth"
+points = ["O6", "E"]
+lengths = { "O6-E" = 1.0 }
+
+[[links]]
+name = "coupler"
+points = ["A", "B", "E"]
+lengths = { "A-B" = 2.0 }
+local = { E = [1.0, 0.6] }
+
+[time]
+log = "rig"
+
+[[logs]]
+name = "rig"
+file = "dp.csv"
+time = "t"
+
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+log = "rig.ang"
+
+[analysis]
+effects = ["gravity", "inertia"]
+
+[gravity]
+g = [0.0, -9.81]
+
+[[masses]]
+link = "coupler"
+mass = 2.0
+center = [1.0, 0.3]
+inertia = 0.5
+"""
+
+
+def test_flags_that_only_later_segments_give(tmp_path):
+    """A redundant double parallelogram driven by a log whose first 40 samples are missing:
+    segments of 16 steps without an ok step give no ``*_unique`` flags; the later ones do.
+    The file holds them as the whole sweep's (the minimum over the segments that give them),
+    and the kept rows' forces list them for the summary."""
+    t = np.arange(100) * 0.01
+    angle = np.where(np.arange(100) < 40, np.nan, 30.0 * np.sin(2 * np.pi * t))
+    (tmp_path / "dp.csv").write_text("t,ang\n" + "".join(
+        f"{ti:.6f},{'' if np.isnan(a) else repr(float(a))}\n" for ti, a in zip(t, angle)))
+    (tmp_path / "dpl.toml").write_text(DOUBLE_PARALLELOGRAM_LOGGED)
+    scene = linkpipe.load_scene(tmp_path / "dpl.toml")
+    whole = linkpipe.solve(scene)
+    assert whole.status_counts() == {"ok": 60, "no_input": 40}
+    assert "link_force_unique" in whole.forces and whole.forces_not_unique()
+    parts = list(segments(scene, 16, {}))
+    assert "link_force_unique" not in parts[0].forces and "link_force_unique" in parts[-1].forces
+    hdf5.write(whole, tmp_path / "whole.h5")
+    kept = _streamed(scene, tmp_path / "segments.h5", segment=16, max_steps=10)
+    _files_equal(tmp_path / "whole.h5", tmp_path / "segments.h5", exact=False)
+    assert kept.forces_not_unique() == whole.forces_not_unique()
+
+
+def test_the_writer_takes_consecutive_steps_only_and_every_one(tmp_path):
+    """A part that skips steps, or a finish before the last step, is refused and no file is
+    published (a half-written file would read as ok steps of zeros)."""
+    r = linkpipe.solve(str(ROOT / "configs" / "fourbar_crank_rocker.toml"))
+    first = dataclasses.replace(r.strided(np.arange(100)), sweep_totals=None)
+    gap = dataclasses.replace(r.strided(np.arange(150, 160)), sweep_totals=None)
+    with pytest.raises(ValueError, match="next consecutive steps from 100"):
+        with hdf5.SweepWriter(tmp_path / "x.h5", r.n_steps) as writer:
+            writer.add(first)
+            writer.add(gap)
+    with pytest.raises(ValueError, match="steps 0 .. 99 of 361"):
+        with hdf5.SweepWriter(tmp_path / "x.h5", r.n_steps) as writer:
+            writer.add(first)
+            writer.finish(r)
+    assert list(tmp_path.iterdir()) == []

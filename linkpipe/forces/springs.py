@@ -158,9 +158,10 @@ def torsion_raw_angle(model: Model, link_angle: np.ndarray) -> np.ndarray:
 
 
 def torsion_offset(model: Model, link_angle: np.ndarray) -> np.ndarray:
-    """The whole turns (..., n_torsion_springs) taken off each torsion spring's angle: at the
-    first step where it is finite, the angle is brought within half a turn of the free angle
-    (NaN where no step is finite: the next segment of a sweep in segments decides)."""
+    """The multiple of 2 pi (radians, (..., n_torsion_springs)) taken off each torsion
+    spring's angle: at the first step where it is finite, the angle is brought within half a
+    turn of the free angle (NaN where no step is finite: the next segment of a sweep in
+    segments decides)."""
     raw = torsion_raw_angle(model, link_angle)
     free = np.deg2rad([t.free_angle for t in model.scene.torsion_springs])
     fin = np.isfinite(raw)

@@ -143,15 +143,13 @@ def _fsync(path: pathlib.Path) -> None:
             os.fsync(fd)
         except OSError as exc:
             failed.append(exc)
+        finally:
+            os.close(fd)  # here: an interrupted wait does not leave it open
 
     worker = threading.Thread(target=sync, name="linkpipe-fsync", daemon=True)
     worker.start()
-    try:
-        while worker.is_alive():
-            worker.join(0.05)
-    finally:
-        if not worker.is_alive():
-            os.close(fd)  # (an interrupted wait leaves it to the process's exit)
+    while worker.is_alive():
+        worker.join(0.05)
     if failed:
         raise failed[0]
 

@@ -7,6 +7,7 @@ are HDF5 dimension scales and every data variable has them attached, so h5py, xa
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from typing import Any
@@ -47,25 +48,33 @@ def _clean_failures(method):
 class SweepWriter:
     """Write one run's file from its rows as they come, step-first variables into datasets of
     the whole sweep's length, each part's rows written in place (a sweep solved in segments:
-    :mod:`linkpipe.segments`; a whole Result is one part). The datasets are contiguous, not
-    chunked: HDF5 2.0 (through h5py 3.16) was measured to crash the process (a segmentation
-    fault when the file is closed) after a write into a chunked dataset fails on a full disk,
-    while a contiguous one fails cleanly (``tests/faults/test_writes.py``). A context manager: the file is written to a temporary name and
-    renamed into place only when :meth:`finish` was called and nothing failed.
+    :mod:`linkpipe.segments`; a whole Result is one part). A context manager: the file is
+    written to a temporary name and renamed into place only when :meth:`finish` was called
+    with every step written and nothing failed.
 
-    ``add(part)``: a Result of some of the sweep's steps (``part.step_numbers``, or all of them):
-    the first part creates the file's layout; each writes its rows, and the variables without a
-    step axis (the ``*_unique`` flags) are the minimum over the parts. ``restart()``: the parts
-    come again from the first step. ``finish(result)``: the flags and the root attributes
-    (``result.attributes()``: the whole sweep's totals)."""
+    ``add(part)``: a Result of the sweep's next consecutive steps (``part.step_numbers``, or all
+    of them): the first part creates the file's layout; each writes its rows, and the variables
+    without a step axis (the ``*_unique`` flags, which a part without an ok step does not
+    give) are the minimum over the parts that give them, as the force stage takes them over
+    its chunks. ``restart()``: the parts come again from the first step. ``finish(result)``:
+    the flags and the root attributes (``result.attributes()``: the whole sweep's totals).
+
+    A full disk must fail cleanly, one part written or many: the datasets are contiguous (a
+    failed write into a chunked one was measured to crash the process when the file closes:
+    HDF5 2.0 through h5py 3.16) and HDF5's sieve buffer is off (with it, a write that failed
+    between two parts left dirty data that crashed the close likewise;
+    ``tests/faults/test_writes.py`` streams several parts onto a full disk)."""
 
     stage = "hdf5"
 
     def __init__(self, path: str | os.PathLike, n_steps: int):
         self.path, self.n_steps = path, n_steps
         self._atomic = self._file = None
-        self._flags: dict = {}
+        self._flags: dict = {}  # name -> Variable of a per-sweep flag (the minimum so far)
         self._datasets: dict = {}
+        self._scales: dict = {}
+        self._next = 0  # the first step the next part must hold
+        self._finished = False
 
     def __enter__(self) -> "SweepWriter":
         return self
@@ -73,7 +82,7 @@ class SweepWriter:
     def __exit__(self, *exc) -> None:
         raised = None
         self._datasets.clear()  # no dataset outlives its file (h5py objects of a file that
-        #                         failed to close were seen to crash the garbage collector)
+        self._scales.clear()    # failed to close were seen to crash the garbage collector)
         try:
             if self._file is not None:
                 self._file.close()  # h5py flushes here: a full disk may show now
@@ -105,50 +114,67 @@ class SweepWriter:
             v.data.nbytes for v in variables if v.dims[:1] != ("step",))
         self._atomic = atomic_path(self.path, n_bytes)
         tmp = self._atomic.__enter__()
-        self._finished = False
-        f = self._file = h5py.File(tmp, "w", track_order=True)
-        scales = {}
+        f = self._file = _new_file(tmp)
         for c in part.coordinates():
             if c.name == "step":
                 ds = f.create_dataset("step", shape=(self.n_steps,), dtype=np.int64)
                 ds.make_scale("step")
                 ds.attrs["units"] = c.units
-                scales["step"] = self._datasets["step"] = ds
+                self._scales["step"] = self._datasets["step"] = ds
             else:
-                scales[c.name] = _write_coordinate(f, c)
+                self._scales[c.name] = _write_coordinate(f, c)
         for var in variables:
             shape = ((self.n_steps,) + var.data.shape[1:] if var.dims[:1] == ("step",)
                      else None)
-            self._datasets[var.name] = _write_variable(f, var, scales, shape)
+            self._datasets[var.name] = _write_variable(f, var, self._scales, shape)
 
     @_clean_failures
     def add(self, part) -> None:
-        if self._file is None:
-            self._open(part)
         steps = (part.step_numbers if part.step_numbers is not None
                  else np.arange(part.n_steps))
-        rows = slice(int(steps[0]), int(steps[0]) + len(steps)) if len(steps) else slice(0, 0)
-        if len(steps) and rows.stop - rows.start != len(steps):
-            raise ValueError("a part's steps must be consecutive")
+        if not len(steps) or steps[0] != self._next or steps[-1] - steps[0] + 1 != len(steps):
+            raise ValueError(f"a part must hold the next consecutive steps from {self._next}")
+        if self._file is None:
+            self._open(part)
+        rows = slice(int(steps[0]), int(steps[-1]) + 1)
         self._datasets["step"][rows] = steps
         for var in part.variables():
             if var.dims[:1] == ("step",):
                 self._datasets[var.name][rows] = _array(var.data)
             elif var.name in self._flags:
-                np.minimum(self._flags[var.name], var.data, out=self._flags[var.name])
+                np.minimum(self._flags[var.name].data, var.data, out=self._flags[var.name].data)
             else:
-                self._flags[var.name] = np.array(var.data)
+                self._flags[var.name] = dataclasses.replace(var, data=np.array(var.data))
+        self._next = rows.stop
 
     def restart(self) -> None:
-        self._flags = {}
+        self._flags, self._next = {}, 0
 
     @_clean_failures
     def finish(self, result) -> None:
-        for name, data in self._flags.items():
-            self._datasets[name][...] = data
+        if self._next != self.n_steps:
+            raise ValueError(f"the file holds steps 0 .. {self._next - 1} of {self.n_steps}")
+        for name, var in self._flags.items():
+            if name in self._datasets:
+                self._datasets[name][...] = var.data
+            else:  # a flag the first part did not give (no ok step in it)
+                self._datasets[name] = _write_variable(self._file, var, self._scales)
         for key, value in result.attributes().items():
             _set_attr(self._file.attrs, key, value)
         self._finished = True
+
+
+def _new_file(path) -> h5py.File:
+    """A new HDF5 file at ``path`` as ``h5py.File(path, "w", track_order=True)`` makes it, with
+    HDF5's sieve buffer off (:class:`SweepWriter` says why)."""
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_sieve_buf_size(0)
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    order = h5py.h5p.CRT_ORDER_TRACKED | h5py.h5p.CRT_ORDER_INDEXED
+    fcpl.set_link_creation_order(order)
+    fcpl.set_attr_creation_order(order)
+    return h5py.File(h5py.h5f.create(os.fsencode(path), h5py.h5f.ACC_TRUNC, fapl=fapl,
+                                     fcpl=fcpl))
 
 
 def write_layout(path: str | os.PathLike, attributes: dict, coordinates, variables,

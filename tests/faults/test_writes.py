@@ -63,6 +63,37 @@ def test_the_disk_filling_during_the_write_leaves_no_partial_file(small_disk, mo
     assert list(small_disk.iterdir()) == []
 
 
+STREAM_ONTO_FULL_DISK = """
+import sys, linkpipe
+from linkpipe import stores
+from linkpipe.segments import stream
+from linkpipe.stores import hdf5
+stores.check_space = lambda path, n: None  # the disk fills after the check
+scene = linkpipe.parse_scene(open(sys.argv[1]).read(), "big.toml")
+try:
+    with hdf5.SweepWriter(sys.argv[2], scene.n_steps) as writer:
+        stream(scene, [writer], segment=1024)  # parts of ~0.4 MB: several fit the 3 MiB
+except stores.OutputError as exc:
+    print("OutputError:", exc)
+"""
+
+
+def test_a_disk_filling_between_the_segments_of_a_streamed_write_fails_cleanly(small_disk,
+                                                                                  tmp_path):
+    """A long sweep streamed in segments onto a disk that fills part-way (several parts
+    written, one fails): one OutputError naming the file, exit 0 of the process that caught it
+    (HDF5 once crashed it when the file closed: exit 139), no file left on the disk."""
+    scene = tmp_path / "big.toml"
+    scene.write_text(CRANK_ROCKER.replace("steps = 361", "steps = 200001"))
+    done = subprocess.run([sys.executable, "-c", STREAM_ONTO_FULL_DISK, str(scene),
+                           str(small_disk / "big.h5")], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "big.h5: not written: the disk is full" in done.stdout
+    assert "Traceback" not in done.stderr and "Segmentation" not in done.stderr, done.stderr
+    assert list(small_disk.iterdir()) == []
+
+
 def test_enospc_from_the_library_becomes_an_output_error(tmp_path, monkeypatch):
     """Without a small disk: the writer raising ENOSPC mid-file is caught the same way."""
     result = linkpipe.solve(str(ROOT / "configs" / "shear_press.toml"))

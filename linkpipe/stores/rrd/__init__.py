@@ -23,7 +23,7 @@ import numpy as np
 import rerun as rr
 
 from .. import atomic_path
-from ...segments import stride_of
+from ...result import stride_of
 from . import forces, mechanism, series
 from .columns import driver_timeline, sender
 from .forces import FORCE_FRACTION, KINDS, force_arrows, force_legend
@@ -69,19 +69,24 @@ def recorded_bytes(result) -> int:
     return len(recorded)
 
 
-def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES):
+def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES,
+         n_steps: int | None = None):
     """Return (stride, why): the uniform stride of steps a recording keeps and, when it is
     more than 1, why ("--rrd-max-steps N" or the size cap). The size of a long sweep's
-    recording is measured on two evenly spaced samples of its steps (:data:`SAMPLE_STEPS`):
-    their difference gives the bytes per step, the rest is fixed; the stride keeps the whole
-    recording within ``max_bytes`` (0/None: no size cap)."""
-    n = result.n_steps
+    recording is measured on two evenly spaced samples of ``result``'s rows
+    (:data:`SAMPLE_STEPS`): their difference gives the bytes per step, the rest is fixed; the
+    stride keeps the whole recording within ``max_bytes`` (0/None: no size cap). ``n_steps``:
+    the sweep's steps where ``result`` holds only some (a sweep streamed in segments plans on
+    its first segment: :mod:`linkpipe.segments`); default ``result.n_steps``."""
+    n = result.n_steps if n_steps is None else n_steps
     stride, why = stride_of(n, max_steps), f"--rrd-max-steps {max_steps:,}" if max_steps else ""
     if max_bytes and n * MAX_BYTES_PER_STEP > max_bytes:
-        (k0, b0), (k1, b1) = [(len(rows), recorded_bytes(result.strided(rows))) for rows in
-                              (np.unique(np.linspace(0, n - 1, k).round().astype(int))
-                               for k in SAMPLE_STEPS)]
-        per_step = max(b1 - b0, 0) / (k1 - k0)
+        m = result.n_steps
+        samples = sorted({min(k, m) for k in SAMPLE_STEPS})
+        measured = [(len(rows), recorded_bytes(result.strided(rows))) for rows in
+                    (np.unique(np.linspace(0, m - 1, k).round().astype(int)) for k in samples)]
+        (k0, b0), (k1, b1) = measured[0], measured[-1]
+        per_step = max(b1 - b0, 0) / (k1 - k0) if k1 > k0 else b1 / max(k1, 1)
         fixed = max(b0 - per_step * k0, 0.0) + FILE_OVERHEAD
         # 10 % kept free: denser steps compress a little worse than the samples (measured:
         # a recording planned for 1 MB from the samples came out at 1.06 MB)
@@ -106,14 +111,16 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     """
     if path is None and not spawn and not connect:
         return None
-    # a sweep solved in segments comes with its rows at a stride already (result.sampled):
-    # the size cap may widen it
-    base, base_why = result.sampled or (1, "")
-    stride, why = plan(result, None if result.sampled else max_steps, max_bytes)
+    # a sweep solved in segments comes with its rows at the stride :func:`plan` set on its
+    # first segment (result.sampled)
+    if result.sampled:
+        (stride, why), base = (1, ""), result.sampled[0]
+        why = result.sampled[1]
+    else:
+        (stride, why), base = plan(result, max_steps, max_bytes), 1
     info = kept = None
     if stride * base > 1:
         rows = np.arange(0, result.n_steps, stride)
-        why = " and ".join(w for w in (base_why, why if stride > 1 else "") if w)
         kept = (f"every {_ordinal(stride * base)} step ({len(rows):,} of "
                 f"{result.totals.n_steps:,}; {why})")
         info = f"This recording keeps {kept}; the .h5 keeps every step."
