@@ -206,15 +206,18 @@ with dask_client(workers={workers}) as client:  # the cluster --workers starts
     address = client.scheduler.address
     # warm: each worker imports linkpipe and solves the base scene's stage 1 once
     run_study(load_study({warm!r}), {out!r} + "_warm", "dask", scheduler=address)
-    t0 = time.perf_counter()
-    run_study(study, {out!r}, "dask", scheduler=address)
-    print(json.dumps(dict(seconds=time.perf_counter() - t0)))
+    seconds = []
+    for rep in range(3):  # best of 3 on the running cluster (a fresh output file each)
+        t0 = time.perf_counter()
+        run_study(study, {out!r} + f"_{{rep}}", "dask", scheduler=address)
+        seconds.append(time.perf_counter() - t0)
+    print(json.dumps(dict(seconds=min(seconds))))
 """
 
 
 def warm_dask(folder: pathlib.Path, workers: int) -> float:
     """Seconds of the 100,000-variant study on a running LocalCluster of ``workers`` (started and
-    warmed with a small study first: what a user with a cluster waits for)."""
+    warmed with a small study first: what a user with a cluster waits for), best of 3 runs."""
     code = WARM_DASK.format(root=str(ROOT), path=str(folder / "v100k.toml"),
                             warm=str(folder / "v10k.toml"), workers=workers,
                             out=str(folder / f"out_warm_{workers}"))
@@ -287,7 +290,8 @@ def main(argv=None) -> None:
               f"{100 * t[1] / (2 * t[2]):.0f} %")
         w = {n: min(warm_dask(folder, n) for _ in range(2)) for n in (1, 2)}
         eff = w[1] / (2 * w[2])
-        print(f"100,000 variants on a running Dask cluster (started and warmed first; best of 2): "
+        print(f"100,000 variants on a running Dask cluster (started and warmed first; best of 3 "
+              f"runs on each of 2 clusters): "
               f"1 worker {w[1]:.2f} s, 2 workers {w[2]:.2f} s; scaling efficiency {100 * eff:.0f} % "
               f"(target >= 80 %: {verdict(eff >= 0.8)}); the machine's own two-process "
               f"efficiency now: {100 * machine_ceiling(folder):.0f} %")
