@@ -33,6 +33,11 @@ from . import reductions, vector
 #: 2-worker cluster: client CPU 0.79 s with batches of 1000 variants, 0.39 s with 4000),
 #: which shares the cores with the workers; a batch's force arrays stay ~100 MB
 DEFAULT_BATCH, BATCH_ROWS = 4000, 100_000
+#: the default number of batches is a multiple of this (where there are that many variants):
+#: 2 or 4 workers then get the same number of batches, none waits for the others' last one
+#: (100,000 variants: 28 batches of 3,572, not 25 of 4,000, whose 25th ran alone on one of two
+#: workers: 1/13 of the run)
+BATCH_MULTIPLE = 4
 #: the names every study file stores: a metric may not take one
 RESERVED = ("variant", "parameter", "driver", "batch", "parameter_value", "peak_input_force",
             "rms_input_force", "input_force_range", "min_transmission_angle", "worst_status",
@@ -134,14 +139,16 @@ def load_study(path, catalog_of=None) -> Study:
     base = tomllib.loads(scene.text)
     base.pop("study", None)
     base.pop("fit", None)
-    default_batch = max(1, min(DEFAULT_BATCH, BATCH_ROWS // max(1, scene.n_steps)))
-    samples, seed, batch = (_whole(path, raw, key, default, low) for key, default, low in
-                            (("samples", 1, 1), ("seed", 0, 0), ("batch_size", default_batch, 1)))
+    samples, seed = (_whole(path, raw, key, default, low) for key, default, low in
+                     (("samples", 1, 1), ("seed", 0, 0)))
+    batch = _whole(path, raw, "batch_size", 1, 1) if "batch_size" in raw else None
     params = _parameters(path, raw, scene, base)
     catalog = (catalog_of or _catalog)(scene)
     metrics = _metrics(path, raw, catalog)
     _check_variant_count(path, params, samples)
     values = variant_values(params, samples, seed)
+    if batch is None:
+        batch = default_batch_size(values.shape[0], scene.n_steps)
     digest = hashlib.sha256("\0".join([__version__, text, scene.text, str(batch)]).encode())
     for log in scene.logs:  # the data a scene reads, not only its text: a changed log restarts
         digest.update(np.ascontiguousarray(log.t).tobytes())
@@ -196,6 +203,19 @@ def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:
                              'write e.g. name = "goal_spring"')
         name = Path(path).stem
     return load_scene(str(base)), name
+
+
+def default_batch_size(n_variants: int, n_steps: int) -> int:
+    """Variants per batch where the study file gives no ``batch_size``: at most DEFAULT_BATCH
+    and BATCH_ROWS (variant, step) rows; where that needs more than one batch, a number of
+    batches that is a multiple of BATCH_MULTIPLE (where there are enough variants), each as
+    large as that allows."""
+    cap = max(1, min(DEFAULT_BATCH, BATCH_ROWS // max(1, n_steps)))
+    n_batches = -(-n_variants // cap)
+    if n_batches == 1:  # one batch holds them all: no split (it would only add batches' costs)
+        return max(1, n_variants)
+    n_batches = min(n_variants, -(-n_batches // BATCH_MULTIPLE) * BATCH_MULTIPLE)
+    return max(1, -(-n_variants // max(1, n_batches)))
 
 
 def _whole(path, raw, key, default, low) -> int:
