@@ -275,65 +275,15 @@ def test_run_streams_a_long_sweep_to_the_whole_sweeps_file_and_a_strided_recordi
     np.testing.assert_array_equal(np.sort(steps.astype(np.int64)), np.arange(0, 100_001, 51))
 
 
-DOUBLE_PARALLELOGRAM_LOGGED = """
-[scene]
-name = "dpl"
-units = { length = "m", mass = "kg", time = "s", force = "N" }
-
-[points]
-O2 = { x = 0.0, y = 0.0, fixed = true }
-O4 = { x = 2.0, y = 0.0, fixed = true }
-O6 = { x = 1.0, y = 0.6, fixed = true }
-A  = { x = 1.0, y = 0.0 }
-B  = { x = 3.0, y = 0.0 }
-E  = { x = 2.0, y = 0.6 }
-
-[[links]]
-name = "crank"
-points = ["O2", "A"]
-lengths = { "O2-A" = 1.0 }
-
-[[links]]
-name = "rocker"
-points = ["O4", "B"]
-lengths = { "O4-B" = 1.0 }
-
-[[links]]
-name = "fifth"
-points = ["O6", "E"]
-lengths = { "O6-E" = 1.0 }
-
-[[links]]
-name = "coupler"
-points = ["A", "B", "E"]
-lengths = { "A-B" = 2.0 }
-local = { E = [1.0, 0.6] }
-
-[time]
-log = "rig"
-
-[[logs]]
-name = "rig"
-file = "dp.csv"
-time = "t"
-
-[[drivers]]
-name = "crank"
-angle = ["O2", "A"]
-log = "rig.ang"
-
-[analysis]
-effects = ["gravity", "inertia"]
-
-[gravity]
-g = [0.0, -9.81]
-
-[[masses]]
-link = "coupler"
-mass = 2.0
-center = [1.0, 0.3]
-inertia = 0.5
-"""
+def _double_parallelogram_logged() -> str:
+    """configs/hard/double_parallelogram.toml (one redundant constraint, every force effect)
+    driven by the log dp.csv (column ang, degrees) instead of its sweep."""
+    text = (ROOT / "configs" / "hard" / "double_parallelogram.toml").read_text()
+    head, rest = text.split("[[drivers]]", 1)
+    tail = rest[rest.index("[analysis]"):]
+    return (head + '[time]\nlog = "rig"\n\n[[logs]]\nname = "rig"\nfile = "dp.csv"\n'
+            'time = "t"\n\n[[drivers]]\nname = "crank"\nangle = ["O2", "A"]\n'
+            'log = "rig.ang"\n\n' + tail)
 
 
 def test_flags_that_only_later_segments_give(tmp_path):
@@ -345,7 +295,7 @@ def test_flags_that_only_later_segments_give(tmp_path):
     angle = np.where(np.arange(100) < 40, np.nan, 30.0 * np.sin(2 * np.pi * t))
     (tmp_path / "dp.csv").write_text("t,ang\n" + "".join(
         f"{ti:.6f},{'' if np.isnan(a) else repr(float(a))}\n" for ti, a in zip(t, angle)))
-    (tmp_path / "dpl.toml").write_text(DOUBLE_PARALLELOGRAM_LOGGED)
+    (tmp_path / "dpl.toml").write_text(_double_parallelogram_logged())
     scene = linkpipe.load_scene(tmp_path / "dpl.toml")
     whole = linkpipe.solve(scene)
     assert whole.status_counts() == {"ok": 60, "no_input": 40}
