@@ -321,3 +321,32 @@ def test_the_batch_rows_equal_the_variant_by_variant_paths(tmp_path):
     assert fast.keys() == slow.keys()
     for name in fast:
         np.testing.assert_array_equal(fast[name], slow[name], err_msg=name)
+
+
+#: wide ranges on the shear press (the review of 2026-11-24 found rows on the mirror assembly
+#: and "ok" rows whose own scene is an error in each): drawn points whose own start Newton
+#: takes to the other assembly or to no assembly, a pivot corner that flips the lever's drawn
+#: side, negative lengths inside a range whose end the scene refuses
+WIDE = {
+    "drawn B.y": '"points.B.y" = { from = -0.5, to = 0.6, steps = 23 }',
+    "drawn B.x": '"points.B.x" = { from = -0.5, to = 0.6, steps = 23 }',
+    "drawn P.x": '"points.P.x" = { from = 0.0, to = 0.6, steps = 31 }',
+    "pivot corners and a side": ('"points.A.x" = { from = -0.1, to = 0.1, steps = 3 }\n'
+                                 '"points.A.y" = { from = -0.1, to = 0.1, steps = 3 }\n'
+                                 '"links.lever.lengths.A-P" = { from = 0.649, to = 0.651, steps = 2 }'),
+    "lengths through zero": '"links.lever.lengths.A-B" = { from = -1.5, to = 0.3, steps = 19 }',
+}
+
+
+@pytest.mark.parametrize("case", sorted(WIDE))
+def test_wide_ranges_on_the_shear_press_equal_own_runs(case, tmp_path):
+    """Every variant of a wide range: its row is its own run's (the start its own run
+    assembles from its drawing is checked by Newton from each drawing, all at once: a variant
+    whose own start is another assembly, or none, is its own run), or no_assembly where its
+    own scene is an error."""
+    text = (f'[study]\nbase = "{(ROOT / "configs" / "shear_press.toml").as_posix()}"\n'
+            f'[study.parameters]\n{WIDE[case]}\n')
+    study = load_study(write(tmp_path, text))
+    assert study.slots is not None, study.path_note
+    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    assert_rows_are_own_runs(ROOT / "configs" / "shear_press.toml", study, status, arrays)

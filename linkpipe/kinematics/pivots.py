@@ -22,7 +22,11 @@ singular shape (:func:`.dyads.branch_check` per variant), and its start, Newton'
 drawing, lies on the base scene's branches: each two-root dyad's point at the first step is
 closer to its drawn place (|dx| + |dy|) than the distance between the dyad's two roots over
 ``BRANCH_MARGIN`` (the margin :func:`.dyads.branch_check` asks of a step's move), and not on
-its singular shape; and its own sparse engine has the base's pattern of entries and coefficients
+its singular shape; and that start is the one its own run assembles: Newton from each
+drawing, by the one loop with the own run's tolerance and limit, for all variants at once
+(:func:`own_starts`), converges to the chain's first step (a drawing far from its solved start
+may lead Newton to the mirror assembly, or nowhere: the nearness test alone let such variants
+through); and its own sparse engine has the base's pattern of entries and coefficients
 (:func:`.affine.same_pattern`), so that its Jacobian entries are its own to the last bit. The
 others are left to their own runs.
 """
@@ -39,6 +43,8 @@ from .dyads import solve_chain
 from .rates import derivatives, link_angles_unwrapped, link_rates
 from .sparse import engine
 from .start import carry_steps
+from .linalg import lin_solve
+from .newton import iterate
 from .vectorised import max_abs_phi
 
 
@@ -70,6 +76,10 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     usable = sw.ok.reshape(V, S).all(axis=1) & (sw.gap.reshape(V, S) > 0).all(axis=1)
     usable &= carry_steps(model, pivots, s[0], sizes)[1] <= 1.0
     usable &= _on_base_branches(chain, sw.position[::S], pivots, s[0], sizes)
+    # and the start its own run assembles is the chain's first step: Newton from each drawing
+    converged, starts = own_starts(model, rows, pivots, s[0], sizes)
+    usable &= converged & (np.abs(starts - sw.position[::S]).max(axis=(1, 2))
+                           <= START_MATCH * sizes)
     eng = engine(model)
     if eng is not None:  # the variant's own engine: the same entries and coefficient pattern
         usable &= same_pattern(eng, pivots, rows)
@@ -90,6 +100,42 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
                         status=status, link_angle=link_angles_unwrapped(model, X, period=S),
                         der=der, velocity=velocity, acceleration=acceleration, link_rates=rates,
                         rows=rows_R)
+
+
+#: a variant's own start and the chain's first step are the same root when they agree to this
+#: part of the size (the other roots, mirror images, lie a fraction of the size away; both
+#: meet the tolerance, 1e-12 of the size by default)
+START_MATCH = 1e-6
+
+
+def own_starts(model: Model, rows, drawn: np.ndarray, s0: np.ndarray, sizes: np.ndarray):
+    """``(converged (V,), X (V, n_points, 2))``: the start each variant's own run assembles at
+    the first driver value ``s0`` (nd,) directly from its drawing ``drawn`` (V, n_points, 2):
+    the first attempt of :func:`.start.start_state` (Newton by the one loop,
+    :func:`.newton.iterate`, with its tolerance and its iteration limit), for all V at once on
+    columns, each with its own rows (``rows``: (V,) arrays where they differ, or None) and size.
+    A variant that does not converge here (its own run then goes on to least squares, or
+    refuses the scene) is left to its own run by the caller."""
+    V = drawn.shape[0]
+    sc = model.scene.solver
+    s_rows = np.tile(s0, (V, 1))
+
+    def positions(qT):
+        X = drawn.copy()
+        X[:, model.moving] = qT.T.reshape(V, -1, 2)
+        return X
+
+    def residual(qT):
+        return model.phi(positions(qT), s_rows, rows).T
+
+    def correction(qT, F):
+        return lin_solve(model.jacobian(positions(qT), s_rows, rows), -F.T).T
+
+    qT = np.ascontiguousarray(model.q_of(drawn).T)
+    with np.errstate(all="ignore"):
+        qT, _, _, converged = iterate(residual, correction, qT, sc.tol * sizes,
+                                      max(sc.max_iter, 50), sizes)
+    return converged, positions(qT)
 
 
 def _on_base_branches(chain: DyadChain, X: np.ndarray, drawn: np.ndarray, s0: np.ndarray,

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
+from ..scene.geometry import MIN_LENGTH
 from ..scene import Scene, sides
 from ..scene.geometry import drawing_extent, frame_too_close
 from . import equations as eq
@@ -382,6 +383,8 @@ def variant_rows(model: Model, lengths: dict | None = None, distances: dict | No
                      + [len(x) for x in (distances or {}).values()]
                      + [X0.shape[0] if X0.ndim == 3 else 1])
     ok = np.ones(n_variants, dtype=bool)
+    for given in list((lengths or {}).values()) + list((distances or {}).values()):
+        ok &= np.asarray(given) > MIN_LENGTH  # the scene's own rule: a length is positive
     for value in reach:
         ok &= ~_too_far(scene, value)
     for value in fits:

@@ -72,13 +72,14 @@ REBUILT = ("length", "side", "drawn")
 def rows_inputs(model, slots, values: np.ndarray) -> tuple[dict, dict, np.ndarray | None]:
     """``(lengths, distances, drawn)`` of :func:`variant_rows` for variants with parameter
     ``values`` (V, n_parameters): frame lengths {link: (V,)}, side lengths {(link, key): (V,)}
-    and, where a moving point's drawn coordinate varies, every variant's drawing (V,
-    n_points, 2) with each varied coordinate (of any point) set; else None."""
+    and, where a pivot or a moving point's drawn coordinate varies, every variant's drawing
+    (V, n_points, 2) with each varied coordinate (of any point) set (the side a plate's point
+    is drawn on, lengths taken from the drawing: each variant's own); else None."""
     lengths = {slot[1]: values[:, j] for j, slot in enumerate(slots) if slot[0] == "length"}
     distances = {(slot[1], slot[2]): values[:, j] for j, slot in enumerate(slots)
                  if slot[0] == "side"}
     drawn = None
-    if any(slot[0] == "drawn" for slot in slots):
+    if any(slot[0] in ("pivot", "drawn") for slot in slots):
         drawn = np.repeat(model.start_position[None], values.shape[0], axis=0)
         for j, slot in enumerate(slots):
             if slot[0] in ("point", "pivot", "drawn"):

@@ -124,10 +124,18 @@ def plan(study) -> tuple[list | None, str]:
                 return None, f"{p.address} = {value:g} fails the scene's checks ({exc.message})"
             if _scene_value(trial, slot) != value:
                 return None, f"{p.address}: the scene does not take the value as written"
-            if why and pivots.changed_constants(study, trial):
-                return None, f"{p.address}: {why} and {pivots.changed_constants(study, trial)}"
-            if slot[0] in pivots.REBUILT and pivots.unlike_own_model(study, trial, slot, value):
-                return None, f"{p.address}: {pivots.unlike_own_model(study, trial, slot, value)}"
+            try:  # the trial's model has checks of its own (a far point beyond its frame)
+                changed = pivots.changed_constants(study, trial) if why else ""
+                unlike = (pivots.unlike_own_model(study, trial, slot, value)
+                          if slot[0] in pivots.REBUILT else "")
+            except SceneError as exc:
+                if slot[0] in pivots.REBUILT and not pivots.passes_checks(study, slot, value):
+                    continue  # variant_rows refuses it too: that variant's own run
+                return None, f"{p.address} = {value:g} fails the model's checks ({exc.message})"
+            if changed:
+                return None, f"{p.address}: {why} and {changed}"
+            if unlike:
+                return None, f"{p.address}: {unlike}"
         slots.append(slot)
     moved = any(s[0] in pivots.GEOMETRY for s in slots)
     why = pivots.path_reason(study) if moved else "" if scene.effects else "the scene has no forces"
@@ -167,7 +175,13 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
 
 def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     """``(status (V, S), {variable: (V, S, ...)})`` of variants ``lo .. hi - 1``: every
-    step-first variable a one-by-one run stores."""
+    step-first variable a one-by-one run stores. Overflow and 0/0 are data here, as in a
+    scene's own run (:func:`linkpipe.solve`): statuses, not warnings."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _variant_arrays(study, slots, lo, hi)
+
+
+def _variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     if any(s[0] in pivots.GEOMETRY for s in slots):
         return pivots.variant_arrays(study, slots, lo, hi)
     base = base_result(study)
