@@ -7,15 +7,17 @@ size of a segment, not by the length of the sweep (issue 16).
 (:class:`linkpipe.pipeline.Stage1`, which carries the dyads' branch margins, the link angles'
 unwrapping and the torsion springs' turns across segments), then its forces and statuses, then
 every sink (the HDF5 writer, :class:`linkpipe.stores.hdf5.SweepWriter`) takes the segment's
-rows, and :class:`Sampled` keeps the rows the recording will hold (a uniform stride of at most
-``--rrd-max-steps`` steps) and the whole sweep's :class:`~linkpipe.result.Totals`. What stays
+rows, and :class:`Sampled` keeps the rows the recording will hold (a uniform stride of steps
+that ``linkpipe.stores.rrd.plan`` sets on the first segment: at most ``--rrd-max-steps`` rows
+and ``--rrd-max-mb``) and the whole sweep's :class:`~linkpipe.result.Totals`. What stays
 whole: the drivers' motion (a few numbers per step) and, on the general Newton path, the
 positions (its coarse continuation spans the sweep).
 
 A segmented run writes the same file as the whole sweep solved at once, to the last bit
-(``tests/test_segments.py``; segments of any other size agree to rounding). Where auto's closed-form dyads fail the branch check in a later
-segment, the whole sweep goes to the general path (as it does when solved at once) and the
-sinks start again from the first step (:data:`RESTART`). Scenes with measurements (their RMS
+(``tests/test_segments.py``; segments of other sizes than ``run``'s agree to rounding). Where
+auto's closed-form dyads fail the branch check in a later segment, the whole sweep goes to
+the general path (as it does when solved at once) and the sinks start again from the first
+step (:data:`RESTART`). Scenes with measurements (their RMS
 spans the sweep) or finite-difference derivatives (they read neighbouring steps) are solved
 whole: :func:`why_whole`.
 """
