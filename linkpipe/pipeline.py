@@ -1,21 +1,20 @@
-"""Decide which stages a scene needs, run them, time them; return a :class:`Result`."""
+"""Decide which stages a scene needs, run them, time them; return a :class:`Result` (stage 1
+itself: :mod:`.stage1`)."""
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import functools
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import kinematics as kin
-from .model import build_model, check_mobility
-from .model import driver_scale as model_driver_scale
-from .model.drive import driver_motion as drive_motion
-from .result import Motion, Result, units_of
-from .status import NO_INPUT, OK, assign, code_counts, finite_rows
+from .model import build_model
+from .result import Result, units_of
+from .stage1 import Kinematics, mobility_of, whole_stage1
+from .stage1 import time_axis as stage1_time_axis
+from .status import assign, code_counts
 from .status import message as status_message
 from .errors import MemoryRefused, SceneError
 from .scene import Scene, load_scene
@@ -133,24 +132,13 @@ def preflight(scene: Scene, segment: int | None = None, recorded_steps: int = 0)
     otherwise): what ``check`` reports."""
     check_memory(scene, segment, recorded_steps)
     model = build_model(scene)
-    mob = _mobility(model)
+    mob = mobility_of(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
     present = np.flatnonzero(np.isfinite(s).all(axis=1))  # not every logged value is missing
     if len(present):
         kin.start_state(model, s[present[0]], scene.solver.tol * model.size,
                         scene.solver.max_iter)
     return model, mob
-
-
-def _mobility(model):
-    """:func:`check_mobility`; on a large mechanism (from ``kinematics.SPARSE_FROM`` unknowns)
-    with one BLAS thread whatever ``threads`` says: its dense SVD and least squares of a few
-    hundred unknowns gain nothing from threads and, multi-threaded on a busy machine, were
-    measured to stall for up to a second (docs/performance.md)."""
-    if model.n_q < kin.SPARSE_FROM:
-        return check_mobility(model)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return check_mobility(model)
 
 
 #: BLAS threads while a scene is solved: its solves are many small systems (stacks of 2x2 to
@@ -183,48 +171,6 @@ def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREA
         return _solve(scene, progress, kinematics, wanted)
 
 
-@dataclass(frozen=True)
-class Kinematics:
-    """Stage 1 of a solved scene, kept with its Result so that a scene differing only in force
-    parameters (springs, masses, loads, gravity) can re-run stage 2 alone (``linkpipe fit``)."""
-
-    mobility: object
-    drive: object
-    s: np.ndarray
-    s_dot: np.ndarray
-    s_ddot: np.ndarray
-    sweep: object
-    link_angle: np.ndarray
-    der: dict
-    velocity: np.ndarray | None
-    acceleration: np.ndarray | None
-    link_rates: tuple
-    #: (S, n_torsion_springs) the multiple of 2 pi (rad) each torsion spring's angle drops (a
-    #: broadcast view), or None without torsion springs
-    #: (:func:`linkpipe.forces.springs.torsion_offset`)
-    torsion_offset: np.ndarray | None = None
-    #: what the force stage may keep between calls on this stage 1 without the Lagrange side
-    #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
-    force_cache: dict = field(default_factory=dict, compare=False, repr=False)
-
-    def motion(self) -> Motion:
-        """The sweep as the force stage takes it."""
-        return Motion(s=self.s, s_dot=self.s_dot, s_ddot=self.s_ddot,
-                      position=self.sweep.position, velocity=self.velocity,
-                      acceleration=self.acceleration, status=self.der["status"],
-                      influence=self.der["influence"],
-                      link_angular_acceleration=self.link_rates[1], link_angle=self.link_angle,
-                      torsion_offset=self.torsion_offset)
-
-    @functools.cached_property
-    def finite(self) -> np.ndarray:
-        """(S,) True where every stored kinematic array is finite (computed once: a fit's
-        trials reuse it)."""
-        stored = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
-                  *self.link_rates]
-        return finite_rows([a for a in stored if a is not None], len(self.s))
-
-
 def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
            wanted: frozenset | None = None) -> Result:
     stages = Stages.of(scene)
@@ -235,7 +181,7 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
         check_memory(scene)
     model = build_model(scene)
     seconds["model"] = _time.perf_counter() - t0
-    k = _stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics
+    k = whole_stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics
     kinematic_status = k.der["status"]
     forces = None
     if stages.forces:
@@ -263,7 +209,7 @@ def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
     stages = Stages.of(scene)
     X, der = k.sweep.position, k.der
     value, drive = k.drive.value, k.drive
-    time, time_note = _time_axis(scene, value) if time_axis is None else time_axis
+    time, time_note = stage1_time_axis(scene, value) if time_axis is None else time_axis
     return Result(
         scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
         driver_velocity=drive.rate if scene.time is not None else None,
@@ -296,169 +242,6 @@ def status_of(model, kinematic_status, residual, stored: list, forces, size=None
                   [a for a in stored if a is not None], finite=finite)
 
 
-def _stage1(scene: Scene, model, stages: Stages, tell, seconds: dict) -> Kinematics:
-    """Positions, velocities, accelerations, condition and influence coefficients of the whole
-    sweep: :class:`Stage1` with the sweep as one segment."""
-    return Stage1(scene, model, stages, tell, seconds).whole()
-
-
-class Stage1:
-    """Stage 1 of one scene, solved over the whole sweep or segment by segment (a long sweep
-    streamed to its files: :mod:`linkpipe.segments`); segments give the whole sweep's rows to
-    the last bit (``tests/test_segments.py``).
-
-    Made once per sweep: the drivers' motion (S, nd) in internal units, the time axis, the
-    start and the dyads' branches. The closed-form dyads solve segment by segment (their
-    branch margins carried across); where auto must leave them for Newton at some segment
-    (:meth:`segment` returns None), :meth:`use_newton` solves the positions of the whole sweep
-    by the general path, and the segments start again from the first. Link angles are unwrapped
-    across segments (:class:`~linkpipe.kinematics.rates.AngleCarry`), torsion springs' turns
-    set at the sweep's first solved step.
-    """
-
-    def __init__(self, scene: Scene, model, stages: Stages, tell=lambda stage: None,
-                 seconds: dict | None = None):
-        self.scene, self.model, self.stages, self.tell = scene, model, stages, tell
-        self.seconds = seconds if seconds is not None else {}
-        self.mobility = _mobility(model)
-        self.drive = drive_motion(scene)  # in scene units; internal units below (deg -> rad)
-        scale = model_driver_scale(scene)
-        self.s, self.s_dot, self.s_ddot = (self.drive.value * scale, self.drive.rate * scale,
-                                           self.drive.acceleration * scale)
-        self.time_axis = _time_axis(scene, self.drive.value)
-        self.order = 2 if stages.acceleration else 1 if stages.velocity else 0
-        self.present = np.isfinite(self.s).all(axis=1)  # False where a logged value is missing
-        self.newton: kin.Sweep | None = None
-        self.chain, self.note, self.start = None, "", None
-        method = scene.solver.method
-        first = np.flatnonzero(self.present)[:2]
-        if not len(first):
-            self.newton = _sweep_where_present(model, self.s, self.present)
-        elif method in ("auto", "dyads"):
-            self.chain, self.note, self.start = kin.dyad_plan(model, self.s[first],
-                                                              method == "dyads")
-        if self.chain is None and self.newton is None:
-            self.use_newton()
-        self.restart()
-
-    @property
-    def n_steps(self) -> int:
-        return self.s.shape[0]
-
-    def restart(self) -> None:
-        """Segments from the first step again (what is carried from one segment to the next)."""
-        self.chain_carry: dict = {}
-        self.angle_carry = kin.AngleCarry.start(len(self.model.link_a))
-        self.turns = (np.full(len(self.scene.torsion_springs), np.nan)
-                      if self.scene.torsion_springs else None)
-
-    def use_newton(self) -> None:
-        """The general path's positions of the whole sweep (auto left the dyads, or the scene
-        asks for Newton); segments then slice them."""
-        t0 = _time.perf_counter()
-        note = self.note or (kin.DYADS_LEFT if self.chain is not None else "")
-        self.chain = None
-        if self.present.all():
-            self.newton = kin.solve_with_newton(self.model, self.s, note, self.start)
-        else:
-            self.newton = _sweep_where_present(self.model, self.s, self.present, note,
-                                               self.start)
-        self._add("positions", t0)
-        self.restart()
-
-    def _add(self, stage: str, t0: float) -> None:
-        self.seconds[stage] = self.seconds.get(stage, 0.0) + _time.perf_counter() - t0
-
-    def whole(self) -> Kinematics:
-        """The whole sweep as one segment."""
-        k = self.segment(0, self.n_steps)
-        if k is None:
-            self.use_newton()
-            k = self.segment(0, self.n_steps)
-        return k
-
-    def _positions(self, rows: slice) -> kin.Sweep | None:
-        """The Sweep of steps ``rows``: the dyads' (None where auto must leave them) or a slice
-        of the general path's."""
-        if self.newton is not None:
-            return kin.Sweep(*(getattr(self.newton, f)[rows] for f in
-                               ("position", "residual", "iterations", "status")),
-                             self.newton.method, self.newton.note)
-        forced = self.scene.solver.method == "dyads"
-        present = self.present[rows]
-        s, sd, sdd = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
-        if present.all():
-            return kin.dyad_sweep(self.model, self.chain, s, sd, sdd, self.order, forced,
-                                  self.chain_carry)
-        idx = np.flatnonzero(present)
-        sub = kin.dyad_sweep(self.model, self.chain, s[idx], sd[idx], sdd[idx], self.order,
-                             forced, self.chain_carry)
-        return None if sub is None else _scattered(self.model, sub, idx, len(present))
-
-    def segment(self, lo: int, hi: int) -> Kinematics | None:
-        """Stage 1 of steps ``lo .. hi - 1``, or None where auto must leave the dyads for
-        Newton (call :meth:`use_newton`, then start again from the first segment)."""
-        model, stages, rows = self.model, self.stages, slice(lo, hi)
-        self.tell("positions")
-        t0 = _time.perf_counter()
-        sweep = self._positions(rows)
-        if sweep is None:
-            return None
-        X = sweep.position
-        link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry)
-        self._add("positions", t0)
-        self.tell("jacobian")
-        t0 = _time.perf_counter()
-        s, s_dot, s_ddot = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
-        Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
-        der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
-                              velocity=sweep.velocity, acceleration=sweep.acceleration,
-                              need_influence=stages.forces)
-        self._add("jacobian", t0)
-        if self.scene.solver.derivatives == "finite_difference" and stages.velocity:
-            if (lo, hi) != (0, self.n_steps):
-                raise ValueError("finite-difference derivatives need the whole sweep")
-            t0 = _time.perf_counter()
-            der.update(_fd_derivatives(model, X, Xz, s, s_dot, s_ddot, der["status"],
-                                       stages.acceleration, self.drive.time))
-            self._add("fd_derivatives", t0)
-        velocity = der["velocity"] if stages.velocity else None
-        acceleration = der["acceleration"] if stages.acceleration else None
-        t0 = _time.perf_counter()
-        link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
-                      else (None, None))
-        self._add("jacobian", t0)  # the links' rates: derivatives too
-        offset = None
-        if self.turns is not None:
-            from .forces.springs import torsion_offset
-
-            unset = np.isnan(self.turns)
-            if unset.any():
-                self.turns = np.where(unset, torsion_offset(model, link_angle), self.turns)
-            offset = np.broadcast_to(self.turns, (hi - lo, len(self.turns)))
-        drive = dataclasses.replace(self.drive, **{
-            f.name: getattr(self.drive, f.name)[rows] for f in dataclasses.fields(self.drive)
-            if isinstance(getattr(self.drive, f.name), np.ndarray)})
-        return Kinematics(self.mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der,
-                          velocity, acceleration, link_rates, offset)
-
-
-def _scattered(model, sub: kin.Sweep, idx: np.ndarray, S: int) -> kin.Sweep:
-    """A Sweep of S steps with ``sub``'s rows at ``idx`` (steps that have every driver value);
-    the others no_input, every moving quantity NaN."""
-    X = np.full((S, model.n_points, 2), np.nan)
-    X[:, model.fixed] = model.start_position[model.fixed]
-    full = dict(position=X, residual=np.full(S, np.nan), iterations=np.zeros(S, np.int32),
-                status=np.full(S, NO_INPUT, np.int8))
-    for key in ("position", "residual", "iterations", "status"):
-        full[key][idx] = getattr(sub, key)
-    for key in ("velocity", "acceleration"):
-        if getattr(sub, key) is not None:
-            full[key] = np.full((S, model.n_points, 2), np.nan)
-            full[key][idx] = getattr(sub, key)
-    return kin.Sweep(**full, method=sub.method, note=sub.note)
-
-
 def _with_measurements(result: Result) -> Result:
     """The result with its measurements beside their computed counterparts (linkpipe.measure);
     a measurement of a quantity the run did not compute is the scene's mistake."""
@@ -474,80 +257,6 @@ def _with_measurements(result: Result) -> Result:
                          f'"{m.of[0]}" is not computed by this scene',
                          "turn on what computes it: [analysis] effects for forces, "
                          '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None
-
-
-def _sweep_where_present(model, s, present, note: str = "", start=None) -> kin.Sweep:
-    """The general path on the steps that have every driver value (the others: status
-    no_input, every moving quantity NaN). The continuation runs from one present step to the
-    next, so a missing sample leaves its neighbours' solutions as they would be without it."""
-    S, idx = s.shape[0], np.flatnonzero(present)
-    if not len(idx):
-        X = np.full((S, model.n_points, 2), np.nan)
-        X[:, model.fixed] = model.start_position[model.fixed]
-        return kin.Sweep(X, np.full(S, np.nan), np.zeros(S, np.int32),
-                         np.full(S, NO_INPUT, np.int8), method="none",
-                         note="no step has every driver value")
-    return _scattered(model, kin.solve_with_newton(model, s[idx], note, start), idx, S)
-
-
-def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration, time) -> dict:
-    """Velocities (and accelerations) by finite differences of the positions along the sweep,
-    NaN where a step is not ok, with the residuals of the stored (finite-difference) values."""
-    fdV, fdA = kin.fd_derivatives(X, s, s_dot, s_ddot, status, need_acceleration, time)
-    ok = (status == OK)[:, None, None]
-    out = {"velocity": np.where(ok, fdV, np.nan)}
-    if need_acceleration:
-        out["acceleration"] = np.where(ok, fdA, np.nan)
-    out.update(_residuals(model, Xz, s, s_dot, s_ddot, out["velocity"], out.get("acceleration")))
-    return out
-
-
-def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
-    """Return the residuals of ``Phi_q qd = -Phi_t`` and ``Phi_q qdd = gamma`` for given V, A."""
-    S = X.shape[0]
-    out = {"velocity_residual": np.full(S, np.nan)}
-    good = np.isfinite(V).all(axis=(1, 2))
-    if A is not None:
-        out["acceleration_residual"] = np.full(S, np.nan)
-        good &= np.isfinite(A).all(axis=(1, 2))
-    idx = np.flatnonzero(good)
-    chunk = kin.dense_chunk(model)  # dense (chunk, m, n) Jacobians: bounded, large mechanisms too
-    for lo in range(0, len(idx), chunk):
-        i = idx[lo:lo + chunk]
-        J = model.jacobian(X[i], s[i])
-        qd = model.q_of(V[i])
-        out["velocity_residual"][i] = np.abs(np.einsum("sij,sj->si", J, qd) + model.phi_t(
-            X[i], s[i], s_dot[i])).max(axis=1)
-        if A is not None:
-            g = model.gamma(X[i], V[i], s[i], s_dot[i], s_ddot[i])
-            out["acceleration_residual"][i] = np.abs(
-                np.einsum("sij,sj->si", J, model.q_of(A[i])) - g).max(axis=1)
-    return out
-
-
-def _time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]:
-    """Return (seconds per step, note): the time when every driver has a rate and no
-    acceleration, ``|value - from| / |rate|``, and all drivers agree on it (to 1e-9 of the
-    sweep's duration); else None, with a note saying why when the rates alone would give one."""
-    if scene.time is not None:
-        return np.asarray(scene.time.instants, dtype=float), ""
-    rates = np.array([d.rate for d in scene.drivers], dtype=float)
-    accs = np.array([d.acceleration for d in scene.drivers], dtype=float)
-    if not len(rates) or np.any(rates == 0) or np.any(accs != 0):
-        return None, ""
-    times = [np.abs(value[:, j] - d.from_value) / abs(d.rate) for j, d in enumerate(scene.drivers)]
-    t = times[0]
-    if not all(np.isfinite(tj).all() for tj in times):
-        return None, ("no time axis: a rate this small gives times beyond the floating-point "
-                      "range")
-    span = float(max(tj.max() for tj in times)) if value.shape[0] else 0.0
-    for tj in times[1:]:
-        if not np.allclose(tj, t, rtol=0, atol=1e-9 * max(span, 1e-300)):
-            ends = ", ".join(f"{d.name} {tj[-1]:.6g} s" for d, tj in zip(scene.drivers, times))
-            return None, (f"no time axis: the drivers' rates give different times for the same "
-                          f"steps (at the last step: {ends}); make each driver's "
-                          f"(to - from) / rate the same")
-    return t, ""
 
 
 def message(status: np.ndarray) -> str:

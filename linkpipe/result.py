@@ -226,7 +226,7 @@ class Result:
     linear_algebra_used: str = ""  # general path: the one-step solves' dense or sparse LU, and why
     time_note: str = ""  # why there is no time axis although every driver has a rate
     measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
-    kinematics: Any = field(default=None, repr=False, compare=False)  # pipeline.Kinematics
+    kinematics: Any = field(default=None, repr=False, compare=False)  # stage1.Kinematics
     step_numbers: np.ndarray | None = None  # the sweep's step of each row (None: 0, 1, ...)
     #: the whole sweep's Totals where this Result holds some of its rows (a sweep streamed in
     #: segments: the rows its recording keeps); None: this Result's own rows are the sweep

@@ -4,7 +4,7 @@ size of a segment, not by the length of the sweep (issue 16).
 ``python -m linkpipe run`` solves a sweep of more than one segment's steps
 (:func:`segment_steps`: a power of two from 16,384 to 131,072 steps, as many as
 :data:`SEGMENT_BYTES` of the scene's stored arrays allow) in segments: stage 1 of the segment
-(:class:`linkpipe.pipeline.Stage1`, which carries the dyads' branch margins, the link angles'
+(:class:`linkpipe.stage1.Stage1`, which carries the dyads' branch margins, the link angles'
 unwrapping and the torsion springs' turns across segments), then its forces and statuses, then
 every sink (the HDF5 writer, :class:`linkpipe.stores.hdf5.SweepWriter`) takes the segment's
 rows, and :class:`Sampled` keeps the rows the recording will hold (a uniform stride of steps
@@ -31,10 +31,11 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .model import build_model
-from .pipeline import (DEFAULT_THREADS, Stage1, Stages, bytes_per_step, check_memory, result_of,
+from .pipeline import (DEFAULT_THREADS, Stages, bytes_per_step, check_memory, result_of,
                        solve, status_of)
 from .result import Result, Totals, units_of
 from .scene import Scene
+from .stage1 import Stage1
 
 #: the bytes of stored arrays one segment may hold (its transients come on top: about 1.3 x)
 SEGMENT_BYTES = 48 * 2**20

@@ -40,7 +40,8 @@ from ..forces.constants import ForceConstants
 from ..forces.springs import torsion_offset
 from ..kinematics.decompose import bodies_of, chain_at
 from ..model.build import build_model, variant_rows
-from ..pipeline import Kinematics, Stages, result_of, status_of
+from ..pipeline import Stages, result_of, status_of
+from ..stage1 import Kinematics
 from ..result import Motion, units_of
 from ..status import NO_ASSEMBLY
 from . import vector
