@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import pathlib
 import signal
 import sys
@@ -260,17 +261,6 @@ def _recorded_steps(scene, args) -> int:
     return min(scene.n_steps, args.rrd_max_steps) if args.rrd_max_steps else scene.n_steps
 
 
-def _recording_plan(max_steps: int, max_bytes: int):
-    """``plan(first segment, n_steps) -> (stride, why)``: a streamed recording's stride of
-    steps, set on its first segment (``stores.rrd.plan`` with the command line's caps)."""
-    from .stores import rrd
-
-    def plan(first_segment, n_steps):
-        return rrd.plan(first_segment, max_steps, max_bytes, n_steps)
-
-    return plan
-
-
 def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
     """Solve ``scene`` (in segments where it is long: :mod:`linkpipe.segments`), its .h5
     written segment by segment, then its .rrd (and streams where asked) from the rows the
@@ -282,7 +272,11 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
     name = scene.name
     recording = not args.no_rrd or args.spawn or args.connect
     max_bytes = int(args.rrd_max_mb * 10**6)
-    plan = _recording_plan(args.rrd_max_steps, max_bytes) if recording else None
+    plan = None
+    if recording:  # the recording's stride, set on the first segment (stores.rrd.plan)
+        from .stores import rrd
+
+        plan = functools.partial(rrd.plan, max_steps=args.rrd_max_steps, max_bytes=max_bytes)
     written, kept = [], None
     with contextlib.ExitStack() as files:
         sinks = []
@@ -298,8 +292,6 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
     if sinks:
         result.seconds["hdf5"] += time.perf_counter() - t0
     if recording:
-        from .stores import rrd
-
         if bar:
             bar.stage("rrd")
         t0 = time.perf_counter()

@@ -222,7 +222,7 @@ def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
         acceleration_residual=der["acceleration_residual"] if stages.acceleration else None,
         forces=forces.variables if forces else None,
         force_coords=forces.coords if forces else {},
-        seconds=seconds, message=message(status),
+        seconds=seconds, message=status_message(code_counts(status)),
         solver_method_used=k.sweep.method, solver_note=k.sweep.note,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
         kinematics=k, step_numbers=step_numbers)
@@ -257,8 +257,3 @@ def _with_measurements(result: Result) -> Result:
                          f'"{m.of[0]}" is not computed by this scene',
                          "turn on what computes it: [analysis] effects for forces, "
                          '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None
-
-
-def message(status: np.ndarray) -> str:
-    """One line: how many steps are ok, and what the others are."""
-    return status_message(code_counts(status))

@@ -110,7 +110,7 @@ def segments(scene: Scene, segment: int, seconds: dict, progress=None):
 
 class Sampled:
     """The rows of a streamed sweep its recording keeps (every ``stride``-th step: ``plan(first
-    segment's Result, n_steps) -> (stride, why)`` decides on the first segment) and the whole
+    segment's Result, n_steps=) -> (stride, why)`` decides on the first segment) and the whole
     sweep's :class:`Totals` and per-sweep flags (the ``*_unique`` variables, which a segment
     without an ok step does not give: the minimum over the segments that give them, as the
     force stage takes them over its chunks)."""
@@ -127,7 +127,7 @@ class Sampled:
 
     def add(self, part: Result) -> None:
         if self.stride is None:
-            self.stride, self.why = self.plan(part, self.n_steps)
+            self.stride, self.why = self.plan(part, n_steps=self.n_steps)
         lo = int(part.step_numbers[0])
         self.parts.append(part.strided(np.arange((-lo) % self.stride, part.n_steps, self.stride)))
         totals = Totals.of(part)
@@ -161,7 +161,7 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
     each segment's Result to every sink (``sink.add(part)``; ``sink.restart()`` at
     :data:`RESTART`; ``sink.finish(result)`` at the end, ``sink.stage`` names its seconds);
     return the rows a recording keeps with the whole sweep's totals and seconds
-    (:class:`Sampled`). ``recording``: ``plan(first segment, n_steps) -> (stride, why)``, the
+    (:class:`Sampled`). ``recording``: ``plan(first segment, n_steps=) -> (stride, why)``, the
     recording's stride of steps (``linkpipe.stores.rrd.plan`` with the CLI's caps), or None
     for no recording (one row kept).
 
@@ -182,7 +182,7 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
         return replace(result, seconds=seconds)
     if check:
         check_memory(scene, segment, S if recording is not None else 0)
-    kept = Sampled(S, recording if recording is not None else (lambda part, n: (n, "")))
+    kept = Sampled(S, recording if recording is not None else (lambda part, n_steps: (n_steps, "")))
     pools = (contextlib.nullcontext() if threads is None
              else threadpool_limits(limits=threads, user_api="blas"))
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"), pools:

@@ -72,7 +72,7 @@ def _files_equal(a: pathlib.Path, b: pathlib.Path, exact: bool = True) -> None:
 def _streamed(scene, path, segment, max_steps=None):
     with hdf5.SweepWriter(path, scene.n_steps) as writer:
         plan = None if max_steps is None else (
-            lambda part, n: (stride_of(n, max_steps), f"--rrd-max-steps {max_steps:,}"))
+            lambda part, n_steps: (stride_of(n_steps, max_steps), f"--rrd-max-steps {max_steps:,}"))
         return stream(scene, [writer], recording=plan, segment=segment)
 
 

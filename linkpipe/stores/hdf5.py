@@ -7,7 +7,6 @@ are HDF5 dimension scales and every data variable has them attached, so h5py, xa
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import os
 from typing import Any
@@ -15,6 +14,8 @@ from typing import Any
 import h5py
 import numpy as np
 
+from ..forces import combine_flags
+from ..result import Variable
 from . import atomic_path
 
 STR = h5py.string_dtype("utf-8")
@@ -70,7 +71,7 @@ class SweepWriter:
     def __init__(self, path: str | os.PathLike, n_steps: int):
         self.path, self.n_steps = path, n_steps
         self._atomic = self._file = None
-        self._flags: dict = {}  # name -> Variable of a per-sweep flag (the minimum so far)
+        self._flags: dict = {}  # name -> (dims, data, units) of a per-sweep flag, so far
         self._datasets: dict = {}
         self._scales: dict = {}
         self._next = 0  # the first step the next part must hold
@@ -141,10 +142,7 @@ class SweepWriter:
         for var in part.variables():
             if var.dims[:1] == ("step",):
                 self._datasets[var.name][rows] = _array(var.data)
-            elif var.name in self._flags:
-                np.minimum(self._flags[var.name].data, var.data, out=self._flags[var.name].data)
-            else:
-                self._flags[var.name] = dataclasses.replace(var, data=np.array(var.data))
+        combine_flags(self._flags, part.forces or {})  # the force stage's rule over its chunks
         self._next = rows.stop
 
     def restart(self) -> None:
@@ -154,11 +152,12 @@ class SweepWriter:
     def finish(self, result) -> None:
         if self._next != self.n_steps:
             raise ValueError(f"the file holds steps 0 .. {self._next - 1} of {self.n_steps}")
-        for name, var in self._flags.items():
+        for name, (dims, data, units) in self._flags.items():
             if name in self._datasets:
-                self._datasets[name][...] = var.data
+                self._datasets[name][...] = data
             else:  # a flag the first part did not give (no ok step in it)
-                self._datasets[name] = _write_variable(self._file, var, self._scales)
+                self._datasets[name] = _write_variable(self._file, Variable(name, dims, data, units),
+                                                       self._scales)
         for key, value in result.attributes().items():
             _set_attr(self._file.attrs, key, value)
         self._finished = True

@@ -113,11 +113,9 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
         return None
     # a sweep solved in segments comes with its rows at the stride :func:`plan` set on its
     # first segment (result.sampled)
-    if result.sampled:
-        (stride, why), base = (1, ""), result.sampled[0]
-        why = result.sampled[1]
-    else:
-        (stride, why), base = plan(result, max_steps, max_bytes), 1
+    (base, why), stride = result.sampled or (1, ""), 1
+    if not result.sampled:
+        stride, why = plan(result, max_steps, max_bytes)
     info = kept = None
     if stride * base > 1:
         rows = np.arange(0, result.n_steps, stride)
