@@ -24,7 +24,7 @@ from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study
 from linkpipe.study import pivots, vector
 from test_study import EVERY_EFFECT
-from test_study_pivots import assert_rows_are_own_runs, own_run, write
+from test_study_pivots import CHUNK_EDGES, assert_rows_are_own_runs, chunk_study, own_run, write
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 GOAL = ROOT / "configs" / "basketball_goal.toml"
@@ -135,31 +135,12 @@ def test_lengths_with_every_effect_over_chunk_boundaries(tmp_path):
     centre's frame on a link whose length varies), 700 variants in one batch (17,500 rows:
     two chunks of the force stage, several of stage 1): rows at both ends and across the
     chunk boundaries equal their own runs to the bit."""
-    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
-    study = load_study(write(tmp_path, """[study]
-base = "goal_every_effect.toml"
-samples = 700
-seed = 5
-batch_size = 700
-[study.parameters]
-"links.backboard.lengths.B-C" = { uniform = [0.99, 1.01] }
-"links.upper.lengths.O2-B" = { uniform = [1.998, 2.002] }
-"points.O4.y" = { uniform = [-2.00164, -1.99836] }
-"points.S1.x" = { uniform = [-0.3, 0.3] }
-"springs.right.damping" = { uniform = [0.1, 0.5] }
-"masses.backboard.inertia" = { normal = [0.375, 0.01] }
-"loads.hand.force.1" = { uniform = [-8.0, -2.0] }
-[study.metrics]
-peak_ground = "max(abs(ground_reaction.S1.y))"
-"""))
+    study, status, arrays = chunk_study(
+        tmp_path, 5, '"links.backboard.lengths.B-C" = { uniform = [0.99, 1.01] }\n'
+                     '"links.upper.lengths.O2-B" = { uniform = [1.998, 2.002] }\n'
+                     '"points.O4.y" = { uniform = [-2.00164, -1.99836] }')
     assert study.path_note.startswith("vectorised: the link lengths")
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
-    assert (status == OK).all()
-    assert_bitwise_own_runs(GOAL, study, arrays, [0, 1, 163, 327, 654, 655, 656, 699],
-                            EVERY_EFFECT)
-    f = read_arrays(run_study(study, tmp_path / "out"))
-    np.testing.assert_array_equal(
-        f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))
+    assert_bitwise_own_runs(GOAL, study, arrays, CHUNK_EDGES, EVERY_EFFECT)
 
 
 def test_variant_rows_and_dyads_are_each_variants_own_model():

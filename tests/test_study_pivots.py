@@ -165,35 +165,51 @@ def test_random_small_pivot_moves_equal_one_by_one_runs(tmp_path_factory, moves,
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
 
 
+#: 700 variants of the every-effect basketball goal in one batch (17,500 rows: two chunks of
+#: the force stage, several of stage 1 and the derivative stage): the geometry parameters
+#: given, with an anchor and force numbers
+CHUNK_STUDY = """[study]
+base = "goal_every_effect.toml"
+samples = 700
+seed = {seed}
+batch_size = 700
+[study.parameters]
+{geometry}
+"points.S1.x" = {{ uniform = [-0.3, 0.3] }}
+"springs.right.damping" = {{ uniform = [0.1, 0.5] }}
+"masses.backboard.inertia" = {{ normal = [0.375, 0.01] }}
+"loads.hand.force.1" = {{ uniform = [-8.0, -2.0] }}
+[study.metrics]
+peak_ground = "max(abs(ground_reaction.S1.y))"
+"""
+#: rows at both ends of the batch and across its chunk boundaries
+CHUNK_EDGES = [0, 1, 163, 327, 654, 655, 656, 699]
+
+
+def chunk_study(tmp_path, seed: int, geometry: str):
+    """``(study, status, arrays)`` of :data:`CHUNK_STUDY` with ``geometry`` (its parameter
+    lines), its vectorised rows all ok; the study file's metric is checked to be the rows'
+    own."""
+    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
+    study = load_study(write(tmp_path, CHUNK_STUDY.format(seed=seed, geometry=geometry)))
+    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    assert (status == OK).all()
+    f = read_arrays(run_study(study, tmp_path / "out"))
+    np.testing.assert_array_equal(
+        f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))
+    return study, status, arrays
+
+
 def test_pivots_with_every_effect_and_force_numbers_over_chunk_boundaries(tmp_path):
     """Pivots, an anchor and force numbers at once, every effect on, 700 variants in one batch
     (17,500 rows: two chunks of the force stage, many of the derivative stage): rows at both
     ends and across the chunk boundaries equal their own runs; the study file's metric is
     the rows' own."""
-    (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
-    study = load_study(write(tmp_path, """[study]
-base = "goal_every_effect.toml"
-samples = 700
-seed = 4
-batch_size = 700
-[study.parameters]
-"points.O2.x" = { uniform = [-0.00164, 0.00164] }
-"points.O4.y" = { uniform = [-2.00164, -1.99836] }
-"points.S1.x" = { uniform = [-0.3, 0.3] }
-"springs.right.damping" = { uniform = [0.1, 0.5] }
-"masses.backboard.inertia" = { normal = [0.375, 0.01] }
-"loads.hand.force.1" = { uniform = [-8.0, -2.0] }
-[study.metrics]
-peak_ground = "max(abs(ground_reaction.S1.y))"
-"""))
+    study, status, arrays = chunk_study(
+        tmp_path, 4, '"points.O2.x" = { uniform = [-0.00164, 0.00164] }\n'
+                     '"points.O4.y" = { uniform = [-2.00164, -1.99836] }')
     assert study.path_note.startswith("vectorised: the pivots")
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
-    assert (status == OK).all()
-    assert_rows_are_own_runs(GOAL, study, status, arrays, [0, 1, 163, 327, 654, 655, 656, 699],
-                             EVERY_EFFECT)
-    f = read_arrays(run_study(study, tmp_path / "out"))
-    np.testing.assert_array_equal(
-        f["peak_ground"], np.abs(arrays["ground_reaction"][:, :, 2, 1]).max(axis=1))
+    assert_rows_are_own_runs(GOAL, study, status, arrays, CHUNK_EDGES, EVERY_EFFECT)
 
 
 @pytest.mark.parametrize("table", ["springs"])
