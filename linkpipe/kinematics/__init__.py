@@ -1,8 +1,11 @@
 """Stage 1: solve a mechanism over its whole sweep (positions, velocities, accelerations).
 
-One entry, :func:`solve_sweep`, and the registry :data:`METHODS` of the paths it may take
-(``[solver] method``: "auto" takes the closed-form dyads where the scene decomposes and every
-dyad stays clear of its singular shape, else the vectorised Newton path). Modules:
+The paths (``[solver] method``: "auto" takes the closed-form dyads where the scene decomposes
+and every dyad stays clear of its singular shape, else the vectorised Newton path) in pieces:
+:func:`dyad_plan` (the dyads and their branches), :func:`dyad_sweep` (their rows of any steps,
+carried across segments), :func:`solve_with_newton`; the pipeline composes them over the
+whole sweep or in segments (:class:`linkpipe.stage1.Stage1`), :func:`solve_sweep` over a
+sweep of driver values alone (the benchmarks' kernel). Modules:
 :mod:`.dyads` (closed-form fast path), :mod:`.vectorised` (coarse continuation + batched
 Newton), :mod:`.continuation` (step by step), :mod:`.start` (the first step), :mod:`.roots`
 (Newton and the rescues), :mod:`.step` (one-step float kernels), :mod:`.linalg` (sparse and
@@ -130,10 +133,6 @@ def solve_with_newton(model: Model, s, note: str = "", start=None) -> Sweep:
     return Sweep(X, out["residual"], out["iterations"], out["status"], "newton", note)
 
 
-#: the paths of stage 1, by the name ``[solver] method`` gives them ("auto" chooses)
-METHODS = {"dyads": solve_with_dyads, "newton": solve_with_newton}
-
-
 def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarray,
                 order: int = 0) -> Sweep:
     """Solve a sweep by the scene's ``[solver] method``; driver values and rates ``s``,
@@ -159,7 +158,7 @@ from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "METHODS", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]
