@@ -157,11 +157,8 @@ def test_variant_rows_and_dyads_are_each_variants_own_model():
     for v in range(3):
         data["links"][0]["lengths"]["O2-A"] = float(lengths["crank"][v])
         data["links"][1]["lengths"]["A-B"] = float(lengths["coupler"][v])
-        own = build_model(linkpipe.scene.parse_scene(tomli_w.dumps(data), str(ROCKER)))
-        assert rows.take(v) == own.rows
-        for mine, theirs in zip(chain_v.take(v).steps, kin.decompose(own).steps):
-            assert (mine.kind, mine.targets, mine.w, mine.ab, mine.r1, mine.r2) == (
-                theirs.kind, theirs.targets, theirs.w, theirs.ab, theirs.r1, theirs.r2)
+        assert_variant_is_own_model(rows, chain_v, v, build_model(
+            linkpipe.scene.parse_scene(tomli_w.dumps(data), str(ROCKER))))
 
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs").glob("*.toml")))
@@ -199,6 +196,16 @@ def test_every_shipped_config_link_length_variants_are_their_own_runs_to_the_bit
     keep = usable(study)
     assert_rows_are_own_runs(base, study, status, arrays)
     assert_bitwise_own_runs(base, study, arrays, np.flatnonzero(keep))
+
+
+def assert_variant_is_own_model(rows, chain, v: int, own) -> None:
+    """Variant ``v`` of the model's rows and dyads built for V variants at once (``rows``,
+    ``chain``) equals the model its own scene builds (``own``) and its dyads, number for
+    number."""
+    assert rows.take(v) == own.rows
+    for mine, theirs in zip(chain.take(v).steps, kin.decompose(own).steps):
+        assert (mine.kind, mine.targets, mine.w, mine.ab, mine.r1, mine.r2) == (
+            theirs.kind, theirs.targets, theirs.w, theirs.ab, theirs.r1, theirs.r2)
 
 
 @settings(max_examples=8, deadline=None)

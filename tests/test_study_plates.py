@@ -29,8 +29,8 @@ from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study, vector
 from linkpipe.study.batch import solve_batch
 from linkpipe.study.pivots import rows_inputs
-from test_study_lengths import assert_bitwise_own_runs, usable
-from test_study_pivots import assert_rows_are_own_runs, own_run, write
+from test_study_lengths import assert_bitwise_own_runs, assert_variant_is_own_model, usable
+from test_study_pivots import assert_rows_are_own_runs, write
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PRESS = ROOT / "configs" / "shear_press.toml"
@@ -256,11 +256,8 @@ def test_variant_rows_are_each_variants_own_model():
         coupler = data["links"][1]
         coupler["lengths"].update({"A-P": values[v, 0], "P-R": values[v, 1], "A-B": values[v, 4]})
         data["points"]["T"]["x"], data["points"]["P"]["y"] = values[v, 2], values[v, 3]
-        own = build_model(parse_scene(tomli_w.dumps(data), "plate.toml"))
-        assert rows.take(v) == own.rows
-        for mine, theirs in zip(chain_v.take(v).steps, kin.decompose(own).steps):
-            assert (mine.kind, mine.targets, mine.w, mine.ab, mine.r1, mine.r2) == (
-                theirs.kind, theirs.targets, theirs.w, theirs.ab, theirs.r1, theirs.r2)
+        assert_variant_is_own_model(rows, chain_v, v,
+                                    build_model(parse_scene(tomli_w.dumps(data), "plate.toml")))
 
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (ROOT / "configs").glob("*.toml")))
