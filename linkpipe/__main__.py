@@ -13,6 +13,7 @@ import time
 
 from .errors import LinkpipeError, SceneError
 from .report import describe, fit_table, stage_table, summary
+from .workers import using
 
 
 #: --rrd-max-steps's default (stores/rrd's MAX_STEPS, without importing rerun to read it)
@@ -43,6 +44,10 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
                           "library's own default)")
+    run.add_argument("--chunk-threads", type=_threads, default=0, metavar="N",
+                     help="threads that share a sweep's chunks of steps (the Jacobian stage, "
+                          "link angles and rates, finiteness checks); results do not depend on "
+                          "it (default 0: the CPUs this process may use, at most 4)")
     _fleet_options(run)
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")
@@ -119,7 +124,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
                "study": _study}[args.command]
     previous = _signals_as_interrupts()
     try:
-        return command(args)
+        with using(getattr(args, "chunk_threads", 0)):
+            return command(args)
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: the writers removed their temporaries
         # one status for a run stopped from outside, whichever signal (130, as for Ctrl-C)
         kept = ("a study's finished batches stay in its .partial file: the same command resumes "

@@ -48,10 +48,20 @@ def on_dask(fn, shared, tasks, workers=None, scheduler=None):
 
     with dask_client(workers, scheduler) as client:
         sent = client.scatter(shared, broadcast=True)
-        futures = {client.submit(fn, sent, *args, pure=False): i for i, args in enumerate(tasks)}
+        futures = {client.submit(_on_one_thread, fn, sent, *args, pure=False): i
+                   for i, args in enumerate(tasks)}
         for future in as_completed(futures):
             yield futures[future], future.result()
             future.release()
+
+
+def _on_one_thread(fn, shared, *args):
+    """``fn(shared, *args)`` with one thread over chunks of steps (:mod:`linkpipe.workers`):
+    a cluster's workers already take a core each."""
+    from .workers import using
+
+    with using(1):
+        return fn(shared, *args)
 
 
 EXECUTORS = {"in_process": in_process, "dask": on_dask}

@@ -10,6 +10,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from .workers import for_chunks
+
 
 class Status(IntEnum):
     """What a step holds (docs/output-format.md, "Results at steps that fail")."""
@@ -86,15 +88,22 @@ def assign(stage_statuses, residual: np.ndarray, tol_abs: float, stored,
 
 
 def finite_rows(arrays, n_steps: int) -> np.ndarray:
-    """(S,) True where every float array of ``arrays`` (step axis first) is finite."""
+    """(S,) True where every float array of ``arrays`` (step axis first) is finite (in chunks
+    of steps on the workers' threads: :func:`linkpipe.workers.for_chunks`)."""
     ok = np.ones(n_steps, dtype=bool)
-    for a in arrays:
-        a = np.asarray(a)
-        if a.dtype.kind != "f":
-            continue
-        with np.errstate(invalid="ignore"):
-            ok &= np.isfinite(a.reshape(a.shape[0], -1)).all(axis=1)
+    arrays = [a.reshape(a.shape[0], -1) for a in map(np.asarray, arrays) if a.dtype.kind == "f"]
+
+    def work(lo: int, hi: int) -> None:
+        for a in arrays:
+            ok[lo:hi] &= np.isfinite(a[lo:hi]).all(axis=1)
+
+    with np.errstate(invalid="ignore"):
+        for_chunks(work, n_steps, FINITE_CHUNK)
     return ok
+
+
+#: steps per chunk of :func:`finite_rows`
+FINITE_CHUNK = 32768
 
 
 def ok_only_if_finite(status: np.ndarray, arrays, finite: np.ndarray | None = None) -> np.ndarray:

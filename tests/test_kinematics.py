@@ -207,8 +207,9 @@ def test_link_angles_unwrap_across_gaps_as_each_link_alone():
         turns = np.cumsum(rng.normal(scale=1.5, size=(S, L)), axis=0)  # jumps of any size
         ang = np.angle(np.exp(1j * turns))
         ang[rng.uniform(size=(S, L)) < gap] = np.nan
-        model = SimpleNamespace(link_angles=lambda X: ang)
-        got = link_angles_unwrapped(model, None)
+        # X: the step numbers, so each chunk of steps gets its own rows of angles
+        model = SimpleNamespace(link_a=[0] * L, link_angles=lambda X: ang[X])
+        got = link_angles_unwrapped(model, np.arange(S))
         for j in range(L):
             fin = np.isfinite(ang[:, j])
             expected = np.full(S, np.nan)

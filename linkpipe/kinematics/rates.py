@@ -16,6 +16,7 @@ from .sparse import engine
 from .sparse_lu import uses_sparse
 from .linalg import CHUNK
 from ..status import OK, SINGULAR
+from ..workers import for_chunks
 
 
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
@@ -59,10 +60,11 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
          ) if need_acceleration else None
     vres = np.full(S, np.nan)
     ares = np.full(S, np.nan) if need_acceleration else None
-    for lo in range(0, S, chunk):
-        idx = lo + np.flatnonzero(status[lo:min(S, lo + chunk)] == OK)
+
+    def work(lo: int, hi: int) -> None:  # rows lo .. hi - 1 of every output
+        idx = lo + np.flatnonzero(status[lo:hi] == OK)
         if not len(idx):
-            continue
+            return
         Xc, sc_ = X[idx], s[idx]
         rows_c = None if rows is None else rows.take(idx)
         cond, regular_steps = factorise(model, Xc, sc_, rows_c)
@@ -72,7 +74,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         good = ~sing
         gi = idx[good]
         if not len(gi):
-            continue
+            return
         solve, driver_columns, times_jacobian = regular_steps(good)
         Xg, sg = Xc[good], sc_[good]
         rows_g = None if rows_c is None else rows_c.take(good)
@@ -91,6 +93,8 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
             ares[gi] = np.abs(times_jacobian(qdd) - g.T).max(axis=0)
             if acceleration is None:
                 A[gi] = model.velocities(qdd.T)
+
+    for_chunks(work, S, chunk)  # chunks on the workers' threads: rows do not depend on them
     for given, out in ((velocity, V), (acceleration, A)):
         if given is not None and out is not None:
             out[status != OK] = np.nan
@@ -240,7 +244,12 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     :class:`AngleCarry` of the segments before (None for the first); then the return is
     ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
     to the last bit (``tests/test_segments.py``)."""
-    ang = model.link_angles(X)
+    ang = np.empty((X.shape[0], len(model.link_a)))
+
+    def work(lo: int, hi: int) -> None:
+        ang[lo:hi] = model.link_angles(X[lo:hi])
+
+    for_chunks(work, X.shape[0], CHUNK)
     if carry is not None:
         return unwrap_runs(ang, carry)
     if period:
@@ -271,23 +280,36 @@ def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
     before = carry if carry is not None else AngleCarry(np.full(lead, np.nan), np.zeros(lead))
     ext = np.concatenate([before.last[..., None, :], ang], axis=-2)  # (..., S + 1, L)
     fin = np.isfinite(ext)
-    if not fin.all():
+    gaps = not fin.all()
+    if gaps and ang.shape[-2] and fin[..., 1:, :].all():  # only the carry's last is missing:
+        first = ext[..., 1, :]                             # the first step stands in for it
+        ext[..., 0, :] = np.where(fin[..., 0, :], ext[..., 0, :], first)
+        gaps = False
+    if gaps:
         rows = np.where(fin, np.arange(ext.shape[-2])[:, None], -1)
         np.maximum.accumulate(rows, axis=-2, out=rows)  # the last finite step at or before each
         first = np.argmax(fin, axis=-2)  # the first finite step (0 where there is none)
         rows = np.where(rows < 0, first[..., None, :], rows)
         ext = np.take_along_axis(ext, rows, axis=-2)
     dd = np.diff(ext, axis=-2)
-    ddmod = np.mod(dd - (-np.pi), 2 * np.pi) + (-np.pi)  # np.unwrap's steps, in its order
-    np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (dd > 0))
-    correction = ddmod - dd
-    np.copyto(correction, 0, where=np.abs(dd) < np.pi)
-    np.copyto(correction, 0, where=np.isnan(dd) & ~fin.any(axis=-2)[..., None, :])
+    # np.unwrap's correction, (dd + pi) mod 2 pi - pi - dd, taken only where it is not zero
+    # (|dd| >= pi, or NaN): the same values, without a pass of mod over every step
+    correction = np.zeros_like(dd)
+    jumps = ~(np.abs(dd) < np.pi)
+    if gaps:  # NaN steps of a link that has no finite angle at all add zero
+        jumps &= ~(np.isnan(dd) & ~fin.any(axis=-2)[..., None, :])
+    if jumps.any():
+        d = dd[jumps]
+        ddmod = np.mod(d - (-np.pi), 2 * np.pi) + (-np.pi)  # np.unwrap's steps, in its order
+        np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (d > 0))
+        correction[jumps] = ddmod - d
     summed = np.cumsum(np.concatenate([before.correction[..., None, :], correction], axis=-2),
                        axis=-2)
     out = ext[..., 1:, :] + summed[..., 1:, :]
-    out[~fin[..., 1:, :]] = np.nan
-    seen = fin.any(axis=-2)  # a link with no finite angle yet keeps its carry as it was
+    seen = np.ones(lead, bool)
+    if gaps:
+        out[~fin[..., 1:, :]] = np.nan
+        seen = fin.any(axis=-2)  # a link with no finite angle yet keeps its carry as it was
     after = AngleCarry(np.where(seen, ext[..., -1, :], before.last),
                        np.where(seen, summed[..., -1, :], before.correction))
     return out, after
@@ -295,12 +317,14 @@ def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
 
 def link_rates(model: Model, X, V, A=None, chunk: int = CHUNK):
     """Return angular velocity (S, n_links) and, with A, angular acceleration of every link,
-    in chunks of steps (each chunk's temporaries stay in cache; only the outputs are whole)."""
+    in chunks of steps (each chunk's temporaries stay in cache; only the outputs are whole),
+    on the workers' threads (:func:`linkpipe.workers.for_chunks`)."""
     S, n_links = X.shape[0], len(model.link_a)
     w = np.empty((S, n_links))
     al = np.empty((S, n_links)) if A is not None else None
-    for lo in range(0, S, chunk):
-        rows = slice(lo, lo + chunk)
+
+    def work(lo: int, hi: int) -> None:
+        rows = slice(lo, hi)
         d = X[rows, model.link_b] - X[rows, model.link_a]
         dv = V[rows, model.link_b] - V[rows, model.link_a]
         n2 = np.einsum("slj,slj->sl", d, d)
@@ -310,6 +334,8 @@ def link_rates(model: Model, X, V, A=None, chunk: int = CHUNK):
             da = A[rows, model.link_b] - A[rows, model.link_a]
             al[rows] = ((d[..., 0] * da[..., 1] - d[..., 1] * da[..., 0]) / n2
                         - 2 * wc * np.einsum("slj,slj->sl", d, dv) / n2)
+
+    for_chunks(work, S, chunk)
     return w, al
 
 

@@ -1,0 +1,85 @@
+"""Threads that share a sweep's chunks of steps.
+
+A sweep's whole-array stages (the Jacobian stage's factorisations, the link angles' rates)
+work chunk by chunk, and each chunk's numpy calls release the GIL for their loops, so a
+second core takes half the chunks (measured: the Jacobian stage 1.9x faster on 2 cores,
+``benchmarks/bench_issue16.py``). Every chunk computes exactly what it computes alone and
+writes its own rows of preallocated outputs, so a result does not depend on the thread count
+to the last bit (``tests/test_workers.py``).
+
+The count: :func:`using` sets it for a block (the CLI's ``--chunk-threads``; a study's Dask
+workers, which already share the cores, set 1); by default the CPUs this process may use,
+at most :data:`MOST`.
+"""
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+#: the default count's ceiling: past a few threads the Python between numpy calls (under the
+#: GIL) is the limit
+MOST = 4
+
+_count: contextvars.ContextVar[int | None] = contextvars.ContextVar("linkpipe_chunk_threads",
+                                                                   default=None)
+_pools: dict[int, ThreadPoolExecutor] = {}
+
+
+def default_count() -> int:
+    """The CPUs this process may use (its affinity), at most :data:`MOST`."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(MOST, cpus))
+
+
+def count() -> int:
+    """The threads a chunked stage uses here: :func:`using`'s, else :func:`default_count`."""
+    n = _count.get()
+    return default_count() if n is None else n
+
+
+@contextlib.contextmanager
+def using(n: int | None):
+    """Chunked stages inside the block use ``n`` threads (None or 0: the default count)."""
+    token = _count.set(n or None)
+    try:
+        yield
+    finally:
+        _count.reset(token)
+
+
+def _pool(n: int) -> ThreadPoolExecutor:
+    pool = _pools.get(n)
+    if pool is None:
+        pool = _pools[n] = ThreadPoolExecutor(n, thread_name_prefix="linkpipe-chunks")
+    return pool
+
+
+def for_chunks(work, n_steps: int, chunk: int) -> None:
+    """Call ``work(lo, hi)`` for each chunk ``lo .. hi - 1`` of ``n_steps`` steps, on
+    :func:`count` threads (in this thread where that is 1 or there is one chunk). ``work``
+    writes its own rows of preallocated outputs; the first exception any chunk raises is
+    raised here, after every started chunk has ended (none still writes)."""
+    bounds = [(lo, min(n_steps, lo + chunk)) for lo in range(0, n_steps, chunk)]
+    n = min(count(), len(bounds))
+    if n <= 1:
+        for lo, hi in bounds:
+            work(lo, hi)
+        return
+    context = contextvars.copy_context()  # numpy's errstate; one thread inside a chunk
+    context.run(_count.set, 1)  # (a chunk's own chunked calls must not wait on this pool)
+    futures = [_pool(n).submit(context.copy().run, work, lo, hi) for lo, hi in bounds]
+    failure = None
+    for future in futures:
+        try:
+            future.result()
+        except BaseException as exc:  # noqa: BLE001 (the first is raised once all have ended)
+            failure = failure or exc
+            for later in futures:
+                later.cancel()
+    if failure is not None:
+        raise failure

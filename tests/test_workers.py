@@ -1,0 +1,130 @@
+"""Threads over chunks of steps (linkpipe.workers) change no result: every chunk computes what
+it computes alone, into its own rows. The exact answer is the one-thread run, bit for bit."""
+from __future__ import annotations
+
+import pathlib
+import re
+import threading
+
+import numpy as np
+import pytest
+
+import linkpipe
+from linkpipe import kinematics as kin
+from linkpipe.model import build_model
+from linkpipe.pipeline import Stages
+from linkpipe.stage1 import Stage1
+from linkpipe.status import finite_rows
+from linkpipe.workers import count, default_count, for_chunks, using
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+CONFIGS = sorted((ROOT / "configs").glob("*.toml")) + sorted((ROOT / "configs" / "hard").glob("*.toml"))
+
+
+def test_each_chunk_once_on_the_threads_asked_for():
+    seen, names, lock = [], set(), threading.Lock()
+
+    def work(lo, hi):
+        with lock:
+            seen.append((lo, hi))
+            names.add(threading.current_thread().name)
+
+    with using(3):
+        assert count() == 3
+        for_chunks(work, 1000, 64)
+    assert sorted(seen) == [(lo, min(1000, lo + 64)) for lo in range(0, 1000, 64)]
+    assert all(n.startswith("linkpipe-chunks") for n in names)
+    seen.clear(), names.clear()
+    with using(1):
+        for_chunks(work, 1000, 64)
+    assert len(seen) == 16 and names == {threading.current_thread().name}
+    assert count() == default_count() >= 1
+
+
+def test_a_failing_chunk_raises_once_every_started_chunk_has_ended():
+    ended = []
+
+    def work(lo, hi):
+        if lo == 128:
+            raise ValueError("chunk 128")
+        ended.append(lo)
+
+    with using(2), pytest.raises(ValueError, match="chunk 128"):
+        for_chunks(work, 1024, 64)
+    # nothing runs after the raise: no chunk is left writing (cancelled ones never start)
+    n = len(ended)
+    threading.Event().wait(0.05)
+    assert len(ended) == n
+
+
+def test_a_chunk_does_not_share_out_its_own_chunks():
+    inner = []
+
+    def work(lo, hi):
+        inner.append(count())
+
+    with using(2):
+        for_chunks(work, 256, 64)
+    assert inner == [1, 1, 1, 1]
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
+def test_jacobian_stage_and_rates_equal_on_one_and_three_threads(config):
+    """Every shipped scene's Jacobian stage, link angles, rates and finiteness in chunks of 16
+    steps (many chunks, whatever the sweep's length): three threads give one thread's arrays."""
+    scene = linkpipe.load_scene(config)
+    model = build_model(scene)
+    stages = Stages.of(scene)
+    with using(1):
+        stage1 = Stage1(scene, model, stages)
+        sweep = stage1._positions(slice(0, stage1.n_steps)) or kin.solve_with_newton(model, stage1.s)
+    X = np.where(np.isfinite(sweep.position), sweep.position, 0.0)
+
+    def run():
+        der = kin.derivatives(model, X, stage1.s, stage1.s_dot, stage1.s_ddot, sweep.status,
+                              stages.acceleration, need_influence=True, chunk=16)
+        rates = kin.link_rates(model, X, der["velocity"], der["acceleration"], chunk=16)
+        angles = kin.link_angles_unwrapped(model, sweep.position)
+        finite = finite_rows([sweep.position, der["velocity"]], len(X))
+        return der, rates, angles, finite
+
+    with using(1):
+        one = run()
+    with using(3):
+        three = run()
+    for key, value in one[0].items():
+        if value is not None:
+            np.testing.assert_array_equal(three[0][key], value, err_msg=key)
+    for a, b in zip(one[1:], three[1:]):
+        for x, y in zip(a if isinstance(a, tuple) else (a,), b if isinstance(b, tuple) else (b,)):
+            np.testing.assert_array_equal(y, x)
+
+
+def arrays_of(result) -> dict:
+    """Every stored array of a Result (its coordinates and variables), by name."""
+    return {v.name: v.data for v in result.coordinates() + result.variables()}
+
+
+def _crank_rocker(steps: int, extra: str = "") -> linkpipe.Scene:
+    text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+    return linkpipe.parse_scene(re.sub(r"steps = \d+", f"steps = {steps}", text) + extra,
+                                "crank_rocker.toml")
+
+
+@pytest.mark.parametrize("method", ["auto", "newton"])
+def test_whole_solve_equal_on_one_and_two_threads(method):
+    """A 50,001-step sweep (7 chunks of the Jacobian stage) with every effect: every stored
+    array of the solve on two threads is the one-thread solve's, bit for bit."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_sweep import EFFECTS
+
+    scene = _crank_rocker(50_001, EFFECTS + f'\n[solver]\nmethod = "{method}"\n')
+    with using(1):
+        one = arrays_of(linkpipe.solve(scene))
+    with using(2):
+        two = arrays_of(linkpipe.solve(scene))
+    assert sorted(one) == sorted(two)
+    for name, value in one.items():
+        np.testing.assert_array_equal(two[name], value, err_msg=name)
