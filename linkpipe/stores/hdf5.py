@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import os
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import h5py
@@ -76,12 +77,23 @@ class SweepWriter:
         self._scales: dict = {}
         self._next = 0  # the first step the next part must hold
         self._finished = False
+        self._thread: ThreadPoolExecutor | None = None  # writes a part's rows while the next solves
+        self._pending: Future | None = None
+        self._fd: int | None = None  # the temporary file's descriptor (fdatasync after a part)
 
     def __enter__(self) -> "SweepWriter":
         return self
 
     def __exit__(self, *exc) -> None:
         raised = None
+        try:
+            self._wait()
+        except Exception as error:  # noqa: BLE001 (a part that failed to write loses the file)
+            raised = error
+        except BaseException as stop:  # Ctrl-C while waiting: the write ends before the
+            raised = stop               # close, then the interrupt goes on (nothing is kept)
+        finally:
+            self._end_thread()
         self._datasets.clear()  # no dataset outlives its file (h5py objects of a file that
         self._scales.clear()    # failed to close were seen to crash the garbage collector)
         try:
@@ -116,6 +128,10 @@ class SweepWriter:
         self._atomic = atomic_path(self.path, n_bytes)
         tmp = self._atomic.__enter__()
         f = self._file = _new_file(tmp)
+        try:
+            self._fd = f.id.get_vfd_handle()
+        except Exception:  # noqa: BLE001 (a driver without a descriptor: the final fsync only)
+            self._fd = None
         for c in part.coordinates():
             if c.name == "step":
                 ds = f.create_dataset("step", shape=(self.n_steps,), dtype=np.int64)
@@ -129,27 +145,54 @@ class SweepWriter:
                      else None)
             self._datasets[var.name] = _write_variable(f, var, self._scales, shape)
 
-    @_clean_failures
     def add(self, part) -> None:
+        """Take the sweep's next part: its rows are written on the writer's thread while the
+        caller solves the next one (h5py's writes release the GIL); this waits for the part
+        before it (whose failure, a full disk, is raised here)."""
         steps = (part.step_numbers if part.step_numbers is not None
                  else np.arange(part.n_steps))
+        self._wait()
         if not len(steps) or steps[0] != self._next or steps[-1] - steps[0] + 1 != len(steps):
             raise ValueError(f"a part must hold the next consecutive steps from {self._next}")
         if self._file is None:
             self._open(part)
         rows = slice(int(steps[0]), int(steps[-1]) + 1)
+        combine_flags(self._flags, part.forces or {})  # the force stage's rule over its chunks
+        self._next = rows.stop
+        if self._thread is None:
+            self._thread = ThreadPoolExecutor(1, thread_name_prefix="linkpipe-hdf5")
+        self._pending = self._thread.submit(self._write_rows, part, rows, steps)
+
+    @_clean_failures
+    def _write_rows(self, part, rows: slice, steps: np.ndarray) -> None:
+        """Write ``part``'s rows (the writer's thread), then start them to the disk
+        (fdatasync: the final fsync has only the last part left to wait for)."""
         self._datasets["step"][rows] = steps
         for var in part.variables():
             if var.dims[:1] == ("step",):
                 self._datasets[var.name][rows] = _array(var.data)
-        combine_flags(self._flags, part.forces or {})  # the force stage's rule over its chunks
-        self._next = rows.stop
+        if self._fd is not None:
+            os.fdatasync(self._fd)
+
+    def _wait(self) -> None:
+        """Wait for the part being written; raise its failure."""
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            pending.result()
+
+    def _end_thread(self) -> None:
+        """Wait for the writer's thread to end, whatever happened (no write outlives the file)."""
+        if self._thread is not None:
+            self._thread.shutdown(wait=True, cancel_futures=True)
+            self._thread = None
 
     def restart(self) -> None:
+        self._wait()
         self._flags, self._next = {}, 0
 
     @_clean_failures
     def finish(self, result) -> None:
+        self._wait()
         if self._next != self.n_steps:
             raise ValueError(f"the file holds steps 0 .. {self._next - 1} of {self.n_steps}")
         for name, (dims, data, units) in self._flags.items():
