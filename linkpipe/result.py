@@ -412,6 +412,7 @@ class Result:
             "solver_derivatives": sc.solver.derivatives,
             "solver_predictor": sc.solver.predictor,
             "solver_singular_rcond": sc.solver.singular_rcond,
+            "solver_rate_residuals": sc.solver.rate_residuals,
             "degrees_of_freedom": self.mobility.dof,
             "redundant_constraints": self.mobility.redundant,
             "forces_not_unique": self.forces_not_unique(),

@@ -190,7 +190,8 @@ class Stage1:
         Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
         der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                               velocity=sweep.velocity, acceleration=sweep.acceleration,
-                              need_influence=stages.forces)
+                              need_influence=stages.forces, need_velocity=stages.velocity,
+                              residuals=self.scene.solver.rate_residuals)
         self._add("jacobian", t0)
         if self.scene.solver.derivatives == "finite_difference" and stages.velocity:
             if (lo, hi) != (0, self.n_steps):

@@ -9,6 +9,7 @@ import dataclasses as dc
 import pathlib
 import sys
 
+import h5py
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
@@ -306,3 +307,36 @@ def test_dyads_satisfy_the_models_equations_and_equal_newton(family, a, b, c, st
     allowed = 1e-11 + 1e-15 * fast.condition  # (S,)
     assert (np.abs(slow.velocity - V).max(axis=(1, 2)) <= allowed * v_scale).all()
     assert (np.abs(slow.acceleration - A).max(axis=(1, 2)) <= 10 * allowed * a_scale).all()
+
+
+@pytest.mark.parametrize("method", ["auto", "newton"])
+def test_rate_residuals_are_stored_only_when_asked_and_are_the_models(method, tmp_path):
+    """``[solver] rate_residuals = true`` stores each step's rates put back into the model's own
+    linear equations (max over rows), on the dyads and on Newton alike; by default neither the
+    re-check runs nor the variables exist (the tests above prove them to rounding)."""
+    from linkpipe.stores import hdf5
+
+    text = (CONFIG_DIR / "fourbar_crank_rocker.toml").read_text()
+    plain = linkpipe.parse_scene(text + f'\n[solver]\nmethod = "{method}"\n', "cr.toml")
+    asked = linkpipe.parse_scene(text + f'\n[solver]\nmethod = "{method}"\nrate_residuals = true\n',
+                                 "cr.toml")
+    r0, r1 = linkpipe.solve(plain), linkpipe.solve(asked)
+    assert r0.velocity_residual is None and r0.acceleration_residual is None
+    names = {v.name for v in r0.variables()}
+    assert not names & {"velocity_residual", "acceleration_residual"}
+    np.testing.assert_array_equal(r1.velocity, r0.velocity)  # the re-check changes nothing
+    model = r1.model
+    _, s, s_dot, s_ddot = kin.driver_motion(model)
+    J = model.jacobian(r1.position, s)
+    vres = np.abs(np.einsum("sij,sj->si", J, model.q_of(r1.velocity))
+                  + model.phi_t(r1.position, s, s_dot)).max(axis=1)
+    ares = np.abs(np.einsum("sij,sj->si", J, model.q_of(r1.acceleration))
+                  - model.gamma(r1.position, r1.velocity, s, s_dot, s_ddot)).max(axis=1)
+    # the same sums in another order (the engine's sparse rows against the dense product):
+    # equal to rounding of the rates' scale (velocities ~10 m/s, accelerations ~100 m/s^2)
+    np.testing.assert_allclose(r1.velocity_residual, vres, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(r1.acceleration_residual, ares, rtol=0, atol=1e-12)
+    assert r1.velocity_residual.max() < 1e-13 and r1.acceleration_residual.max() < 1e-12
+    hdf5.write(r1, tmp_path / "r.h5")
+    with h5py.File(tmp_path / "r.h5") as f:
+        np.testing.assert_array_equal(f["velocity_residual"][:], r1.velocity_residual)

@@ -92,7 +92,8 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
     der = derivatives(model, Xz, sR, sdR, sddR, status, order >= 2, velocity=sw.velocity,
                       acceleration=sw.acceleration, need_influence=need_influence,
-                      fixed_per_row=True, rows=rows_R)
+                      fixed_per_row=True, rows=rows_R, need_velocity=order >= 1,
+                      residuals=sc.rate_residuals)
     velocity = der["velocity"] if order >= 1 else None
     acceleration = der["acceleration"] if order >= 2 else None
     rates = link_rates(model, X, velocity, acceleration) if order >= 1 else (None, None)

@@ -22,7 +22,8 @@ from ..workers import for_chunks
 def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acceleration: bool,
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
                 need_influence: bool = True, chunk: int = CHUNK, dense: bool = False,
-                fixed_per_row: bool = False, rows=None):
+                fixed_per_row: bool = False, rows=None, residuals: bool = False,
+                need_velocity: bool = True):
     """Velocities, accelerations, condition and influence coefficients of a solved sweep: the
     one place they are solved, from one factorisation of each ok step's Jacobian.
 
@@ -33,9 +34,16 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     (sigma_1/sigma_n when redundant; estimated beyond ESTIMATE_FROM unknowns, exact near the
     threshold) flags SINGULAR steps (their derivatives NaN); ``qd = J^-1 (-Phi_t)``,
     ``qdd = J^-1 gamma`` (or the given ``velocity`` / ``acceleration`` (S, P, 2), e.g. the
-    dyads', checked by their residuals and completed in place: NaN at every step not ok, zero
-    at fixed points, so a sweep's rates are not held twice); with ``need_influence`` the influence coefficients
+    dyads', completed in place: NaN at every step not ok, zero at fixed points, so a sweep's
+    rates are not held twice); with ``residuals`` (the scene's ``[solver] rate_residuals``)
+    each step's rates put back into their linear equations, ``|J qd + Phi_t|`` and
+    ``|J qdd - gamma|`` (max over rows), else no such re-check: that the engine's solves and
+    the dyads' closed forms meet those equations to rounding is what ``tests/test_fast_path.py``
+    and ``tests/test_kernels.py`` prove; with ``need_influence`` the influence coefficients
     ``dq/ds = -J^-1 Phi_s`` over the driver rows (what the force stage needs of the inverse).
+
+    ``need_velocity`` False (a scene of positions only): no rates, only the condition (and
+    the influence coefficients); velocity is then NaN at every moving point.
 
     ``fixed_per_row``: the fixed points of X differ row by row (a study's variants that move
     pivots): the engine's entries are read off the model's terms at X itself
@@ -44,7 +52,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     link lengths), read at X's rows the same way.
 
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
-    acceleration_residual, status, influence (S, n_q, n_drivers) NaN where not ok, or None.
+    acceleration_residual (None without ``residuals``), status, influence (S, n_q, n_drivers) NaN where not ok, or None.
     """
     rcond = model.scene.solver.singular_rcond
     eng = None if dense else engine(model)
@@ -58,8 +66,9 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     V = velocity if velocity is not None else np.full((S, model.n_points, 2), np.nan)
     A = (acceleration if acceleration is not None else np.full((S, model.n_points, 2), np.nan)
          ) if need_acceleration else None
-    vres = np.full(S, np.nan)
-    ares = np.full(S, np.nan) if need_acceleration else None
+    residuals = residuals and need_velocity
+    vres = np.full(S, np.nan) if residuals else None
+    ares = np.full(S, np.nan) if residuals and need_acceleration else None
 
     def work(lo: int, hi: int) -> None:  # rows lo .. hi - 1 of every output
         idx = lo + np.flatnonzero(status[lo:hi] == OK)
@@ -80,18 +89,24 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         rows_g = None if rows_c is None else rows_c.take(good)
         if influence is not None:
             influence[gi] = driver_columns(model.phi_s(Xg, sg, rows_g))
-        phit = -model.phi_t(Xg, sg, s_dot[gi], rows_g)  # (g, m)
+        solve_v = need_velocity and velocity is None
+        solve_a = need_acceleration and acceleration is None
+        if not (solve_v or solve_a or residuals):
+            return  # the given rates, not re-checked (see above)
+        phit = -model.phi_t(Xg, sg, s_dot[gi], rows_g) if solve_v or residuals else None  # (g, m)
         # coordinates first, steps last (n, g): the engine's contiguous layout
-        qd = solve(phit) if velocity is None else model.q_of(velocity[gi]).T
-        vres[gi] = np.abs(times_jacobian(qd) - phit.T).max(axis=0)
+        qd = solve(phit) if solve_v else model.q_of(velocity[gi]).T
+        if residuals:
+            vres[gi] = np.abs(times_jacobian(qd) - phit.T).max(axis=0)
         Vg = model.velocities(qd.T)
-        if velocity is None:
+        if solve_v:
             V[gi] = Vg
-        if need_acceleration:
+        if solve_a or (residuals and need_acceleration):
             g = model.gamma(Xg, Vg, sg, s_dot[gi], s_ddot[gi], rows_g)  # (g, m)
-            qdd = solve(g) if acceleration is None else model.q_of(acceleration[gi]).T
-            ares[gi] = np.abs(times_jacobian(qdd) - g.T).max(axis=0)
-            if acceleration is None:
+            qdd = solve(g) if solve_a else model.q_of(acceleration[gi]).T
+            if residuals:
+                ares[gi] = np.abs(times_jacobian(qdd) - g.T).max(axis=0)
+            if solve_a:
                 A[gi] = model.velocities(qdd.T)
 
     for_chunks(work, S, chunk)  # chunks on the workers' threads: rows do not depend on them

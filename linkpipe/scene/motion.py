@@ -240,7 +240,9 @@ class MotionTables:
         if not 0 < rcond < 1:
             raise table.error("singular_rcond", f"must be between 0 and 1, got {rcond:g}",
                               "write e.g. singular_rcond = 1e-6")
-        return Solver(tol, max_iter, singular_rcond=rcond, **choices)
+        return Solver(tol, max_iter, singular_rcond=rcond,
+                      rate_residuals=table.boolean("rate_residuals", Solver.rate_residuals),
+                      **choices)
 
 
 

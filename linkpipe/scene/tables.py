@@ -197,6 +197,10 @@ class Solver:
     ``linear_algebra``: the one-step work of the general path (sequential continuation, start)
     on dense Jacobians (``dense``), on a sparse LU (``sparse``), or by size (``auto``: sparse
     from :data:`linkpipe.kinematics.sparse_lu.SPARSE_FROM` unknowns).
+    ``rate_residuals``: also store each step's velocities and accelerations put back into
+    their linear equations (``velocity_residual``, ``acceleration_residual``), a run-time
+    re-check of what the tests prove (rounding level); off by default, it costs about a
+    third of the Jacobian stage.
     """
 
     tol: float = 1e-12
@@ -207,6 +211,7 @@ class Solver:
     method: str = "auto"
     singular_rcond: float = 1e-6
     linear_algebra: str = "auto"
+    rate_residuals: bool = False
 
 
 @dataclass(frozen=True)
