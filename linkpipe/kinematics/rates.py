@@ -74,19 +74,26 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         idx = lo + np.flatnonzero(status[lo:hi] == OK)
         if not len(idx):
             return
+        if len(idx) == hi - lo:  # every step ok: views of the rows, not copies
+            idx = slice(lo, hi)
         Xc, sc_ = X[idx], s[idx]
         rows_c = None if rows is None else rows.take(idx)
         cond, regular_steps = factorise(model, Xc, sc_, rows_c)
         condition[idx] = cond
         sing = is_singular(cond, rcond)
-        status[idx[sing]] = SINGULAR
         good = ~sing
-        gi = idx[good]
-        if not len(gi):
+        if isinstance(idx, slice):
+            status[lo + np.flatnonzero(sing)] = SINGULAR
+            gi = idx if good.all() else lo + np.flatnonzero(good)
+        else:
+            status[idx[sing]] = SINGULAR
+            gi = idx[good]
+        if not isinstance(gi, slice) and not len(gi):
             return
         solve, driver_columns, times_jacobian = regular_steps(good)
-        Xg, sg = Xc[good], sc_[good]
-        rows_g = None if rows_c is None else rows_c.take(good)
+        every = isinstance(gi, slice)
+        Xg, sg = (Xc, sc_) if every else (Xc[good], sc_[good])
+        rows_g = None if rows_c is None else rows_c if every else rows_c.take(good)
         if influence is not None:
             influence[gi] = driver_columns(model.phi_s(Xg, sg, rows_g))
         solve_v = need_velocity and velocity is None
@@ -152,7 +159,11 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
 
     def factorise(model: Model, X, s, rows=None):
-        E = entries_at(eng, X, s, rows) if fixed_per_row else eng.entries(model.q_of(X), s)
+        # the moving coordinates first, steps last (n, k), in one gather (q_of(X).T, as the
+        # engine takes it, without its two copies)
+        E = (entries_at(eng, X, s, rows) if fixed_per_row else
+             eng.entries_T(X.transpose(1, 2, 0)[model.moving].reshape(model.n_q, -1),
+                           np.ascontiguousarray(s.T)))
         if with_inverse:
             inv = eng.inverse(E)  # (n, m, k)
             cond = eng.condition(E, inv)
