@@ -56,9 +56,13 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     """
     rcond = model.scene.solver.singular_rcond
     eng = None if dense else engine(model)
+    # the inverse is formed only where a solve uses it: rates to solve, or influence
+    # coefficients; else the exact condition comes from its column sums alone
+    uses_inverse = (need_influence or (need_velocity and velocity is None)
+                    or (need_acceleration and acceleration is None))
     factorise = (_dense_factors if eng is None else
                  _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond,
-                                 fixed_per_row or rows is not None))
+                                 fixed_per_row or rows is not None, uses_inverse))
     S = X.shape[0]
     status = status.copy()
     condition = np.full(S, np.nan)
@@ -145,7 +149,8 @@ def dense_chunk(model: Model) -> int:
     return max(1, min(CHUNK, DENSE_CHUNK_ENTRIES // max(1, model.n_rows * model.n_q)))
 
 
-def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool = False):
+def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool = False,
+                    uses_inverse: bool = True):
     """The sparse engine's factorisation of a chunk of k steps: (condition (k,),
     ``regular_steps(rows (k,) bool)`` -> the g picked steps' ``solve(b (g, m)) -> J^-1 b``
     (n, g), ``driver_columns(phi_s (g, nd)) -> -J^-1 Phi_s`` over the driver rows (g, n, nd)
@@ -155,7 +160,10 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
     the cheaper way to their exact condition. Otherwise no inverse: block solves, and the
     condition estimated from a few of them (:func:`.linalg.estimate_inverse_norm1`), taken
     exactly where the estimate comes within POLISH_FROM of the singular threshold, so a step's
-    status never rests on an estimate. ``fixed_per_row``: as :func:`derivatives` says."""
+    status never rests on an estimate. ``fixed_per_row``: as :func:`derivatives` says.
+    ``uses_inverse`` False (small Jacobians whose solves are not wanted): the exact condition
+    from the inverse's column sums (:meth:`.sparse.Engine.inverse_column_sums`), no inverse;
+    ``solve`` then takes block solves."""
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
 
     def factorise(model: Model, X, s, rows=None):
@@ -165,7 +173,7 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
              eng.entries_T(X.transpose(1, 2, 0)[model.moving].reshape(model.n_q, -1),
                            np.ascontiguousarray(s.T)))
         if with_inverse:
-            inv = eng.inverse(E)  # (n, m, k)
+            inv = eng.inverse(E) if uses_inverse else None  # (n, m, k)
             cond = eng.condition(E, inv)
         else:
             inv = None

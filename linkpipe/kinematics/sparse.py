@@ -386,11 +386,59 @@ class Engine:
 
     def condition(self, E: np.ndarray, inverse: np.ndarray | None = None) -> np.ndarray:
         """Return the 1-norm condition ``|J|_1 |J^-1|_1`` (S,) (inf where not finite), as
-        :func:`condition` measures it densely."""
-        inv = self.inverse(E) if inverse is None else inverse
+        :func:`condition` measures it densely; without ``inverse``, the inverse's column sums
+        come from :meth:`inverse_column_sums` (the same numbers, without forming it)."""
         with np.errstate(invalid="ignore"):
-            cond = self.norm1(E) * np.abs(inv).sum(axis=0).max(axis=0)
+            sums = (self.inverse_column_sums(E) if inverse is None else
+                    np.abs(inverse).sum(axis=0))
+            cond = self.norm1(E) * sums.max(axis=0)
         return np.where(np.isfinite(cond), cond, np.inf)
+
+    def inverse_column_sums(self, E: np.ndarray) -> np.ndarray:
+        """Return ``|J^-1|``'s column sums (m, S): :meth:`inverse`'s block solves of the unit
+        right-hand sides, each block only for the columns it can reach (the inverse of a
+        block-triangular matrix is block-triangular: a block's unknowns are zero for every unit
+        column of an earlier block's rows it does not depend on). The entries it skips are
+        exact zeros in :meth:`inverse`, so the sums are its sums, in its order, bit for bit
+        (``tests/test_kernels.py``), at about half its work on a chain of dyads."""
+        S = E.shape[1]
+        x: list = [None] * self.model.n_q  # x[c]: (len(reach of c's block), S)
+        where: list = [None] * self.model.n_q  # the unit columns x[c]'s rows stand for
+        sums = np.zeros((self.model.n_rows, S))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for rows, cols, inner, outer in self.blocks:
+                reach = set(rows)
+                for out in outer:
+                    for _, c in out:
+                        reach.update(where[c])
+                reach = sorted(reach)
+                at = {j: i for i, j in enumerate(reach)}
+                rhs = []
+                for r, out in zip(rows, outer):
+                    acc = np.zeros((len(reach), S))
+                    acc[at[r]] = 1.0
+                    for e, c in out:  # as _solve: b[r] - E[e] x[c] - ..., in its order
+                        pos = [at[j] for j in where[c]]
+                        acc[pos] = acc[pos] - E[e] * x[c]
+                    rhs.append(acc)
+                k = len(cols)
+                if k == 1:
+                    sol = [rhs[0] / E[inner[0][0]]]
+                elif k == 2:
+                    sol = list(_cramer2(*_block2(E, inner), *rhs))
+                else:  # larger blocks: the general solve on these columns
+                    M = _dense_block(E, inner)
+                    R = np.stack(rhs)  # (k, r, S)
+                    try:
+                        out_ = np.linalg.solve(M, R.transpose(2, 0, 1))  # (S, k, r)
+                    except np.linalg.LinAlgError:
+                        out_ = np.full((S, k, R.shape[1]), np.nan)
+                    sol = [out_[:, a, :].T for a in range(k)]
+                for c, xc in zip(cols, sol):
+                    x[c], where[c] = xc, reach
+            for c in range(self.model.n_q):  # the column sums over the unknowns, in order
+                sums[where[c]] += np.abs(x[c])
+        return sums
 
 
 def _cramer2(a, b, c, d, r0, r1):
