@@ -396,30 +396,25 @@ class Engine:
 
     def inverse_column_sums(self, E: np.ndarray) -> np.ndarray:
         """Return ``|J^-1|``'s column sums (m, S): :meth:`inverse`'s block solves of the unit
-        right-hand sides, each block only for the columns it can reach (the inverse of a
-        block-triangular matrix is block-triangular: a block's unknowns are zero for every unit
-        column of an earlier block's rows it does not depend on). The entries it skips are
-        exact zeros in :meth:`inverse`, so the sums are its sums, in its order, bit for bit
-        (``tests/test_kernels.py``), at about half its work on a chain of dyads."""
+        right-hand sides, each block only for the unit columns of its own and earlier blocks'
+        rows (the inverse of a block-triangular matrix is block-triangular: the others are
+        exact zeros in :meth:`inverse`). The sums are its sums, in its order, bit for bit
+        (``tests/test_kernels.py``), without forming or reading the inverse."""
         S = E.shape[1]
-        x: list = [None] * self.model.n_q  # x[c]: (len(reach of c's block), S)
-        where: list = [None] * self.model.n_q  # the unit columns x[c]'s rows stand for
-        sums = np.zeros((self.model.n_rows, S))
+        order = [r for rows, _, _, _ in self.blocks for r in rows]  # unit columns, by block
+        at = {r: i for i, r in enumerate(order)}
+        x: list = [None] * self.model.n_q  # x[c]: (columns up to its block's end, S)
         with np.errstate(divide="ignore", invalid="ignore"):
+            end = 0
             for rows, cols, inner, outer in self.blocks:
-                reach = set(rows)
-                for out in outer:
-                    for _, c in out:
-                        reach.update(where[c])
-                reach = sorted(reach)
-                at = {j: i for i, j in enumerate(reach)}
+                end += len(rows)
                 rhs = []
                 for r, out in zip(rows, outer):
-                    acc = np.zeros((len(reach), S))
+                    acc = np.zeros((end, S))
                     acc[at[r]] = 1.0
                     for e, c in out:  # as _solve: b[r] - E[e] x[c] - ..., in its order
-                        pos = [at[j] for j in where[c]]
-                        acc[pos] = acc[pos] - E[e] * x[c]
+                        xc = x[c]
+                        acc[:len(xc)] -= E[e] * xc
                     rhs.append(acc)
                 k = len(cols)
                 if k == 1:
@@ -428,17 +423,20 @@ class Engine:
                     sol = list(_cramer2(*_block2(E, inner), *rhs))
                 else:  # larger blocks: the general solve on these columns
                     M = _dense_block(E, inner)
-                    R = np.stack(rhs)  # (k, r, S)
+                    R = np.stack(rhs)  # (k, end, S)
                     try:
-                        out_ = np.linalg.solve(M, R.transpose(2, 0, 1))  # (S, k, r)
+                        out_ = np.linalg.solve(M, R.transpose(2, 0, 1))  # (S, k, end)
                     except np.linalg.LinAlgError:
-                        out_ = np.full((S, k, R.shape[1]), np.nan)
+                        out_ = np.full((S, k, end), np.nan)
                     sol = [out_[:, a, :].T for a in range(k)]
                 for c, xc in zip(cols, sol):
-                    x[c], where[c] = xc, reach
-            for c in range(self.model.n_q):  # the column sums over the unknowns, in order
-                sums[where[c]] += np.abs(x[c])
-        return sums
+                    x[c] = xc
+            sums = np.zeros((self.model.n_rows, S))  # by block; summed over the unknowns
+            for xc in x:                              # in their order, as inverse's rows
+                sums[:len(xc)] += np.abs(xc)
+        out = np.empty_like(sums)
+        out[order] = sums
+        return out
 
 
 def _cramer2(a, b, c, d, r0, r1):
