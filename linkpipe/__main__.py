@@ -47,7 +47,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--chunk-threads", type=_threads, default=0, metavar="N",
                      help="threads that share a sweep's chunks of steps (the Jacobian stage, "
                           "link angles and rates, finiteness checks); results do not depend on "
-                          "it (default 0: the CPUs this process may use, at most 4)")
+                          "it (default 0: the CPUs this process may use but one, which the HDF5 "
+                          "writer takes, at most 4)")
     _fleet_options(run)
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")

@@ -1,15 +1,15 @@
 """Threads that share a sweep's chunks of steps.
 
 A sweep's whole-array stages (the Jacobian stage's factorisations, the link angles' rates)
-work chunk by chunk, and each chunk's numpy calls release the GIL for their loops, so a
-second core takes half the chunks (measured: the Jacobian stage 1.9x faster on 2 cores,
-``benchmarks/bench_issue16.py``). Every chunk computes exactly what it computes alone and
-writes its own rows of preallocated outputs, so a result does not depend on the thread count
-to the last bit (``tests/test_workers.py``).
+work chunk by chunk, and each chunk's numpy calls release the GIL for their loops, so another
+core can take some of the chunks (measured alone: the Jacobian stage 1.9x faster on 2 cores;
+a whole run on 2 cores gains nothing, its second core being the HDF5 writer's). Every chunk
+computes exactly what it computes alone and writes its own rows of preallocated outputs, so
+a result does not depend on the thread count to the last bit (``tests/test_workers.py``).
 
 The count: :func:`using` sets it for a block (the CLI's ``--chunk-threads``; a study's Dask
-workers, which already share the cores, set 1); by default the CPUs this process may use,
-at most :data:`MOST`.
+workers, which already share the cores, set 1); by default the CPUs this process may use
+but one (the writer's), at most :data:`MOST`.
 """
 from __future__ import annotations
 
@@ -28,12 +28,15 @@ _pools: dict[int, ThreadPoolExecutor] = {}
 
 
 def default_count() -> int:
-    """The CPUs this process may use (its affinity), at most :data:`MOST`."""
+    """The CPUs this process may use (its affinity) but one, at most :data:`MOST`: the one
+    left is the HDF5 writer's, whose thread writes a segment while the next one solves
+    (measured on 2 cores: two chunk threads beside the writer gave 0.98-1.06x the time of
+    one, ``docs/performance.md``)."""
     try:
         cpus = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # not on Linux
         cpus = os.cpu_count() or 1
-    return max(1, min(MOST, cpus))
+    return max(1, min(MOST, cpus - 1))
 
 
 def count() -> int:

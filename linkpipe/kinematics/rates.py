@@ -328,7 +328,7 @@ def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
     dd = np.diff(ext, axis=-2)
     # np.unwrap's correction, (dd + pi) mod 2 pi - pi - dd, taken only where it is not zero
     # (|dd| >= pi, or NaN): the same values, without a pass of mod over every step
-    correction = np.zeros_like(dd)
+    correction = np.zeros(dd.shape)
     jumps = ~(np.abs(dd) < np.pi)
     if gaps:  # NaN steps of a link that has no finite angle at all add zero
         jumps &= ~(np.isnan(dd) & ~fin.any(axis=-2)[..., None, :])
@@ -337,8 +337,9 @@ def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
         ddmod = np.mod(d - (-np.pi), 2 * np.pi) + (-np.pi)  # np.unwrap's steps, in its order
         np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (d > 0))
         correction[jumps] = ddmod - d
-    summed = np.cumsum(np.concatenate([before.correction[..., None, :], correction], axis=-2),
-                       axis=-2)
+    corrections = np.concatenate([before.correction[..., None, :], correction], axis=-2)
+    summed = (_running_sums(corrections) if corrections.ndim == 2 and not gaps else
+              np.cumsum(corrections, axis=-2))
     out = ext[..., 1:, :] + summed[..., 1:, :]
     seen = np.ones(lead, bool)
     if gaps:
@@ -352,6 +353,25 @@ def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
 #: steps per chunk of :func:`link_rates`: a chunk's dozen (chunk,) columns fit in L2, and few
 #: enough chunks that two threads gain (8,192-step chunks were slower on two threads than one)
 RATES_CHUNK = 32768
+
+
+def _running_sums(corrections: np.ndarray) -> np.ndarray:
+    """``np.cumsum(corrections, axis=0)`` of (S + 1, L) finite corrections, bit for bit, where
+    they are mostly zero (a link turns past pi a few times in a sweep): the running sum is
+    taken over the non-zero ones alone, in order (adding the zeros between changes no bit),
+    and held between them; a column with many turns takes the cumsum itself."""
+    out = np.empty_like(corrections)
+    S1 = corrections.shape[0]
+    at, of = np.nonzero(corrections[1:])  # row-major: each column's rows in order
+    for j in range(corrections.shape[1]):
+        col = corrections[:, j]
+        rows = at[of == j] + 1
+        if len(rows) > S1 // 64:
+            out[:, j] = np.cumsum(col)
+            continue
+        sums = np.cumsum(np.concatenate([col[:1], col[rows]]))
+        out[:, j] = np.repeat(sums, np.diff(np.concatenate([[0], rows, [S1]])))
+    return out
 
 
 def link_rates(model: Model, X, V, A=None, chunk: int = RATES_CHUNK):
