@@ -37,8 +37,13 @@ from .result import Result, Totals, units_of
 from .scene import Scene
 from .stage1 import Stage1
 
-#: the bytes of stored arrays one segment may hold (its transients come on top: about 1.3 x)
-SEGMENT_BYTES = 48 * 2**20
+#: the bytes of stored arrays one segment may hold (its transients come on top: about 1.3 x):
+#: 12 MB, 16,384-step segments of the crank-rocker with every rate (A/B, 8 runs of a 360k-step
+#: sweep to .h5: 32,768-step segments 0.96x the time of 131,072-step ones, 102 MB peak instead
+#: of 126 MB, and 16,384-step ones 0.99x of 32,768 at 91 MB: arrays that small are reused by
+#: the allocator instead of mapped afresh, and the writer's last part, written after the
+#: solve, is shorter)
+SEGMENT_BYTES = 12 * 2**20
 #: the fewest and most steps of a segment: powers of two, so that a segment holds whole chunks
 #: of every stage that works in chunks of steps (the derivatives' and the dyads' 8,192, the
 #: force stage's 16,384). Each step's numbers are then computed in the
