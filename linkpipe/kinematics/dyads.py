@@ -348,8 +348,10 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     # the outputs (one contiguous copy instead of strided writes over the full arrays); the
     # buffers hold the fixed points (their positions, zero rates) from the start
     m = min(S, chunk)
-    bufs = [np.zeros((m, P, 2)) for _ in range(1 + min(order, 2))]
+    bufs = [np.empty((m, P, 2)) for _ in range(1 + min(order, 2))]  # moving points: each chunk's
     bufs[0][:, fixed] = X0[fixed]
+    for rates in bufs[1:]:
+        rates[:, fixed] = 0.0
     ok = np.ones(S, dtype=bool)
     gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
     residual = np.empty(S) if max_abs_phi is not None else None

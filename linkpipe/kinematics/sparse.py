@@ -375,9 +375,16 @@ class Engine:
         return out
 
     def norm1(self, E: np.ndarray) -> np.ndarray:
-        """Return the 1-norm (largest column sum of |J|) at every step (S,)."""
+        """Return the 1-norm (largest column sum of |J|) at every step (S,): each column's
+        entries added in order (as ``|E|[entries].sum(axis=0)`` adds them), in place."""
         absE = np.abs(E)
-        return np.max(np.stack([absE[ce].sum(axis=0) for ce in self.col_entries]), axis=0)
+        out = None
+        for ce in self.col_entries:
+            acc = absE[ce[0]].copy()
+            for e in ce[1:]:
+                acc += absE[e]
+            out = acc if out is None else np.maximum(out, acc, out=out)
+        return out
 
     def inverse(self, E: np.ndarray) -> np.ndarray:
         """Return J^-1 as (n, m, S): one block solve per unit right-hand side."""
