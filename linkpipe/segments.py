@@ -45,8 +45,9 @@ from .stage1 import Stage1
 #: solve, is shorter)
 SEGMENT_BYTES = 12 * 2**20
 #: the fewest and most steps of a segment: powers of two, so that a segment holds whole chunks
-#: of every stage that works in chunks of steps (the derivatives' and the dyads' 8,192, the
-#: force stage's 16,384). Each step's numbers are then computed in the
+#: of every stage whose rows depend on where its chunks start (the derivatives' and the dyads'
+#: 8,192, the force stage's 16,384; link rates and the finiteness checks, elementwise, give
+#: the same rows in chunks of any size). Each step's numbers are then computed in the
 #: same batch as in the whole sweep, so they agree to the last bit (a batched solve's last few
 #: steps take a different SIMD path, with other rounding, than the ones before them)
 MIN_SEGMENT_STEPS, MAX_SEGMENT_STEPS = 2**14, 2**17

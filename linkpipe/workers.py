@@ -16,7 +16,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 #: the default count's ceiling: past a few threads the Python between numpy calls (under the
 #: GIL) is the limit
@@ -25,6 +25,8 @@ MOST = 4
 _count: contextvars.ContextVar[int | None] = contextvars.ContextVar("linkpipe_chunk_threads",
                                                                    default=None)
 _pools: dict[int, ThreadPoolExecutor] = {}
+if hasattr(os, "register_at_fork"):  # a forked child has none of its parent's threads
+    os.register_at_fork(after_in_child=_pools.clear)
 
 
 def default_count() -> int:
@@ -65,8 +67,9 @@ def _pool(n: int) -> ThreadPoolExecutor:
 def for_chunks(work, n_steps: int, chunk: int) -> None:
     """Call ``work(lo, hi)`` for each chunk ``lo .. hi - 1`` of ``n_steps`` steps, on
     :func:`count` threads (in this thread where that is 1 or there is one chunk). ``work``
-    writes its own rows of preallocated outputs; the first exception any chunk raises is
-    raised here, after every started chunk has ended (none still writes)."""
+    writes its own rows of preallocated outputs; the first chunk's exception (in step order), or
+    a Ctrl-C while this thread waits, is raised here, after every started chunk has ended (none
+    still writes)."""
     bounds = [(lo, min(n_steps, lo + chunk)) for lo in range(0, n_steps, chunk)]
     n = min(count(), len(bounds))
     if n <= 1:
@@ -76,13 +79,22 @@ def for_chunks(work, n_steps: int, chunk: int) -> None:
     context = contextvars.copy_context()  # numpy's errstate; one thread inside a chunk
     context.run(_count.set, 1)  # (a chunk's own chunked calls must not wait on this pool)
     futures = [_pool(n).submit(context.copy().run, work, lo, hi) for lo, hi in bounds]
-    failure = None
-    for future in futures:
-        try:
+    try:
+        for future in futures:
             future.result()
-        except BaseException as exc:  # noqa: BLE001 (the first is raised once all have ended)
-            failure = failure or exc
-            for later in futures:
-                later.cancel()
-    if failure is not None:
-        raise failure
+    except BaseException:  # a chunk's failure, or Ctrl-C while waiting: no chunk left writing
+        for future in futures:
+            future.cancel()
+        _settle(futures)
+        raise
+
+
+def _settle(futures) -> None:
+    """Wait until every started chunk has ended (a chunk is milliseconds of numpy: a further
+    Ctrl-C while waiting is held until then, and the first one is raised by the caller)."""
+    while True:
+        try:
+            wait(futures)
+            return
+        except KeyboardInterrupt:
+            continue

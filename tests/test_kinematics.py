@@ -235,7 +235,10 @@ def test_running_sums_of_sparse_corrections_are_cumsums_bit_for_bit():
         c = np.where(rng.uniform(size=(S + 1, L)) < density,
                      2 * np.pi * rng.integers(-3, 4, size=(S + 1, L))
                      + rng.normal(scale=1e-15, size=(S + 1, L)), 0.0)
-        c[0] = rng.normal(scale=20.0, size=L) * (rng.uniform(size=L) < 0.5)
-        np.testing.assert_array_equal(_running_sums(c), np.cumsum(c, axis=0))
+        # a carried start: a sum of corrections, never -0.0 (x + y == 0 rounds to +0.0)
+        c[0] = np.where(rng.uniform(size=L) < 0.5, rng.normal(scale=20.0, size=L), 0.0)
+        # bit for bit, the sign of zero too
+        np.testing.assert_array_equal(_running_sums(c).view(np.uint64),
+                                      np.cumsum(c, axis=0).view(np.uint64))
 
     check()

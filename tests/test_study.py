@@ -217,6 +217,8 @@ def test_dask_local_cluster_gives_the_same_file(tmp_path):
      "study.metrics", "x", "'input_forc' is not a variable"),
     ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "2 + 3"',
      "study.metrics", "x", "names no stored variable"),
+    ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "max(velocity_residual)"',
+     "study.metrics", "x", "set [solver] rate_residuals = true"),
     ('"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }', 'x = "__import__(\'os\')"',
      "study.metrics", "x", "unexpected"),
 ])

@@ -69,9 +69,14 @@ def test_a_chunk_does_not_share_out_its_own_chunks():
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
-def test_jacobian_stage_and_rates_equal_on_one_and_three_threads(config):
+def test_jacobian_stage_and_rates_equal_on_one_and_three_threads(config, monkeypatch):
     """Every shipped scene's Jacobian stage, link angles, rates and finiteness in chunks of 16
     steps (many chunks, whatever the sweep's length): three threads give one thread's arrays."""
+    from linkpipe import status
+    from linkpipe.kinematics import rates as rates_module
+
+    monkeypatch.setattr(rates_module, "CHUNK", 16)  # link angles' chunks
+    monkeypatch.setattr(status, "FINITE_CHUNK", 16)
     scene = linkpipe.load_scene(config)
     model = build_model(scene)
     stages = Stages.of(scene)
@@ -149,3 +154,67 @@ def test_finite_rows_equal_the_entrywise_test_with_overflowing_sums():
                 np.testing.assert_array_equal(finite_rows([a, a[:, :1].copy()], S), want)
 
     check()
+
+
+def test_ctrl_c_while_waiting_returns_once_every_started_chunk_has_ended():
+    """A signal that lands while this thread waits for the chunks (here SIGALRM raising
+    KeyboardInterrupt, as Ctrl-C does) is raised only after every chunk that had started has
+    ended: no chunk still writes into the outputs when the caller unwinds."""
+    import signal
+    import time
+
+    state, lock = {}, threading.Lock()
+
+    def work(lo, hi):
+        with lock:
+            state[lo] = "start"
+        time.sleep(0.4 if lo == 0 else 0.1)  # the chunk waited on when the signal lands is
+        with lock:                            # the last of the started ones to end
+            state[lo] = "end"
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
+        with using(2), pytest.raises(KeyboardInterrupt):
+            for_chunks(work, 64, 8)  # 8 chunks on 2 threads
+        with lock:
+            at_raise = dict(state)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert at_raise and set(at_raise.values()) == {"end"}  # started ones ended, none mid-way
+    assert len(at_raise) < 8  # the others were cancelled, never started
+    time.sleep(0.5)
+    assert state == at_raise  # and none started after
+
+
+def test_a_forked_child_solves_with_threads_of_its_own(tmp_path):
+    """The pools are the parent's threads: a child forked after a threaded solve (multiprocessing
+    on Linux) gets new ones instead of waiting forever on threads it does not have."""
+    import multiprocessing
+
+    with using(2):
+        for_chunks(lambda lo, hi: None, 64, 8)  # the parent's pool exists
+    ctx = multiprocessing.get_context("fork")
+
+    def child(path):
+        out = np.zeros(64)
+
+        def work(lo, hi):
+            out[lo:hi] = 1.0
+
+        with using(2):
+            for_chunks(work, 64, 8)
+        np.save(path, out)
+
+    proc = ctx.Process(target=child, args=(str(tmp_path / "out.npy"),))
+    proc.start()
+    proc.join(20)
+    alive = proc.is_alive()
+    if alive:
+        proc.kill()
+    assert not alive and proc.exitcode == 0
+    assert (np.load(tmp_path / "out.npy") == 1.0).all()

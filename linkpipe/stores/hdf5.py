@@ -79,7 +79,7 @@ class SweepWriter:
         self._finished = False
         self._thread: ThreadPoolExecutor | None = None  # writes a part's rows while the next solves
         self._pending: Future | None = None
-        self._fd: int | None = None  # the temporary file's descriptor (fdatasync after a part)
+        self._fd: int | None = None  # the temporary file's descriptor (writeback after a part)
 
     def __enter__(self) -> "SweepWriter":
         return self
@@ -88,19 +88,17 @@ class SweepWriter:
         raised = None
         try:
             self._wait()
-        except Exception as error:  # noqa: BLE001 (a part that failed to write loses the file)
-            raised = error
-        except BaseException as stop:  # Ctrl-C while waiting: the write ends before the
-            raised = stop               # close, then the interrupt goes on (nothing is kept)
-        finally:
-            self._end_thread()
+        except BaseException as error:  # noqa: BLE001 (a part that failed to write, or Ctrl-C
+            raised = error              # while waiting: the file is not kept)
+        stop = self._end_thread()  # every write has ended before the file closes
+        raised = raised or stop
         self._datasets.clear()  # no dataset outlives its file (h5py objects of a file that
         self._scales.clear()    # failed to close were seen to crash the garbage collector)
         try:
             if self._file is not None:
                 self._file.close()  # h5py flushes here: a full disk may show now
-        except Exception as error:  # noqa: BLE001 (any failure to close loses the file)
-            raised = error
+        except BaseException as error:  # noqa: BLE001 (any failure to close loses the file;
+            raised = error              # a Ctrl-C here still removes the temporary below)
         finally:
             self._file = None
         if self._atomic is None:
@@ -165,14 +163,16 @@ class SweepWriter:
 
     @_clean_failures
     def _write_rows(self, part, rows: slice, steps: np.ndarray) -> None:
-        """Write ``part``'s rows (the writer's thread), then start them to the disk
-        (fdatasync: the final fsync has only the last part left to wait for)."""
+        """Write ``part``'s rows (the writer's thread), then start them to the disk without
+        waiting for it (``posix_fadvise(DONTNEED)`` starts the writeback of the file's dirty
+        pages: the final fsync has less left to wait for, and a Ctrl-C never waits for a
+        disk here, only for this copy into the page cache)."""
         self._datasets["step"][rows] = steps
         for var in part.variables():
             if var.dims[:1] == ("step",):
                 self._datasets[var.name][rows] = _array(var.data)
-        if self._fd is not None:
-            os.fdatasync(self._fd)
+        if self._fd is not None and hasattr(os, "posix_fadvise"):
+            os.posix_fadvise(self._fd, 0, 0, os.POSIX_FADV_DONTNEED)
 
     def _wait(self) -> None:
         """Wait for the part being written; raise its failure."""
@@ -180,11 +180,18 @@ class SweepWriter:
         if pending is not None:
             pending.result()
 
-    def _end_thread(self) -> None:
-        """Wait for the writer's thread to end, whatever happened (no write outlives the file)."""
-        if self._thread is not None:
-            self._thread.shutdown(wait=True, cancel_futures=True)
-            self._thread = None
+    def _end_thread(self) -> BaseException | None:
+        """Wait for the writer's thread to end, whatever happened (no write outlives the file:
+        a part's copy takes milliseconds, so a Ctrl-C meanwhile is held until then and
+        returned, for the caller to raise once the file is closed and removed)."""
+        held = None
+        while self._thread is not None:
+            try:
+                self._thread.shutdown(wait=True, cancel_futures=True)
+                self._thread = None
+            except KeyboardInterrupt as stop:
+                held = held or stop
+        return held
 
     def restart(self) -> None:
         self._wait()

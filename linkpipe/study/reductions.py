@@ -162,6 +162,9 @@ def resolve(node, catalog: dict):
 def _reference(text: str, catalog: dict):
     parts = text.split(".")
     var, labels = parts[0], parts[1:]
+    if var not in catalog and var in ("velocity_residual", "acceleration_residual"):
+        raise ReductionError(f"{var!r} is stored only when the scene asks for it: set "
+                             "[solver] rate_residuals = true in the base scene")
     if var not in catalog:
         raise ReductionError(f"{var!r} is not a variable this scene stores "
                              f"({_suggest(var, sorted(catalog))})")
