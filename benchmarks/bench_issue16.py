@@ -26,7 +26,6 @@ import pathlib
 import re
 import subprocess
 import sys
-import tempfile
 import time
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -34,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_memory import scene_text  # noqa: E402  (a shipped config with its step count set)
-from bench_sweep import pylinkage_available, pylinkage_run  # noqa: E402
+from bench_sweep import pylinkage_available, pylinkage_run, scratch  # noqa: E402
 
 
 def verdict(ok: bool) -> str:
@@ -81,8 +80,8 @@ def peak_mb(config: str, steps: int, *flags: str) -> float:
     segments) in a fresh process."""
     code = ("import sys, json, pathlib, tempfile; sys.path[:0] = [{r!r}, {b!r}];"
             "from linkpipe.__main__ import main; from bench_memory import scene_text;"
-            "from bench_sweep import peak_rss_mb;"
-            "d = pathlib.Path(tempfile.mkdtemp()); p = d / 's.toml';"
+            "from bench_sweep import peak_rss_mb, scratch;"
+            "d = scratch(); p = d / 's.toml';"
             "p.write_text(scene_text({c!r}, {n}, '')); "
             "assert main(['run', str(p), '--out', str(d), '--quiet', *{f!r}]) == 0;"
             "print(json.dumps(peak_rss_mb()))").format(
@@ -120,7 +119,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true")
     args = p.parse_args(argv)
-    folder = pathlib.Path(tempfile.mkdtemp(prefix="linkpipe_issue16_"))
+    folder = scratch("linkpipe_issue16_")
     print(f"issue 16 targets, {time.strftime('%Y-%m-%d %H:%M')}{' (--quick)' if args.quick else ''}")
     cli_target(folder, 36_001 if args.quick else 360_001)
     memory_targets(args.quick)

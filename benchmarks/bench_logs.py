@@ -20,7 +20,6 @@ import json
 import pathlib
 import subprocess
 import sys
-import tempfile
 import time
 
 import numpy as np
@@ -29,7 +28,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_sweep import EFFECTS, peak_rss_mb  # noqa: E402  (the same every-effect tables as its pipeline case)
+from bench_sweep import EFFECTS, peak_rss_mb, scratch  # noqa: E402  (the same every-effect tables as its pipeline case)
 
 
 def scene_text(measure: bool = False, k=200.0, mass=3.0, load=20.0) -> str:
@@ -81,7 +80,7 @@ def child_run(rows: int, folder: pathlib.Path) -> None:
 def child_fit(rows: int) -> None:
     import linkpipe
     from linkpipe.fit import fit
-    folder = pathlib.Path(tempfile.mkdtemp())
+    folder = scratch()
     write_log(folder, rows)
     (folder / "truth.toml").write_text(scene_text(k=250.0, mass=3.6, load=35.0))
     torque = linkpipe.solve(str(folder / "truth.toml")).forces["input_force"][1][:, 0]
@@ -112,7 +111,7 @@ def main(argv=None) -> int:
         return child_run(args.rows, pathlib.Path(args.folder)) or 0
     if args.child == "fit":
         return child_fit(args.rows) or 0
-    folder = pathlib.Path(tempfile.mkdtemp())
+    folder = scratch()
     write_log(folder, args.rows)
     r = run_child("run", args.rows, str(folder))
     rate = r["rows"] / r["work"]

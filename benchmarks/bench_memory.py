@@ -22,7 +22,6 @@ import pathlib
 import re
 import subprocess
 import sys
-import tempfile
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -49,8 +48,9 @@ def child(name: str, scale: float, mode: str) -> None:
     import linkpipe
     from linkpipe.pipeline import memory_needed
     from linkpipe.stores import hdf5
+    from bench_sweep import scratch
     config, steps, extra = CASES[name]
-    folder = pathlib.Path(tempfile.mkdtemp())
+    folder = scratch()
     path = folder / "s.toml"
     path.write_text(scene_text(config, int(steps * scale), extra))
     scene = linkpipe.load_scene(str(path))

@@ -28,12 +28,14 @@ linkage (``configs/jansen.toml`` when present), each written to .h5 and .rrd; an
 from __future__ import annotations
 
 import argparse
+import atexit
 import datetime
 import json
 import math
 import os
 import pathlib
 import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -51,6 +53,14 @@ POINTS = ("O2", "A", "B", "O4", "P")  # the scene's point order
 
 
 # ------------------------------------------------------------------------------------ tools
+
+def scratch(prefix: str = "linkpipe_bench_") -> pathlib.Path:
+    """A new temporary folder, removed when this process exits (a benchmark's outputs reach
+    gigabytes: a 10M-step .h5 is 3.6 GB)."""
+    folder = pathlib.Path(tempfile.mkdtemp(prefix=prefix))
+    atexit.register(shutil.rmtree, folder, True)
+    return folder
+
 def closed_form(theta: np.ndarray, omega: float = OMEGA, alpha: float = 0.0):
     """Return X, V, A (S, 5, 2) of the crank-rocker at crank angles theta: plain numpy."""
     a, b, c, d, u, v = A_, B_, C_, D_, U_, V_
@@ -354,7 +364,7 @@ def pipeline_child(case: str) -> None:
     imports = time.perf_counter() - t0
     rss0 = peak_rss_mb()
     name, text = scene_text(case)
-    out = pathlib.Path(tempfile.mkdtemp(prefix="linkpipe_bench_"))
+    out = scratch()
     trace = os.environ.get("BENCH_TRACEMALLOC") == "1"
     if trace:
         tracemalloc.start()
@@ -387,7 +397,7 @@ def run_child(case: str) -> dict:
 
 
 def cli_cold() -> float:
-    out = tempfile.mkdtemp(prefix="linkpipe_cli_")
+    out = str(scratch("linkpipe_cli_"))
     configs = sorted(str(p) for p in (ROOT / "configs").glob("*.toml"))
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "linkpipe", "run", *configs, "--out", out, "--quiet"],
