@@ -19,9 +19,10 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 CRANK_ROCKER = ROOT / "configs" / "fourbar_crank_rocker.toml"
 
 
-#: steps of a run that lasts past the last signal's delay (the crank-rocker at about 1.5 M
-#: steps/s end to end, streamed in segments)
-LONG_STEPS = 8_000_000
+#: steps of a run that lasts past the last signal's delay on any machine CI runs on (the
+#: crank-rocker, streamed in segments: 16M steps about 10 s here; 8M finished in 5 s after the
+#: 2026-11-24 speed-ups, before the 4.5 s signal below)
+LONG_STEPS = 16_000_000
 
 
 def _long_scene(tmp_path, steps=LONG_STEPS):
@@ -90,6 +91,53 @@ def test_a_signal_stops_the_run_at_once_and_keeps_earlier_outputs(tmp_path, sign
             assert f["position"].shape[0] == LONG_STEPS and f.attrs["steps_ok"] == LONG_STEPS
     left = sorted(p.name for p in out.iterdir() if not p.name.endswith(".lock"))
     assert left == ["long.h5"]  # no temporaries, no .rrd (an advisory lock file may stay)
+
+
+_SIGNAL_INSIDE = """
+import os, signal, sys
+from linkpipe.stores import hdf5, rrd
+where = sys.argv[3]
+if where == "rrd":  # the .h5 published, the recording started
+    write = rrd.write
+    def rrd_write(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return write(*args, **kwargs)
+    rrd.write = rrd_write
+else:  # the .h5 writer's own thread, at its third part: the main thread is solving
+    write_rows, parts = hdf5.SweepWriter._write_rows, []
+    def write_rows_then_stop(self, *args):
+        parts.append(1)
+        if len(parts) == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return write_rows(self, *args)
+    hdf5.SweepWriter._write_rows = write_rows_then_stop
+from linkpipe.__main__ import main
+sys.exit(main(["run", sys.argv[1], "--out", sys.argv[2]]))
+"""
+
+
+@pytest.mark.parametrize("where", ["hdf5", "rrd"])
+def test_a_signal_inside_a_writer_keeps_whole_files_only(tmp_path, where):
+    """Ctrl-C raised from inside the .h5 writer's thread (while the main thread solves the next
+    segment) or inside the recording's writer: exit 130, one line; the previous .h5 kept (the
+    .h5 writer) or the new one whole (the recording's: it was published first); no .rrd, no
+    temporary file."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "long.h5").write_bytes(b"the previous run's file")
+    steps = 200_001  # a dozen segments
+    scene = _long_scene(tmp_path, steps)
+    proc = subprocess.run([sys.executable, "-c", _SIGNAL_INSIDE, str(scene), str(out), where],
+                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert proc.returncode == 130, proc.stderr
+    assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    if where == "hdf5":
+        assert (out / "long.h5").read_bytes() == b"the previous run's file"
+    else:
+        with h5py.File(out / "long.h5") as f:
+            assert f["position"].shape[0] == steps and f.attrs["steps_ok"] == steps
+    left = sorted(p.name for p in out.iterdir() if not p.name.endswith(".lock"))
+    assert left == ["long.h5"]
 
 
 def test_the_other_scenes_run_after_one_fails_and_the_summary_names_it(tmp_path, capsys):
