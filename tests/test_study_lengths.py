@@ -24,7 +24,8 @@ from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study
 from linkpipe.study import pivots, vector
 from test_study import EVERY_EFFECT
-from test_study_pivots import CHUNK_EDGES, assert_rows_are_own_runs, chunk_study, own_run, write
+from test_study_pivots import (CHUNK_EDGES, assert_rows_are_own_runs, chunk_study, own_run, study_of,
+                               vectorised_rows_are_own_runs, write)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 GOAL = ROOT / "configs" / "basketball_goal.toml"
@@ -213,17 +214,14 @@ def assert_variant_is_own_model(rows, chain, v: int, own) -> None:
 def test_random_link_lengths_equal_one_by_one_runs(tmp_path_factory, moves, seed):
     tmp_path = tmp_path_factory.mktemp("lengths")
     crank, coupler, rocker = moves
-    study = load_study(write(tmp_path, f'[study]\nbase = "{ROCKER.as_posix()}"\nsamples = 3\n'
-                             f'seed = {seed}\n[study.parameters]\n'
-                             f'"links.crank.lengths.O2-A" = {{ from = {1 + crank!r}, to = '
-                             f'{1 + crank!r}, steps = 1 }}\n'
-                             f'"links.coupler.lengths.A-B" = {{ uniform = [{3.5 + coupler!r}, '
-                             f'{3.55 + coupler!r}] }}\n'
-                             f'"links.rocker.lengths.O4-B" = {{ from = {3 + rocker!r}, to = '
-                             f'{3 + rocker!r}, steps = 1 }}\n'))
-    assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
-    assert_rows_are_own_runs(ROCKER, study, status, arrays)
+    study = study_of(tmp_path, ROCKER,
+                     f'"links.crank.lengths.O2-A" = {{ from = {1 + crank!r}, to = '
+                     f'{1 + crank!r}, steps = 1 }}\n'
+                     f'"links.coupler.lengths.A-B" = {{ uniform = [{3.5 + coupler!r}, '
+                     f'{3.55 + coupler!r}] }}\n'
+                     f'"links.rocker.lengths.O4-B" = {{ from = {3 + rocker!r}, to = '
+                     f'{3 + rocker!r}, steps = 1 }}\n', samples=3, seed=seed)
+    _, arrays = vectorised_rows_are_own_runs(ROCKER, study)
     assert_bitwise_own_runs(ROCKER, study, arrays, np.flatnonzero(usable(study)))
 
 

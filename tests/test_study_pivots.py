@@ -51,6 +51,22 @@ def write(tmp_path, text: str, name="s.toml") -> pathlib.Path:
     return path
 
 
+def study_of(tmp_path, base, parameters: str, samples=1, seed=0, extra=""):
+    """The study of ``parameters`` (the [study.parameters] table's lines) over scene ``base``."""
+    return load_study(write(tmp_path, f'[study]\nbase = "{pathlib.Path(base).as_posix()}"\n'
+                            f'samples = {samples}\nseed = {seed}\n{extra}[study.parameters]\n'
+                            f'{parameters}', "study.toml"))
+
+
+def vectorised_rows_are_own_runs(base, study):
+    """Assert the study takes the vectorised path and its rows of every variant are the
+    variants' own runs; return the rows (status, arrays)."""
+    assert study.slots is not None
+    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    assert_rows_are_own_runs(base, study, status, arrays)
+    return status, arrays
+
+
 def set_value(data: dict, path: tuple, value: float) -> None:
     """data at a parameter's path (tables of names, or arrays of tables by name or link)."""
     node, rest = data[path[0]], path[1:]
@@ -154,15 +170,12 @@ def test_derived_lengths_stay_variant_by_variant(tmp_path):
 def test_random_small_pivot_moves_equal_one_by_one_runs(tmp_path_factory, moves, seed):
     tmp_path = tmp_path_factory.mktemp("pivots")
     ox, oy, fy = moves
-    study = load_study(write(tmp_path, f'[study]\nbase = "{ROCKER.as_posix()}"\nsamples = 3\n'
-                             f'seed = {seed}\n[study.parameters]\n'
-                             f'"points.O2.x" = {{ from = {ox!r}, to = {ox!r}, steps = 1 }}\n'
-                             f'"points.O2.y" = {{ from = {oy!r}, to = {oy!r}, steps = 1 }}\n'
-                             '"points.O4.x" = { uniform = [3.98, 4.02] }\n'
-                             f'"points.O4.y" = {{ from = {fy!r}, to = {fy!r}, steps = 1 }}\n'))
-    assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
-    assert_rows_are_own_runs(ROCKER, study, status, arrays)
+    study = study_of(tmp_path, ROCKER, f'"points.O2.x" = {{ from = {ox!r}, to = {ox!r}, steps = 1 }}\n'
+                     f'"points.O2.y" = {{ from = {oy!r}, to = {oy!r}, steps = 1 }}\n'
+                     '"points.O4.x" = { uniform = [3.98, 4.02] }\n'
+                     f'"points.O4.y" = {{ from = {fy!r}, to = {fy!r}, steps = 1 }}\n',
+                     samples=3, seed=seed)
+    vectorised_rows_are_own_runs(ROCKER, study)
 
 
 #: 700 variants of the every-effect basketball goal in one batch (17,500 rows: two chunks of

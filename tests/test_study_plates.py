@@ -30,7 +30,7 @@ from linkpipe.study import load_study, run_study, vector
 from linkpipe.study.batch import solve_batch
 from linkpipe.study.pivots import rows_inputs
 from test_study_lengths import assert_bitwise_own_runs, assert_variant_is_own_model, usable
-from test_study_pivots import assert_rows_are_own_runs, write
+from test_study_pivots import assert_rows_are_own_runs, study_of, write
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PRESS = ROOT / "configs" / "shear_press.toml"
@@ -86,12 +86,6 @@ mass = 2.0
 inertia = 0.3
 center = "R"
 """
-
-
-def study_of(tmp_path, base, parameters: str, samples=1, seed=0, extra=""):
-    return load_study(write(tmp_path, f'[study]\nbase = "{pathlib.Path(base).as_posix()}"\n'
-                            f'samples = {samples}\nseed = {seed}\n{extra}[study.parameters]\n'
-                            f'{parameters}', "study.toml"))
 
 
 def plate_base(tmp_path, text=PLATE) -> pathlib.Path:
