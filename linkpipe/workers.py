@@ -85,16 +85,18 @@ def for_chunks(work, n_steps: int, chunk: int) -> None:
     except BaseException:  # a chunk's failure, or Ctrl-C while waiting: no chunk left writing
         for future in futures:
             future.cancel()
-        _settle(futures)
+        held_interrupts(lambda: wait(futures))  # the first failure or Ctrl-C goes on
         raise
 
 
-def _settle(futures) -> None:
-    """Wait until every started chunk has ended (a chunk is milliseconds of numpy: a further
-    Ctrl-C while waiting is held until then, and the first one is raised by the caller)."""
+def held_interrupts(call) -> KeyboardInterrupt | None:
+    """Run ``call()`` (a wait for threads whose work takes milliseconds) to its end, a Ctrl-C
+    meanwhile held until then; return the first one held (None: none), for the caller to
+    raise once it has cleaned up."""
+    held = None
     while True:
         try:
-            wait(futures)
-            return
-        except KeyboardInterrupt:
-            continue
+            call()
+            return held
+        except KeyboardInterrupt as stop:
+            held = held or stop

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..forces import combine_flags
 from ..result import Variable
+from ..workers import held_interrupts
 from . import atomic_path
 
 STR = h5py.string_dtype("utf-8")
@@ -184,13 +185,10 @@ class SweepWriter:
         """Wait for the writer's thread to end, whatever happened (no write outlives the file:
         a part's copy takes milliseconds, so a Ctrl-C meanwhile is held until then and
         returned, for the caller to raise once the file is closed and removed)."""
-        held = None
-        while self._thread is not None:
-            try:
-                self._thread.shutdown(wait=True, cancel_futures=True)
-                self._thread = None
-            except KeyboardInterrupt as stop:
-                held = held or stop
+        if self._thread is None:
+            return None
+        held = held_interrupts(lambda: self._thread.shutdown(wait=True, cancel_futures=True))
+        self._thread = None
         return held
 
     def restart(self) -> None:
