@@ -75,27 +75,22 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     ares = np.full(S, np.nan) if residuals and need_acceleration else None
 
     def work(lo: int, hi: int) -> None:  # rows lo .. hi - 1 of every output
-        idx = lo + np.flatnonzero(status[lo:hi] == OK)
-        if not len(idx):
+        at = lo + np.flatnonzero(status[lo:hi] == OK)  # the chunk's ok steps
+        if not len(at):
             return
-        if len(idx) == hi - lo:  # every step ok: views of the rows, not copies
-            idx = slice(lo, hi)
-        Xc, sc_ = X[idx], s[idx]
-        rows_c = None if rows is None else rows.take(idx)
+        ok_rows = slice(lo, hi) if len(at) == hi - lo else at  # every step ok: views, not copies
+        Xc, sc_ = X[ok_rows], s[ok_rows]
+        rows_c = None if rows is None else rows.take(ok_rows)
         cond, regular_steps = factorise(model, Xc, sc_, rows_c)
-        condition[idx] = cond
+        condition[ok_rows] = cond
         sing = is_singular(cond, rcond)
+        status[at[sing]] = SINGULAR
         good = ~sing
-        if isinstance(idx, slice):
-            status[lo + np.flatnonzero(sing)] = SINGULAR
-            gi = idx if good.all() else lo + np.flatnonzero(good)
-        else:
-            status[idx[sing]] = SINGULAR
-            gi = idx[good]
-        if not isinstance(gi, slice) and not len(gi):
+        if not good.any():
             return
+        every = good.all()
+        gi = ok_rows if every else at[good]
         solve, driver_columns, times_jacobian = regular_steps(good)
-        every = isinstance(gi, slice)
         Xg, sg = (Xc, sc_) if every else (Xc[good], sc_[good])
         rows_g = None if rows_c is None else rows_c if every else rows_c.take(good)
         if influence is not None:
