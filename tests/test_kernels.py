@@ -212,3 +212,19 @@ def test_norm1_is_the_dense_largest_column_sum_bit_for_bit():
         q, s = _samples(model, n=16)[:2]
         E = eng.entries(q, s)
         np.testing.assert_array_equal(eng.norm1(E), np.abs(eng.dense(E)).sum(axis=1).max(axis=1))
+
+
+def test_entries_of_points_are_the_entries_of_their_coordinates():
+    """Engine.entries_of (one gather of the moving coordinates) gives Engine.entries of
+    model.q_of, bit for bit, on every shipped scene with an engine."""
+    from linkpipe.kinematics.sparse import engine
+
+    for config in [c for c in _ALL_CONFIGS if "studies" not in c.parts]:
+        model = build_model(linkpipe.load_scene(config))
+        eng = engine(model)
+        if eng is None:
+            continue
+        q, s = _samples(model, n=16)[:2]
+        X = model.positions(q)
+        np.testing.assert_array_equal(model.qT_of(X), model.q_of(X).T)
+        np.testing.assert_array_equal(eng.entries_of(X, s), eng.entries(q, s))

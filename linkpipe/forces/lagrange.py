@@ -31,7 +31,7 @@ def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, ro
         for lo in range(0, len(idx), CHUNK):
             ii = idx[lo:lo + CHUNK]
             E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
-                 if pivots or rows is not None else eng.entries(model.q_of(Xz[ii]), s[ii]))
+                 if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
             rhs = list(np.ascontiguousarray(generalized_q[ii].T))
             lam[ii] = np.stack(eng.solve_transpose(E, rhs), axis=1)
         return lam, undetermined

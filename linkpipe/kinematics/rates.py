@@ -162,11 +162,7 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
 
     def factorise(model: Model, X, s, rows=None):
-        # the moving coordinates first, steps last (n, k), in one gather (q_of(X).T, as the
-        # engine takes it, without its two copies)
-        E = (entries_at(eng, X, s, rows) if fixed_per_row else
-             eng.entries_T(X.transpose(1, 2, 0)[model.moving].reshape(model.n_q, -1),
-                           np.ascontiguousarray(s.T)))
+        E = entries_at(eng, X, s, rows) if fixed_per_row else eng.entries_of(X, s)
         if with_inverse:
             inv = eng.inverse(E) if uses_inverse else None  # (n, m, k)
             cond = eng.condition(E, inv)

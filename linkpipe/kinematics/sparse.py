@@ -91,6 +91,11 @@ class Engine:
         """Return the Jacobian's non-zero entries (nnz, S) at positions q (S, n_q), values s (S, nd)."""
         return self.entries_T(np.ascontiguousarray(q.T), np.ascontiguousarray(s.T))
 
+    def entries_of(self, X: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Return the entries (nnz, S) at positions X (S, n_points, 2), values s (S, nd):
+        :meth:`entries` without its copies of ``q`` (:meth:`Model.qT_of`)."""
+        return self.entries_T(self.model.qT_of(X), np.ascontiguousarray(s.T))
+
     def dense(self, E: np.ndarray) -> np.ndarray:
         """Return the dense Jacobians (S, m, n) from entries (nnz, S) (for checks)."""
         S = E.shape[1]

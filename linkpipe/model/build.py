@@ -125,6 +125,11 @@ class Model:
         """Return ``q`` ``(S, n_q)`` from positions ``(S, n_points, 2)``."""
         return X[:, self.moving].reshape(X.shape[0], -1)
 
+    def qT_of(self, X: np.ndarray) -> np.ndarray:
+        """Return ``q_of(X).T`` ``(n_q, S)``, contiguous, in one gather (coordinates first,
+        steps last: the sparse engine's layout)."""
+        return X.transpose(1, 2, 0)[self.moving].reshape(self.n_q, -1)
+
     def velocities(self, qdot: np.ndarray) -> np.ndarray:
         """Return point velocities ``(S, n_points, 2)`` (zero at fixed points)."""
         V = np.zeros((qdot.shape[0], self.n_points, 2))
