@@ -255,6 +255,37 @@ def test_dyads_without_assembly_give_nan_and_no_assembly():
     np.testing.assert_array_equal(r.position[outside][:, r.point_names.index("O4")], [[3.5, 0.0]] * outside.sum())
 
 
+@pytest.mark.parametrize("method", ["dyads", "newton"])
+@pytest.mark.parametrize("kinematics", ['["velocity", "acceleration"]', '[]'])
+def test_rates_are_zero_at_fixed_points_and_nan_at_moving_points_of_failed_steps(method, kinematics):
+    """Every step's rates at a fixed point are exactly 0 (ok or not: the ground does not move),
+    a failed step's rates at its moving points NaN, an ok step's finite; a scene of positions
+    only stores no rates but the same rule holds for the arrays it computes (exact: a
+    statement about which values are written, not about rounding)."""
+    text = (DATA / "triple_rocker.toml").read_text().replace("steps = 361", "steps = 73")
+    text += f'\n[solver]\nmethod = "{method}"\n[outputs]\nkinematics = {kinematics}\n'
+    scene = linkpipe.parse_scene(text, "triple_rocker.toml")
+    model = build_model(scene)
+    rates_too = kinematics != "[]"  # as stage 1 asks: no rates for a scene of positions only
+    motion = kin.driver_motion(model)[1:]
+    sweep = kin.solve_sweep(model, *motion, order=2 if rates_too else 0)
+    der = kin.derivatives(model, np.nan_to_num(sweep.position), *motion, sweep.status, rates_too,
+                          velocity=sweep.velocity, acceleration=sweep.acceleration,
+                          need_influence=False, need_velocity=rates_too)
+    ok = der["status"] == st.OK
+    assert ok.any() and (~ok).any()
+    fixed, moving = model.fixed, ~model.fixed
+    for name in ("velocity", "acceleration") if rates_too else ("velocity",):
+        rates = der[name]
+        assert (rates[:, fixed] == 0.0).all() and not np.signbit(rates[:, fixed]).any(), name
+        assert np.isnan(rates[~ok][:, moving]).all(), name
+        if rates_too:
+            assert np.isfinite(rates[ok]).all(), name
+        else:
+            assert np.isnan(rates[:, moving]).all(), name
+    assert rates_too or der["acceleration"] is None
+
+
 # ------------------------------------------------------------------ the fast path shares the model
 _HARD = pathlib.Path(__file__).resolve().parent / "hard"
 if str(_HARD) not in sys.path:

@@ -116,12 +116,18 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
                 A[gi] = model.velocities(qdd.T)
 
     for_chunks(work, S, chunk)  # chunks on the workers' threads: rows do not depend on them
+    # every ok step's rates are written (given: the dyads' buffers hold zero at fixed points;
+    # solved: model.velocities), so only the steps not ok need their fixed points zeroed: a
+    # whole (S, P, 2) column write touches every cache line of the array (measured 10 ms per
+    # array at 360k steps)
+    bad = np.flatnonzero(status != OK)
+    fixed = np.flatnonzero(model.fixed)
     for given, out in ((velocity, V), (acceleration, A)):
         if given is not None and out is not None:
-            out[status != OK] = np.nan
-    V[:, model.fixed] = 0.0
-    if A is not None:
-        A[:, model.fixed] = 0.0
+            out[bad] = np.nan
+    for out, written in ((V, need_velocity), (A, True)):
+        if out is not None:
+            out[np.ix_(bad, fixed) if written else (slice(None), fixed)] = 0.0
     return dict(velocity=V, acceleration=A, condition=condition, velocity_residual=vres,
                 acceleration_residual=ares, status=status, influence=influence)
 
