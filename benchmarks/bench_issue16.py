@@ -35,6 +35,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from linkpipe.segments import SEGMENT_BYTES  # noqa: E402
 from bench_memory import scene_text  # noqa: E402  (a shipped config with its step count set)
 from bench_sweep import pylinkage_available, pylinkage_run, scratch  # noqa: E402
 
@@ -95,7 +96,7 @@ def disk_seconds(h5: pathlib.Path, folder: pathlib.Path) -> float:
     data = h5.read_bytes()
     target, tmp = folder / "disk_floor.bin", folder / "disk_floor.tmp"
     target.write_bytes(data)
-    piece = 12 * 2**20  # the run's segment size
+    piece = SEGMENT_BYTES  # the run's parts
     times = []
     for _ in range(3):
         t0 = time.perf_counter()

@@ -122,12 +122,12 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     # array at 360k steps)
     bad = np.flatnonzero(status != OK)
     fixed = np.flatnonzero(model.fixed)
-    for given, out in ((velocity, V), (acceleration, A)):
-        if given is not None and out is not None:
+    for given, out, written in ((velocity, V, need_velocity), (acceleration, A, True)):
+        if out is None:
+            continue
+        if given is not None:
             out[bad] = np.nan
-    for out, written in ((V, need_velocity), (A, True)):
-        if out is not None:
-            out[np.ix_(bad, fixed) if written else (slice(None), fixed)] = 0.0
+        out[np.ix_(bad, fixed) if written else (slice(None), fixed)] = 0.0
     return dict(velocity=V, acceleration=A, condition=condition, velocity_residual=vres,
                 acceleration_residual=ares, status=status, influence=influence)
 
