@@ -211,11 +211,13 @@ def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict) -> str:
 def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tuple:
     """Write ``<name>_fleet.h5`` (``fit``: ``<name>_fleet_fit.h5``) into the folder ``out``;
     return (its path, the table to print)."""
+    from .forces.virtual_work import input_force_units
     from .result import units_of
     from .stores import fleet as fleet_store
 
     labels, columns = fleet_columns(kind, scene, paths, rows)
-    force = units_of(scene)["force"]
+    by_driver = input_force_units(scene.drivers, units_of(scene))
+    force = by_driver[0] if len(set(by_driver)) == 1 else "mixed"
     units = {name: force if key == "force" else "1" if key == "1" else ""
              for name, (_, _, key) in COLUMNS[kind].items()}
     out.mkdir(parents=True, exist_ok=True)

@@ -212,8 +212,7 @@ def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
     time, time_note = stage1_time_axis(scene, value) if time_axis is None else time_axis
     return Result(
         scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
-        driver_velocity=drive.rate if scene.time is not None else None,
-        driver_acceleration=drive.acceleration if scene.time is not None else None,
+        driver_velocity=drive.rate, driver_acceleration=drive.acceleration,
         time_note=time_note, position=X, link_angle=k.link_angle, status=status,
         residual=k.sweep.residual, iterations=k.sweep.iterations, condition=der["condition"],
         velocity=k.velocity, acceleration=k.acceleration,

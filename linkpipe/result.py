@@ -189,7 +189,8 @@ class Result:
     """Everything one run produced, step axis first (like scipy's ``OdeResult``).
 
     Kinematic arrays: ``driver_value`` (S, n_drivers), ``time`` (S,) or None,
-    ``driver_velocity``/``driver_acceleration`` (S, n_drivers) in a [time] sweep, ``position``
+    ``driver_velocity``/``driver_acceleration`` (S, n_drivers) (a v1 sweep's constant rate and
+    acceleration at every step; a [time] sweep's from its laws and logs), ``position``
     (S, n_points, 2), ``velocity``/``acceleration`` (S, n_points, 2) or None, ``link_angle``
     (S, n_links) rad unwrapped, ``link_angular_velocity``/``_acceleration`` (S, n_links) or
     None, ``status`` (S,) int8, ``residual`` (S,), ``iterations`` (S,), ``condition`` (S,).

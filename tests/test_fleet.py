@@ -2,6 +2,7 @@
 of that scene run on that log alone; a log the scene cannot take is a row with its message."""
 import pathlib
 
+import h5py
 import numpy as np
 import pandas as pd
 import pytest
@@ -51,6 +52,8 @@ def test_run_over_a_glob_of_logs(logs, tmp_path, capsys):
         assert f["peak_input_force"][i, 0] == np.abs(r.forces["input_force"][1]).max()
         assert f["measured_rms"][i, 0] == r.measurements["rms"][0]
     assert np.isnan(f["peak_input_force"][0, 0]) and f["steps_ok"][0] == -1
+    with h5py.File(tmp_path / "dump_truck_logged_fleet.h5", "r") as h5:  # the run's own units
+        assert h5["peak_input_force"].attrs["units"] == r.forces["input_force"][2]
     out = capsys.readouterr().out
     assert "bad.csv      failed:" in out and "truck_2.csv" in out
 

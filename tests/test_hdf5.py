@@ -221,7 +221,8 @@ def test_a_crash_mid_write_keeps_the_previous_file(solve, tmp_path, monkeypatch)
     monkeypatch.setattr(hdf5, "_write_variable", failing)
     with pytest.raises(RuntimeError, match="disk on fire"):
         hdf5.write(result, path)
-    assert written == ["driver_value", "time", "position", "velocity", "acceleration"]  # part-way
+    assert written == ["driver_value", "time", "driver_velocity", "driver_acceleration", "position",
+                       "velocity", "acceleration"]  # part-way
     assert path.read_bytes() == before
     assert os.listdir(tmp_path) == [path.name]    # no temporary file left behind
     with pytest.raises(RuntimeError, match="disk on fire"):

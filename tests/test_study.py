@@ -6,6 +6,7 @@ import subprocess
 import sys
 import tomllib
 
+import h5py
 import numpy as np
 import pytest
 import tomli_w
@@ -119,6 +120,32 @@ def test_distributions_alone_give_samples_variants(tmp_path):
         r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(GOAL)))
         assert f["peak_input_force"][v, 0] == pytest.approx(
             np.abs(r.forces["input_force"][1]).max(), rel=1e-12)
+    # in the run's units: the goal's angle driver pushes at its input point H, in lbf
+    assert r.forces["input_force"][2] == "lbf"
+    with h5py.File(tmp_path / f"{study.name}_study.h5", "r") as h5:
+        for name in ("peak_input_force", "rms_input_force", "input_force_range"):
+            assert h5[name].attrs["units"] == "lbf" and h5[name].attrs["driver_units"] == "lbf"
+
+
+def test_an_angle_driver_without_input_point_has_torque_units(tmp_path):
+    """Without ``input`` an angle driver's input force is a torque: the study's peak, RMS and
+    range are in force*length (lbf*ft here), as the run's input_force is, and equal to it."""
+    base = tmp_path / "goal_torque.toml"
+    base.write_text(GOAL.read_text().replace('input = { point = "H", direction = [0.0, 1.0] }\n', ""))
+    assert "input =" not in base.read_text()
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{base.as_posix()}"\n[study.parameters]\n'
+                    '"points.O2.y" = { from = -1.0, to = -1.001, steps = 2 }\n')
+    study = load_study(path)
+    f = read_arrays(run_study(study, tmp_path))
+    r = linkpipe.load_scene(base)
+    r = linkpipe.solve(r)
+    assert r.forces["input_force"][2] == "lbf*ft"
+    assert f["peak_input_force"][0, 0] == pytest.approx(np.abs(r.forces["input_force"][1]).max(),
+                                                        rel=1e-12)
+    with h5py.File(tmp_path / f"{study.name}_study.h5", "r") as h5:
+        for name in ("peak_input_force", "rms_input_force", "input_force_range"):
+            assert h5[name].attrs["units"] == "lbf*ft" and h5[name].attrs["driver_units"] == "lbf*ft"
 
 
 def test_a_variant_that_cannot_assemble_is_a_row(tmp_path):

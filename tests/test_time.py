@@ -175,6 +175,28 @@ def test_run_writes_time_and_the_driver_rates(tmp_path):
         assert f["driver_velocity"].dims[1][0].name.endswith("driver")
 
 
+def test_a_version_1_sweep_writes_its_driver_rates_too(tmp_path):
+    """OUTPUT_FORMAT lists driver_velocity / driver_acceleration for every sweep: a version 1
+    sweep's are its drivers' constant rate and acceleration at every step (the scene's own
+    numbers, exactly), per driver in its own units; the slider's driver is a length."""
+    for config, rate, acc, unit in (("fourbar_crank_rocker", 572.9577951308232, 0.0, "degree"),
+                                    ("hard/slider_driven_dead_centres", 0.5, 0.0, "m")):
+        scene = linkpipe.load_scene(CONFIGS / f"{config}.toml")
+        d = scene.drivers[0]  # the scene's numbers, as parsed
+        assert (d.rate, d.acceleration) == (rate, acc)
+        assert main(["run", str(CONFIGS / f"{config}.toml"), "--out", str(tmp_path), "--quiet",
+                     "--no-rrd"]) == 0
+        with h5py.File(tmp_path / f"{scene.name}.h5", "r") as f:
+            n = f["driver_value"].shape[0]
+            np.testing.assert_array_equal(f["driver_velocity"][:], np.full((n, 1), rate))
+            np.testing.assert_array_equal(f["driver_acceleration"][:], np.full((n, 1), acc))
+            if unit == "degree":
+                assert f["driver_velocity"].attrs["units"] == "degree/s"
+                assert f["driver_acceleration"].attrs["units"] == "degree/s^2"
+            assert f["driver_velocity"].attrs["driver_units"] == f"{unit}/s"
+            assert f["driver_velocity"].dims[1][0].name.endswith("driver")
+
+
 # ------------------------------------------------------------------ scene errors
 BAD = [
     ("steps", crank_rocker('law = "linear"\nfrom = 0.0\nto = 90.0\nsteps = 10'), "steps"),

@@ -50,12 +50,9 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
     (S, P, 2)); a step where that leverage vanishes gets NO_LEVERAGE (and NaN); any step not ok
     gets NaN. ``size``: the mechanism's length scale, float or (S,) (default ``model.size``).
     Returns (status, unit of the input force)."""
-    force_unit, length_unit = units["force"], units["length"]
     status = status.copy()
-    unit_by_driver = []
     for j, driver in enumerate(model.scene.drivers):
         if driver.input is None:
-            unit_by_driver.append(f"{force_unit}*{length_unit}" if driver.kind == "angle" else force_unit)
             continue
         n = input_direction(model, driver.input, X)  # (S, 2)
         ip = model.point_names.index(driver.input.point)
@@ -66,10 +63,19 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
         safe = np.where(flat, np.nan, leverage)
         for force in forces:
             force[:, j] = force[:, j] / safe
-        unit_by_driver.append(force_unit)
     for force in forces:
         force[status != OK] = np.nan
+    unit_by_driver = input_force_units(model.scene.drivers, units)
     return status, unit_by_driver[0] if len(set(unit_by_driver)) == 1 else "mixed"
+
+
+def input_force_units(drivers, units: dict) -> list[str]:
+    """Each driver's input force unit: a generalized force, force*length for an angle driver
+    (a torque), force for a length driver or for any driver with an ``input`` point (the force
+    along its direction). ``units``: the scene's (:func:`linkpipe.result.units_of`)."""
+    force_unit, length_unit = units["force"], units["length"]
+    return [f"{force_unit}*{length_unit}" if d.kind == "angle" and d.input is None else force_unit
+            for d in drivers]
 
 
 def input_direction(model: Model, driver_input, X: np.ndarray) -> np.ndarray:

@@ -83,6 +83,7 @@ class _Attempt:
     residual: float = np.nan
     iterations: int = 0
     capped: bool = False
+    guess_residual: float = np.nan
     lm_residual: float | None = None
     q_lm: np.ndarray | None = None
 
@@ -198,7 +199,8 @@ class _Continuation:
                                        self.jacobian)
         att.q, att.residual, att.converged = qi, res[0], bool(conv[0])
         att.iterations += it[0]
-        att.capped = _converging_at_cap(model, fast, att.guess, s_i, it[0], res[0], conv[0], max_iter)
+        att.capped, att.guess_residual = _converging_at_cap(model, fast, att.guess, qi, s_i, it[0],
+                                                            res[0], conv[0], max_iter)
         aligned = (fast.aligned(qi[0], s_i) if fast is not None
                    else drivers_aligned(model, qi, s_i[None])[0])
         if att.converged and not aligned:
@@ -208,16 +210,21 @@ class _Continuation:
             att.iterations += it2[0]
             att.q, att.residual = qi, res[0]
             att.converged = bool((conv & drivers_aligned(model, qi, s_i[None]))[0])
-            att.capped = _converging_at_cap(model, fast, aimed, s_i, it2[0], res[0],
-                                            att.converged, max_iter)
+            att.capped, att.guess_residual = _converging_at_cap(
+                model, fast, aimed, qi, s_i, it2[0], res[0], att.converged, max_iter)
 
     def rescue(self, att: _Attempt, path: _Path, s_i) -> None:
         """Newton gave up (it stalled, failed, or wandered to the cap): slow or wandering at a
         singular root, or no root at all. Damped least squares from the same guess tells which,
         and reaches a singular root (not after a run that reached max_iter while converging:
-        that step is not_converged, as max_iter says). Failing right after an assembled step,
-        the step may just be too long for the continuation: it is retried in sub-steps."""
+        that step is not_converged). Failing right after an assembled step, the step may just be
+        too long for the continuation: it is retried in sub-steps, each Newton run in them
+        capped at max_iter as well. After a capped run only where the guess was no prediction:
+        farther from the constraints than the mechanism's own size (a predictor that overshot,
+        next to a limit); a capped run from a real prediction is the cap's doing."""
         model = self.model
+        if att.capped and not att.guess_residual > model.size:
+            return
         if not att.capped:
             att.q_lm, att.lm_residual, it_lm = _lm_root(model, att.guess, s_i, self.tol_abs)
             att.iterations += it_lm
@@ -235,7 +242,6 @@ class _Continuation:
         att.iterations += int(its.sum())
         if np.isfinite(qs[-1]).all() and rs[-1] <= self.tol_abs:
             att.q, att.converged, att.residual = qs[-1][None], True, rs[-1]
-            att.lm_residual, att.capped = None, False
 
     def accept(self, att: _Attempt, path: _Path, s_i) -> None:
         """A converged step: polish it near a singular shape, keep the assembly mode across a

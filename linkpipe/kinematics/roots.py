@@ -6,7 +6,7 @@ import numpy as np
 
 from ..model import Model
 from ..status import NO_ASSEMBLY, NOT_CONVERGED
-from .linalg import lin_solve
+from .linalg import MODE_SETTLED_BELOW, condition, is_singular, lin_solve
 from .step import _step_kernels
 
 
@@ -223,18 +223,32 @@ def _classify_failure(model: Model, q_guesses, s_row: np.ndarray, tol_abs: float
     return NO_ASSEMBLY, None
 
 
-def _converging_at_cap(model: Model, fast, guess: np.ndarray, s_row: np.ndarray, iterations: int,
-                       residual: float, converged: bool, max_iter: int) -> bool:
-    """Return whether a Newton run used all ``max_iter`` iterations while converging.
+def _converging_at_cap(model: Model, fast, guess: np.ndarray, q_end: np.ndarray, s_row: np.ndarray,
+                       iterations: int, residual: float, converged: bool, max_iter: int):
+    """Return (whether a Newton run from ``guess`` used all ``max_iter`` iterations while
+    converging, stopped at ``q_end`` (n_q,) with ``residual``; the guess's residual).
 
-    Converging: its residual fell to a thousandth of the guess's or less. Such a step is
-    not_converged (the cap stopped it); a run that reached the cap wandering (far from any root,
-    e.g. after a gap) is treated like one that stalled: damped least squares takes over."""
+    Converging: its residual fell to a thousandth of the guess's or less, or fell at all and
+    ended where Φq is well clear of singular (there Newton converges quadratically, so a run cut
+    short is the cap's doing, however low the cap). Such a step is not_converged, as
+    ``max_iter`` says: no other method finishes it. A run that reached the cap wandering (no
+    progress, e.g. after a gap) or creeping towards a near-singular root (Newton is only
+    linear there) failed like one that stalled: damped least squares takes over."""
     if converged or iterations < max_iter or not np.isfinite(residual):
-        return False
+        return False, np.nan
     F = fast.phi(guess, s_row) if fast is not None else model.phi(
         model.positions(guess[None]), s_row[None])[0]
-    return bool(F.size and residual <= 1e-3 * float(np.abs(F).max()))
+    start = float(np.abs(F).max()) if F.size else 0.0
+    if not residual < start:
+        return False, start
+    if residual <= 1e-3 * start:
+        return True, start
+    q_end = np.asarray(q_end, float).reshape(-1)
+    if not np.all(np.isfinite(q_end)):
+        return False, start
+    J = model.jacobian(model.positions(q_end[None]), s_row[None])
+    return not bool(is_singular(condition(J)[0], model.scene.solver.singular_rcond,
+                                MODE_SETTLED_BELOW)), start
 
 
 def aim_drivers(model: Model, q: np.ndarray, s_row: np.ndarray) -> np.ndarray:

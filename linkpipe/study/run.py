@@ -15,6 +15,7 @@ import pathlib
 import numpy as np
 
 from ..executors import EXECUTORS
+from ..forces.virtual_work import input_force_units
 from ..result import Variable, units_of
 from ..version import __version__
 from .batch import solve_batch
@@ -23,22 +24,25 @@ from .batch import solve_batch
 def layout(study) -> tuple[dict, list, list]:
     """(attributes, coordinates, variables at full size with their fill values)."""
     V, D, B = study.n_variants, len(study.driver_names), len(study.batches())
-    force = units_of(study.scene)["force"]
+    # each driver's input force unit (a torque for an angle driver without an input point)
+    by_driver = input_force_units(study.scene.drivers, units_of(study.scene))
+    force = by_driver[0] if len(set(by_driver)) == 1 else "mixed"
     coords = [Variable("variant", ("variant",), np.arange(V, dtype=np.int64), "1"),
               Variable("parameter", ("parameter",), np.array(study.names, dtype=object), "",
                        {"kind": [p.kind for p in study.parameters]}),
               Variable("driver", ("driver",), np.array(study.driver_names, dtype=object), ""),
               Variable("batch", ("batch",), np.arange(B, dtype=np.int64), "1")]
     nan = np.full((V, D), np.nan)
-    per_driver = {"long_name": "over the variant's ok steps"}
+    per_driver = {"long_name": "over the variant's ok steps", "driver_units": ",".join(by_driver)}
     variables = [
         Variable("parameter_value", ("variant", "parameter"), study.values, "",
                  {"initial": [p.initial for p in study.parameters]}),
         Variable("peak_input_force", ("variant", "driver"), nan, force,
-                 {"long_name": "max |input_force| over the variant's ok steps"}),
+                 {**per_driver, "long_name": "max |input_force| over the variant's ok steps"}),
         Variable("rms_input_force", ("variant", "driver"), nan, force, per_driver),
         Variable("input_force_range", ("variant", "driver"), nan, force,
-                 {"long_name": "max - min of input_force over the variant's ok steps"}),
+                 {**per_driver,
+                  "long_name": "max - min of input_force over the variant's ok steps"}),
         Variable("min_transmission_angle", ("variant",), np.full(V, np.nan), "degree",
                  {"long_name": "smallest min(mu, 180 - mu) at the pins between two moving "
                                "links no angle driver turns, over the ok steps"}),

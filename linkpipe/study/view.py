@@ -7,6 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..forces.virtual_work import input_force_units
+from ..result import units_of
+
 #: best variants solved again for their motion in the recording; bins of a metric's histogram
 N_MOTION, N_BINS = 3, 30
 
@@ -52,12 +55,12 @@ def study_view(study, columns: dict) -> StudyView:
     """The view of a finished study's file (``columns``: its arrays, as read back)."""
     from .batch import solve_variant
 
-    force = study.scene.units.get("force", "force")
+    force = input_force_units(study.scene.drivers, units_of(study.scene))
     metrics, units = {}, {}
     for name in ("peak_input_force", "input_force_range", "rms_input_force"):
         for j, driver in enumerate(study.driver_names):
             if np.isfinite(columns[name][:, j]).any():
-                metrics[f"{name}.{driver}"], units[f"{name}.{driver}"] = columns[name][:, j], force
+                metrics[f"{name}.{driver}"], units[f"{name}.{driver}"] = columns[name][:, j], force[j]
     for m in study.metrics:
         metrics[m.name], units[m.name] = np.asarray(columns[m.name], float), ""
     if np.isfinite(columns["min_transmission_angle"]).any():
