@@ -1,5 +1,5 @@
 """Studies that change link lengths (``links.<name>.lengths.<first>-<second>``) on the vectorised
-path: each batch's model constants built at once (linkpipe/model/build.py: variant_rows), the
+path: each batch's model constants built at once (linkpipe/model/rows.py: variant_rows), the
 dyads' constants from them (linkpipe/kinematics/decompose.py: chain_at), stage 1, the
 derivative stage and the force stage on V x S rows. Every stored variable of every variant
 equals its own one-by-one run (the scene's TOML edited by hand, parsed and solved by
@@ -18,7 +18,7 @@ import linkpipe
 import linkpipe.kinematics as kin
 from linkpipe.kinematics.decompose import bodies_of, chain_at
 from linkpipe.model import build_model
-from linkpipe.model.build import variant_rows
+from linkpipe.model.rows import variant_rows
 from linkpipe.status import NO_ASSEMBLY, OK
 from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study

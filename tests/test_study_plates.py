@@ -3,7 +3,7 @@ point P placed by two distances: linkpipe/scene/sides.py) or the drawn coordinat
 points (``points.<P>.x | y``: the start guess, and the lengths and local coordinates a scene
 takes from its drawing) on the vectorised path: each batch's plates placed again and its
 model rows built at once by the code that builds one scene's (sides.placement,
-model/build.py: variant_rows), stage 1, the derivative stage and the force stage on V x S
+model/rows.py: variant_rows), stage 1, the derivative stage and the force stage on V x S
 rows. Every stored variable of every variant equals its own one-by-one run (the scene's TOML
 edited by hand, parsed and solved by ``linkpipe.solve``), bit for bit where the vectorised
 rows hold it; variants whose scene fails its checks, that cannot assemble or that start on
@@ -22,7 +22,7 @@ import linkpipe
 import linkpipe.kinematics as kin
 from linkpipe.kinematics.decompose import bodies_of, chain_at
 from linkpipe.model import build_model
-from linkpipe.model.build import variant_rows
+from linkpipe.model.rows import variant_rows
 from linkpipe.scene import parse_scene
 from linkpipe.status import NO_ASSEMBLY, OK
 from linkpipe.stores.study import read_arrays

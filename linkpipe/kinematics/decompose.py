@@ -123,7 +123,7 @@ class DyadChain:
 
 def bodies_of(model: Model, rows=None) -> list[Body]:
     """Return every link as a body with local coordinates (a at 0, b at (L, 0), others (u, v)),
-    read off the model's rows; ``rows``: V variants' rows (:func:`linkpipe.model.build.variant_rows`),
+    read off the model's rows; ``rows``: V variants' rows (:func:`linkpipe.model.rows.variant_rows`),
     each body's local coordinates then (V, n, 2)."""
     scene = model.scene
     rows = model.rows if rows is None else rows

@@ -11,7 +11,7 @@ engine's affine map, whose entries then take the coefficients each variant's own
 (:func:`.affine.entries_at`, read off :meth:`Model.jacobian_terms` at probe configurations).
 Variants that also differ in link lengths (or local coordinates) carry their own constants
 the same way: the model's rows with per-row arrays (:class:`linkpipe.model.equations.Rows`,
-built by the model's own code, :func:`linkpipe.model.build.variant_rows`), read by every
+built by the model's own code, :func:`linkpipe.model.rows.variant_rows`), read by every
 equation, the engine's coefficients and the dyads' constants (:func:`.decompose.chain_at`)
 row by row.
 
@@ -55,7 +55,7 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     points, of length scales ``sizes`` (V,); the sweep ``s``, ``s_dot``, ``s_ddot`` (S, nd) in
     internal units; ``chain`` the base scene's dyads with its branches set. Variants that also
     differ in link lengths (or local coordinates) give ``rows``, their model's rows with (V,)
-    arrays where they differ (:func:`linkpipe.model.build.variant_rows`), and ``chain`` with
+    arrays where they differ (:func:`linkpipe.model.rows.variant_rows`), and ``chain`` with
     their dyads' (V,) constants (:func:`.decompose.chain_at`; which variants decompose alike
     is the caller's to check).
 

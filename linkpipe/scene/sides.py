@@ -11,7 +11,7 @@ model never sees a distance.
 
 The geometry (:func:`drawn_local`, :func:`placement`) is written once, elementwise: on floats
 for one scene (:func:`place`, at load) and on (V,) arrays for V variants of it (a study's
-side distances, frame lengths or drawn points: :func:`linkpipe.model.build.variant_rows`).
+side distances, frame lengths or drawn points: :func:`linkpipe.model.rows.variant_rows`).
 The checks a scene must pass (:func:`fits`, :func:`place`'s errors) read its results; only
 :func:`place` raises.
 """
@@ -56,7 +56,7 @@ def drawn_local(ax, ay, bx, by, px, py):
     """(u, v) of a point drawn at (px, py) in the frame of a link whose first two points are
     drawn at (ax, ay), (bx, by): u along a -> b, v a quarter turn counter-clockwise (floats,
     or arrays elementwise). The model takes every further point's local coordinates that the
-    scene does not give from here (:func:`linkpipe.model.build._link_rows`)."""
+    scene does not give from here (:func:`linkpipe.model.rows._link_rows`)."""
     dx, dy = bx - ax, by - ay
     drawn = np.hypot(dx, dy)
     ex, ey = dx / drawn, dy / drawn

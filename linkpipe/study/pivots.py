@@ -7,7 +7,7 @@ changes nothing else of the model where the scene gives the lengths and local co
 the links at that point (checked at both ends of each parameter's range: the model's rows and
 mass-centre frames must equal the base scene's). A parameter ``links.<name>.lengths.A-B`` (the
 distance of a link's first two points) changes the model's constants: each variant's are
-built by the model's own code at once for the batch (:func:`linkpipe.model.build.variant_rows`:
+built by the model's own code at once for the batch (:func:`linkpipe.model.rows.variant_rows`:
 the rows with (V,) arrays where they differ; the dyads' constants from them by
 :func:`linkpipe.kinematics.decompose.chain_at`), checked at both ends of each parameter's range
 against the model the variant's own scene builds (rows and mass-centre frames equal to the
@@ -39,7 +39,8 @@ from ..forces.applied import center_frame
 from ..forces.constants import ForceConstants
 from ..forces.springs import torsion_offset
 from ..kinematics.decompose import bodies_of, chain_at
-from ..model.build import build_model, variant_rows
+from ..model.build import build_model
+from ..model.rows import variant_rows
 from ..pipeline import Stages, result_of, status_of
 from ..stage1 import Kinematics
 from ..result import Motion, units_of
