@@ -18,6 +18,7 @@ from .step import _step_kernels
 
 
 SUBSTEPS, SUBDIVIDE = 8, 2  # a failing step's retry: 8 sub-steps, at most 2 levels deep
+CLASSIFY_ITER = 10  # Newton iterations past a capped run that look for its root (not counted)
 
 
 def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
@@ -343,7 +344,17 @@ class _Continuation:
         """A failed step: not_converged where a root exists (the cap stopped Newton), else
         no_assembly; the path goes on from that root, or restarts after the gap."""
         root = None
-        if att.lm_residual is None:
+        if att.capped:
+            # Newton was converging when the cap stopped it: a few more iterations from where it
+            # stopped (not counted: they only tell the two failures apart) usually find the root,
+            # far cheaper than damped least squares
+            qr, _, _, conv = newton(self.model, att.q, s_i[None], self.tol_abs, CLASSIFY_ITER,
+                                    self.jacobian)
+            if conv[0] and drivers_aligned(self.model, qr, s_i[None])[0]:
+                root = qr[0]
+        if root is not None:
+            status = NOT_CONVERGED
+        elif att.lm_residual is None:
             tries = (att.guess, att.q, path.q) if att.capped else (att.guess,)
             status, root = _classify_failure(self.model, tries, s_i, self.tol_abs)
         else:
