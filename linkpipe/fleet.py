@@ -212,12 +212,11 @@ def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tupl
     """Write ``<name>_fleet.h5`` (``fit``: ``<name>_fleet_fit.h5``) into the folder ``out``;
     return (its path, the table to print)."""
     from .forces.virtual_work import input_force_units
-    from .result import units_of
+    from .result import common_unit, units_of
     from .stores import fleet as fleet_store
 
     labels, columns = fleet_columns(kind, scene, paths, rows)
-    by_driver = input_force_units(scene.drivers, units_of(scene))
-    force = by_driver[0] if len(set(by_driver)) == 1 else "mixed"
+    force = common_unit(input_force_units(scene.drivers, units_of(scene)))
     units = {name: force if key == "force" else "1" if key == "1" else ""
              for name, (_, _, key) in COLUMNS[kind].items()}
     out.mkdir(parents=True, exist_ok=True)

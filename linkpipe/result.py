@@ -36,6 +36,12 @@ class Variable:
     attrs: dict[str, Any] = field(default_factory=dict)
 
 
+def common_unit(units: list[str]) -> str:
+    """The one unit of a variable whose entries (drivers, measurements) share it, else
+    ``"mixed"`` (each entry's own unit then goes in an attribute beside it)."""
+    return units[0] if len(set(units)) == 1 else "mixed"
+
+
 def units_of(scene: Scene) -> dict[str, str]:
     """Unit strings of a scene (free text), with neutral defaults: length, time, force, mass."""
     u = dict(scene.units)
@@ -335,7 +341,7 @@ class Result:
         dunits = self.driver_units()
         out = [
             Variable("driver_value", ("step", "driver"), self.driver_value,
-                     dunits[0] if len(set(dunits)) == 1 else "mixed",
+                     common_unit(dunits),
                      {"driver_units": ",".join(dunits)}),
         ]
         if self.time is not None:
@@ -345,7 +351,7 @@ class Result:
             if data is not None:
                 units = [f"{d}/{per}" for d in dunits]
                 out.append(Variable(name, ("step", "driver"), data,
-                                    units[0] if len(set(units)) == 1 else "mixed",
+                                    common_unit(units),
                                     {"driver_units": ",".join(units)}))
         out.append(Variable("position", ("step", "point", "xy"), self.position, L))
         if self.velocity is not None:
@@ -363,7 +369,7 @@ class Result:
                 out.append(Variable(name, dims, data, units))
         if self.measurements:
             m = self.measurements
-            units = m["units"][0] if len(set(m["units"])) == 1 else "mixed"
+            units = common_unit(m["units"])
             per = {"measurement_units": ",".join(m["units"])}
             out.append(Variable("measured", ("step", "measurement"), m["measured"], units, per))
             out.append(Variable("measured_residual", ("step", "measurement"), m["residual"], units,

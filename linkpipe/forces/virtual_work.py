@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import Model
+from ..result import common_unit
 from ..status import NO_LEVERAGE, OK
 
 LEVERAGE_RTOL = 1e-9  # |n . dr_H/ds| below this times the mechanism size: no leverage
@@ -65,8 +66,7 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
             force[:, j] = force[:, j] / safe
     for force in forces:
         force[status != OK] = np.nan
-    unit_by_driver = input_force_units(model.scene.drivers, units)
-    return status, unit_by_driver[0] if len(set(unit_by_driver)) == 1 else "mixed"
+    return status, common_unit(input_force_units(model.scene.drivers, units))
 
 
 def input_force_units(drivers, units: dict) -> list[str]:

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 
 _R90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # d_perp = _R90 @ d
 
+
 def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray,
                lengths: dict | None = None, distances: dict | None = None,
                reach: list | None = None, fits: list | None = None):

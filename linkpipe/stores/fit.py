@@ -16,7 +16,7 @@ import numpy as np
 import tomlkit
 
 from . import atomic_path, hdf5
-from ..result import Variable
+from ..result import Variable, common_unit
 
 
 def write_toml(fit, path: str | os.PathLike) -> None:
@@ -37,7 +37,7 @@ def write_toml(fit, path: str | os.PathLike) -> None:
 def write_h5(fit, path: str | os.PathLike) -> None:
     names = np.array(fit.names, dtype=object)
     before, after = fit.before.measurements, fit.after.measurements
-    units = before["units"][0] if len(set(before["units"])) == 1 else "mixed"
+    units = common_unit(before["units"])
     coords = [Variable("parameter", ("parameter",), names, ""),
               Variable("measurement", ("measurement",), np.array(before["names"], dtype=object), ""),
               Variable("step", ("step",), np.arange(len(before["residual"])), "1"),

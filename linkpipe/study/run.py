@@ -16,7 +16,7 @@ import numpy as np
 
 from ..executors import EXECUTORS
 from ..forces.virtual_work import input_force_units
-from ..result import Variable, units_of
+from ..result import Variable, common_unit, units_of
 from ..version import __version__
 from .batch import solve_batch
 
@@ -26,7 +26,7 @@ def layout(study) -> tuple[dict, list, list]:
     V, D, B = study.n_variants, len(study.driver_names), len(study.batches())
     # each driver's input force unit (a torque for an angle driver without an input point)
     by_driver = input_force_units(study.scene.drivers, units_of(study.scene))
-    force = by_driver[0] if len(set(by_driver)) == 1 else "mixed"
+    force = common_unit(by_driver)
     coords = [Variable("variant", ("variant",), np.arange(V, dtype=np.int64), "1"),
               Variable("parameter", ("parameter",), np.array(study.names, dtype=object), "",
                        {"kind": [p.kind for p in study.parameters]}),
