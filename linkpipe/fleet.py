@@ -211,16 +211,23 @@ def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict) -> str:
 def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tuple:
     """Write ``<name>_fleet.h5`` (``fit``: ``<name>_fleet_fit.h5``) into the folder ``out``;
     return (its path, the table to print)."""
-    from .forces.virtual_work import input_force_units
-    from .result import common_unit, units_of
+    from .result import common_unit, input_force_units, measured_units, units_of
     from .stores import fleet as fleet_store
 
     labels, columns = fleet_columns(kind, scene, paths, rows)
-    force = common_unit(input_force_units(scene.drivers, units_of(scene)))
-    units = {name: force if key == "force" else "1" if key == "1" else ""
-             for name, (_, _, key) in COLUMNS[kind].items()}
+    # each entry's unit where drivers or measurements differ: driver_units, measurement_units
+    per = {"force": ("driver_units", input_force_units(scene.drivers, units_of(scene))),
+           "measurement": ("measurement_units", measured_units(scene))}
+    units, attrs = {}, {}
+    for name, (_, _, key) in COLUMNS[kind].items():
+        if key in per:
+            attr, entries = per[key]
+            units[name] = common_unit(entries) if entries else ""
+            attrs[name] = {attr: ",".join(entries)}
+        else:
+            units[name] = key
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
     fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
-                             "logs_glob": pattern, "command": kind}, labels, columns, units)
+                             "logs_glob": pattern, "command": kind}, labels, columns, units, attrs)
     return path, fleet_table(kind, scene, labels, columns)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .result import measured_units
+
 
 def computed_series(result, of: tuple) -> np.ndarray:
     """The computed counterpart (S,) of a measurement's ``of`` = (variable, name, axis), or a
@@ -21,7 +23,7 @@ def computed_series(result, of: tuple) -> np.ndarray:
 def compare(result) -> dict | None:
     """Return {names, measured (S, M), residual (S, M) computed - measured, rms (M,), max_abs
     (M,)} over the steps where both are finite (NaN where none), or None without measurements.
-    Units: the computed variable's, per measurement."""
+    Units: the measured entry's, per measurement (:func:`~linkpipe.result.measured_units`)."""
     ms = result.scene.measurements
     if not ms:
         return None
@@ -34,6 +36,5 @@ def compare(result) -> dict | None:
         rms = np.where(n > 0, np.sqrt((np.where(both, residual, 0.0) ** 2).sum(axis=0)
                                       / np.maximum(n, 1)), np.nan)
         max_abs = np.where(n > 0, np.where(both, np.abs(residual), 0.0).max(axis=0), np.nan)
-    units = {v.name: v.units for v in result.variables()}
     return dict(names=[m.name for m in ms], measured=measured, residual=residual, rms=rms,
-                max_abs=max_abs, units=[units[m.of[0]] for m in ms])
+                max_abs=max_abs, units=measured_units(result.scene))

@@ -42,6 +42,52 @@ def common_unit(units: list[str]) -> str:
     return units[0] if len(set(units)) == 1 else "mixed"
 
 
+def driver_units_of(scene: Scene) -> list[str]:
+    """Each driver's value unit: degree for an angle, the scene's length for a distance."""
+    L = units_of(scene)["length"]
+    return ["degree" if d.kind == "angle" else L for d in scene.drivers]
+
+
+def input_force_units(drivers, units: dict) -> list[str]:
+    """Each driver's input force unit: a generalized force, force*length for an angle driver
+    (a torque), force for a length driver or for any driver with an ``input`` point (the force
+    along its direction). ``units``: the scene's (:func:`units_of`)."""
+    force_unit, length_unit = units["force"], units["length"]
+    return [f"{force_unit}*{length_unit}" if d.kind == "angle" and d.input is None else force_unit
+            for d in drivers]
+
+
+def measured_units(scene: Scene) -> list[str]:
+    """Each ``[[measurements]]`` entry's unit: that of the stored entry its ``of`` names (a
+    driver's own unit where drivers differ). ``tests/test_measurements.py`` proves it equal to
+    the unit :meth:`Result.variables` writes for every measurable variable."""
+    u = units_of(scene)
+    L, T, F = u["length"], u["time"], u["force"]
+    names = [d.name for d in scene.drivers]
+    per_driver = {"driver_value": driver_units_of(scene),
+                  "input_force": input_force_units(scene.drivers, u)}
+    per_driver["input_force_lagrange"] = per_driver["input_force"]
+    per_driver["driver_velocity"] = [f"{d}/{T}" for d in per_driver["driver_value"]]
+    per_driver["driver_acceleration"] = [f"{d}/{T}^2" for d in per_driver["driver_value"]]
+    whole = {"position": L, "velocity": f"{L}/{T}", "acceleration": f"{L}/{T}^2",
+             "link_angle": "rad", "link_angular_velocity": f"rad/{T}",
+             "link_angular_acceleration": f"rad/{T}^2",
+             "spring_length": L, "spring_extension": L, "spring_energy": f"{F}*{L}",
+             "torsion_spring_angle": "rad", "torsion_spring_torque": f"{F}*{L}",
+             "torsion_spring_energy": f"{F}*{L}", "link_force": F, "spring_force": F,
+             "slider_force": F, "joint_force": F, "ground_reaction": F}
+    return [per_driver[m.of[0]][names.index(m.of[1])] if m.of[0] in per_driver
+            else whole[m.of[0]] for m in scene.measurements]
+
+
+def entry_units(var: "Variable") -> list[str]:
+    """The unit of each entry along a variable's second dimension: its ``<dimension>_units``
+    attribute (``driver_units``, ``measurement_units``) where the entries may differ, else the
+    variable's one unit for every entry."""
+    per = var.attrs.get(f"{var.dims[1]}_units") if len(var.dims) > 1 else None
+    return per.split(",") if per else [var.units] * var.data.shape[1]
+
+
 def units_of(scene: Scene) -> dict[str, str]:
     """Unit strings of a scene (free text), with neutral defaults: length, time, force, mass."""
     u = dict(scene.units)
@@ -313,8 +359,7 @@ class Result:
         return units_of(self.scene)
 
     def driver_units(self) -> list[str]:
-        L = self.units()["length"]
-        return ["degree" if d.kind == "angle" else L for d in self.scene.drivers]
+        return driver_units_of(self.scene)
 
     def coordinates(self) -> list[Variable]:
         """Coordinate variables (dimension scales)."""
@@ -365,8 +410,10 @@ class Result:
             out.append(Variable("link_angular_acceleration", ("step", "link"),
                                 self.link_angular_acceleration, f"rad/{T}^2"))
         if self.forces:
+            per_driver = {"driver_units": ",".join(input_force_units(self.scene.drivers, u))}
             for name, (dims, data, units) in self.forces.items():
-                out.append(Variable(name, dims, data, units))
+                out.append(Variable(name, dims, data, units,
+                                    dict(per_driver) if dims[1:2] == ("driver",) else {}))
         if self.measurements:
             m = self.measurements
             units = common_unit(m["units"])

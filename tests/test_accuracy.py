@@ -413,3 +413,43 @@ def test_log_knobs_measure_a_log_of_the_law_against_the_law_itself():
 
 def test_log_knobs_only_for_law_driven_time_scenes():
     assert accuracy.knobs.log_settings(coarse("fourbar_crank_rocker")) == []
+
+
+def test_a_time_scene_is_resampled_keeping_its_instants():
+    """The ladder's other step counts of a [time] scene: a refinement by a whole factor keeps
+    every instant (uneven log time stamps too), so the drivers' values there are the scene's
+    own to rounding; other counts are evenly spaced over the same span."""
+    instants = np.array([0.0, 0.1, 0.25, 0.3, 0.5, 0.6, 0.8, 1.0])
+    fine = accuracy.knobs.resampled_instants(instants, 3 * 7 + 1)
+    np.testing.assert_array_equal(fine[::3], instants)
+    np.testing.assert_allclose(np.diff(fine).reshape(7, 3), np.repeat(np.diff(instants) / 3, 3)
+                               .reshape(7, 3), rtol=1e-12)
+    np.testing.assert_array_equal(accuracy.knobs.resampled_instants(instants, 5),
+                                  np.linspace(0.0, 1.0, 5))
+    scene = linkpipe.load_scene(str(CONFIGS / "logged" / "dump_truck_logged.toml"))
+    S = scene.n_steps
+    finer = accuracy._with_steps(scene, 2 * (S - 1) + 1)
+    assert finer.n_steps == len(finer.time.instants) == 2 * S - 1 and finer.measurements == ()
+    from linkpipe.model.drive import driver_motion
+    base, refined = driver_motion(scene), driver_motion(finer)
+    np.testing.assert_array_equal(finer.time.instants[::2], scene.time.instants)
+    np.testing.assert_allclose(refined.value[::2], base.value, rtol=0, atol=1e-12)  # m
+    np.testing.assert_allclose(refined.rate[::2], base.rate, rtol=0, atol=1e-12)  # m/s
+
+
+def test_the_ladder_runs_on_a_logged_time_scene():
+    """configs/logged/dump_truck_logged.toml (a cylinder on a logged stroke, closed-form
+    reference): the rows at other step counts solve (they crashed on the time grid once), and
+    their positions meet the closed form to the solver's tolerance (1e-10 of the size)."""
+    scene = linkpipe.load_scene(str(CONFIGS / "logged" / "dump_truck_logged.toml"))
+    ladder = accuracy.measure(scene, quick=True, repeats=1, knobs=("derivatives", "predictor"))
+    assert ladder.reference.startswith("closed form")
+    assert all(r.failure == "" for r in ladder.rows), [r.failure for r in ladder.rows]
+    other = [r for r in ladder.rows if r.steps != scene.n_steps]
+    assert {r.steps for r in other} == {2 * scene.n_steps - 1, (scene.n_steps - 1) // 4 + 1}
+    for r in other:
+        assert r.relative_error["position"] <= 1e-10, (r.knob, r.value, r.steps)
+        assert r.steps_failed == 0
+    (linear,) = rows(ladder, "derivatives", "linear")
+    for r in rows(ladder, "derivatives", "finite_difference"):
+        assert linear.relative_error["velocity"] < r.relative_error["velocity"] < 1e-3

@@ -146,6 +146,8 @@ def test_the_command_writes_the_fitted_scene_and_the_h5(tmp_path, capsys):
         assert f["initial"][0] == 10.0 and f["fitted"][0] == pytest.approx(K_TRUE, rel=1e-9)
         assert len(f["cost"][:]) >= 2 and f["cost"][-1] < f["cost"][0]
         assert f["measured_residual_after"].attrs["rms"][0] < 1e-9
+        for name in ("measured_residual_before", "measured_residual_after"):  # a crank's torque
+            assert f[name].attrs["units"] == f[name].attrs["measurement_units"] == "N*m"
 
 
 @pytest.mark.parametrize("params, words", [

@@ -118,3 +118,142 @@ def test_measuring_what_the_scene_does_not_compute_is_its_mistake(tmp_path, caps
     err = capsys.readouterr().err
     assert '[measurements "rocker_angle"] of: "input_force" is not computed by this scene' in err
     assert not out.exists() or not any(p for p in out.iterdir() if not p.name.startswith("."))
+
+
+# ------------------------------------------------------------------ units of mixed drivers
+#: a crank on a logged angle (its input a torque, kN*mm) and a cylinder on a logged length (its
+#: input a force, kN): one of each measurable variable, every unit distinct
+MIXED = """\
+[scene]
+name = "mixed"
+units = { length = "mm", mass = "kg", time = "s", force = "kN" }
+
+[points]
+O = { x = 0.0, y = 0.0, fixed = true }
+A = { x = 1000.0, y = 0.0 }
+O2 = { x = 0.0, y = -3000.0, fixed = true }
+C = { x = 1500.0, y = -3000.0, fixed = true }
+P = { x = 1000.0, y = -2000.0 }
+
+[[links]]
+name = "crank"
+points = ["O", "A"]
+
+[[links]]
+name = "lever"
+points = ["O2", "P"]
+
+[time]
+log = "run"
+
+[[logs]]
+name = "run"
+file = "run.csv"
+time = "t"
+
+[[drivers]]
+name = "crank"
+angle = ["O", "A"]
+log = "run.angle"
+
+[[drivers]]
+name = "cylinder"
+distance = ["C", "P"]
+log = "run.length"
+
+[analysis]
+effects = ["gravity", "springs"]
+
+[gravity]
+g = [0.0, -9810.0]
+
+[[masses]]
+link = "crank"
+mass = 2.0
+center = "A"
+
+[[springs]]
+name = "coil"
+between = ["O", "P"]
+k = 0.03
+free_length = 1000.0
+
+[[torsion_springs]]
+name = "hinge"
+links = ["crank", "ground"]
+k = 5.0
+free_angle = 10.0
+"""
+
+#: (of, the unit of that entry) for every measurable variable of MIXED
+MEASURED = [("position.A.y", "mm"), ("velocity.A.x", "mm/s"), ("acceleration.P.y", "mm/s^2"),
+            ("driver_value.crank", "degree"), ("driver_value.cylinder", "mm"),
+            ("driver_velocity.crank", "degree/s"), ("driver_acceleration.cylinder", "mm/s^2"),
+            ("input_force.crank", "kN*mm"), ("input_force.cylinder", "kN"),
+            ("input_force_lagrange.crank", "kN*mm"), ("link_angle.lever", "rad"),
+            ("link_angular_velocity.crank", "rad/s"), ("link_angular_acceleration.lever", "rad/s^2"),
+            ("link_force.lever", "kN"), ("spring_force.coil", "kN"),
+            ("spring_length.coil", "mm"), ("spring_extension.coil", "mm"),
+            ("spring_energy.coil", "kN*mm"), ("torsion_spring_angle.hinge", "rad"),
+            ("torsion_spring_torque.hinge", "kN*mm"), ("torsion_spring_energy.hinge", "kN*mm"),
+            ("joint_force.A@crank.x", "kN"), ("ground_reaction.O2.y", "kN")]
+
+
+def test_each_measurement_and_driver_carries_its_own_unit(tmp_path):
+    """Drivers of two kinds: ``input_force`` is "mixed" with ``driver_units`` beside it, and each
+    measurement's unit (``measurement_units``, the summary, the recording's plot names, the fit's
+    and the fleet's files) is the unit of the entry it measures, read back from the run's file:
+    ``driver_units`` where the variable has it, else its ``units``. The slider force is the only
+    measurable variable left out (no slider): a force, as link_force."""
+    from linkpipe.scene.timing import MEASURABLE
+    assert {of.split(".")[0] for of, _ in MEASURED} == set(MEASURABLE) - {"slider_force"}
+    t = np.linspace(0.0, 1.0, 21)
+    import pandas as pd
+    pd.DataFrame({"t": t, "angle": 10.0 + 40.0 * t, "length": 1300.0 + 200.0 * t,
+                  "signal": np.sin(t)}).to_csv(tmp_path / "run.csv", index=False)
+    text = MIXED + "".join(f'\n[[measurements]]\nname = "m{k}"\nlog = "run.signal"\nof = "{of}"\n'
+                           for k, (of, _) in enumerate(MEASURED))
+    text = text.replace('[analysis]', '[outputs]\nkinematics = ["velocity", "acceleration"]\n\n'
+                        '[analysis]')
+    (tmp_path / "mixed.toml").write_text(text)
+    assert main(["run", str(tmp_path / "mixed.toml"), "--out", str(tmp_path / "out"),
+                 "--quiet"]) == 0
+    want = [unit for _, unit in MEASURED]
+    with h5py.File(tmp_path / "out" / "mixed.h5", "r") as f:
+        for name in ("input_force", "input_force_lagrange"):
+            assert f[name].attrs["units"] == "mixed"
+            assert f[name].attrs["driver_units"] == "kN*mm,kN"
+        drivers = [n.decode() for n in f["driver"][:]]
+        for (of, unit), got in zip(MEASURED, f["measured"].attrs["measurement_units"].split(",")):
+            variable, rest = of.split(".", 1)
+            attrs = f[variable].attrs
+            if "driver_units" in attrs:
+                unit_in_file = attrs["driver_units"].split(",")[drivers.index(rest)]
+            else:
+                unit_in_file = attrs["units"]
+            assert got == unit_in_file == unit, of
+        assert f["measured"].attrs["units"] == "mixed"
+        assert f["measured_residual"].attrs["measurement_units"] == ",".join(want)
+    from linkpipe.result import measured_units
+    assert measured_units(linkpipe.load_scene(tmp_path / "mixed.toml")) == want
+
+    # the recording names each series' own unit
+    from linkpipe.stores.rrd.series import series_of
+    r = linkpipe.solve(linkpipe.load_scene(tmp_path / "mixed.toml"))
+    named = {entity: name for entity, name, _, _ in series_of(r)}
+    assert named["/plots/input_force/crank"] == "crank [kN*mm]"
+    assert named["/plots/input_force/cylinder"] == "cylinder [kN]"
+    assert named["/plots/measurements/m5/computed"] == "computed [degree/s]"
+
+    # a fleet of two logs: its input-force and rms columns carry the same per-entry units
+    import shutil
+    (tmp_path / "logs").mkdir()
+    for k in range(2):
+        shutil.copy(tmp_path / "run.csv", tmp_path / "logs" / f"run{k}.csv")
+    assert main(["run", str(tmp_path / "mixed.toml"), "--logs", str(tmp_path / "logs" / "*.csv"),
+                 "--out", str(tmp_path / "fleet"), "--quiet"]) == 0
+    with h5py.File(tmp_path / "fleet" / "mixed_fleet.h5", "r") as f:
+        for name in ("peak_input_force", "rms_input_force"):
+            assert f[name].attrs["units"] == "mixed" and f[name].attrs["driver_units"] == "kN*mm,kN"
+        assert f["measured_rms"].attrs["units"] == "mixed"
+        assert f["measured_rms"].attrs["measurement_units"] == ",".join(want)

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import dataclasses as dc
 
+import numpy as np
 
 from ..scene import Scene
+from ..scene.tables import LogData, TimeSweep
 
 
 # The ladder. Step counts are multiples of the scene's own number of intervals.
@@ -34,12 +36,36 @@ def _with_solver(scene: Scene, **changes) -> Scene:
 
 
 def _with_steps(scene: Scene, steps: int) -> Scene:
-    """Return ``scene`` swept over the same range with ``steps`` steps."""
+    """Return ``scene`` swept over the same range with ``steps`` steps.
+
+    A ``[time]`` scene keeps its first and last instant (:func:`resampled_instants`: a
+    refinement by a whole factor keeps every instant it had, so a finer reference can be read at
+    them); its drivers' laws, rates and logs are then evaluated at the new instants. Its
+    measurements, sampled at the scene's own steps, are left out (the ladder measures the
+    solver, not the fit to a log)."""
+    if steps == scene.n_steps:
+        return scene
+    time = scene.time
+    if time is not None:
+        instants = resampled_instants(np.asarray(time.instants, dtype=float), steps)
+        time = TimeSweep(float(instants[0]), float(instants[-1]), steps, None, None, instants)
     drivers = []
     for d in scene.drivers:
         to = d.to_value if d.step is None else d.from_value + (d.steps - 1) * d.step
         drivers.append(dc.replace(d, steps=steps, step=None, to_value=to))
-    return dc.replace(scene, drivers=tuple(drivers))
+    return dc.replace(scene, drivers=tuple(drivers), time=time, measurements=())
+
+
+def resampled_instants(instants: np.ndarray, steps: int) -> np.ndarray:
+    """(steps,) instants from the first of ``instants`` (S,) to its last: when ``steps - 1`` is
+    a multiple ``k`` of ``S - 1``, each interval cut into ``k`` equal parts (every old instant
+    kept exactly, however uneven a log's time stamps); else evenly spaced."""
+    S = len(instants)
+    if S >= 2 and steps >= 2 and (steps - 1) % (S - 1) == 0:
+        k = (steps - 1) // (S - 1)
+        parts = instants[:-1, None] + np.diff(instants)[:, None] * (np.arange(k) / k)
+        return np.append(parts.ravel(), instants[-1])
+    return np.linspace(instants[0], instants[-1], steps)
 
 
 def _all_orders(scene: Scene) -> Scene:
@@ -111,10 +137,8 @@ def log_settings(scene: Scene, quick: bool = False) -> list[tuple[str, str, Scen
     the instants, and so the reference, stay the scene's. Empty for any other scene."""
     if scene.time is None or not all(d.timed in ("law", "rate") for d in scene.drivers):
         return []
-    import numpy as np
 
     from ..model.drive import driver_motion
-    from ..scene.tables import LogData
 
     law = driver_motion(scene).value  # (S, nd) in scene units
     t = np.asarray(scene.time.instants, dtype=float)

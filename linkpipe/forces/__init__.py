@@ -20,7 +20,7 @@ import numpy as np
 
 from ..model import Model
 from ..result import Forces, Motion
-from ..status import OK
+from ..status import NO_ASSEMBLY, NO_INPUT, NOT_CONVERGED, OK, SINGULAR
 from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
 from .constants import ForceConstants
 from .effects import EFFECTS, Context, applies
@@ -138,9 +138,46 @@ def _effect_terms(ctx: Context, influence: Influence, cache: dict | None, chunk_
     return out
 
 
+#: the force stage's variables that the positions alone determine: a singular step (positions
+#: solved; derivatives and what the constraint Jacobian gives undetermined) keeps them, every
+#: other variable is NaN there. A spring's force is its law at its length (with a damper it
+#: holds the damper's force too, NaN there with the velocities).
+POSITION_ONLY = frozenset({"spring_length", "spring_extension", "spring_energy", "spring_force",
+                           "torsion_spring_angle", "torsion_spring_energy", "torsion_spring_torque",
+                           "gravity_energy"})
+
+#: kinematic statuses whose steps hold no solved positions: every force-stage variable is NaN
+UNSOLVED = (NO_ASSEMBLY, NOT_CONVERGED, NO_INPUT)
+
+
+def failed_steps_as_nan(variables: dict, kinematic_status: np.ndarray) -> None:
+    """Set, in place, each step-first float variable of ``variables`` {name: (dims, (S, ...),
+    units)} to NaN at the steps stage 1 did not solve (no_assembly, not_converged, no_input)
+    and, but for :data:`POSITION_ONLY`, at singular steps (docs/scene-format.md, "Results at
+    steps that fail"). A law that maps a NaN length to a number (a gas spring's clamp, a
+    one-sided spring's slack branch) cannot then leave a finite force at a failed step."""
+    unsolved = np.isin(kinematic_status, UNSOLVED)
+    singular = kinematic_status == SINGULAR
+    if not (unsolved.any() or singular.any()):
+        return
+    for name, (dims, data, _) in variables.items():
+        if dims[:1] != ("step",) or data.dtype.kind != "f":
+            continue
+        data[unsolved if name in POSITION_ONLY else unsolved | singular] = np.nan
+
+
 def _forces_of(model: Model, motion: Motion, units: dict, constants=None, lagrange: bool = True,
                cache: dict | None = None, chunk_key=0) -> Forces:
-    """The force stage on one chunk of steps (see :func:`compute_forces`)."""
+    """The force stage on one chunk of steps (see :func:`compute_forces`); at failed steps
+    every variable is NaN (:func:`failed_steps_as_nan`)."""
+    forces = _forces_computed(model, motion, units, constants, lagrange, cache, chunk_key)
+    failed_steps_as_nan(forces.variables, motion.status)
+    return forces
+
+
+def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
+                     lagrange: bool = True, cache: dict | None = None, chunk_key=0) -> Forces:
+    """The force stage's computation on one chunk of steps, before failed steps are masked."""
     ctx = Context.of(model, motion, units, constants, lagrange)
     n_steps = ctx.n_steps
     Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)

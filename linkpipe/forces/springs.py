@@ -77,7 +77,8 @@ def spring_law(geo: SpringGeometry, springs) -> tuple[np.ndarray, np.ndarray, np
     for j, sp in enumerate(springs):
         if sp.kind in ("tension_only", "compression_only"):
             t, kj = tension[:, j], geo.k[..., j]
-            active = t > 0 if sp.kind == "tension_only" else t < 0
+            # a NaN tension (a failed step's NaN length) stays NaN, not "slack"
+            active = (t > 0 if sp.kind == "tension_only" else t < 0) | np.isnan(t)
             one_sided = np.where(kj > 0, 0.5 * kj * extension[:, j] ** 2, t * stretch[:, j])
             tension[:, j] = np.where(active, t, 0.0)
             energy[:, j] = np.where(active, one_sided, 0.0)
@@ -98,9 +99,11 @@ def gas_law(length: np.ndarray, sp) -> tuple[np.ndarray, np.ndarray]:
         tension = -f1 * np.exp(gamma * x)
         shape = x if gamma == 1.0 else np.expm1((gamma - 1.0) * x) / (gamma - 1.0)
         energy = f1 * (sp.extended_length - d) * shape
-    # NaN length (a failed step) stays NaN; a reached dead length is an infinite push
-    dead = ~alive & ~np.isnan(length)
-    return np.where(dead, -np.inf, tension), np.where(dead, np.inf, energy)
+    # a NaN length (a failed step) stays NaN; a reached dead length is an infinite push
+    unknown = np.isnan(length)
+    dead = ~alive & ~unknown
+    tension = np.where(unknown, np.nan, np.where(dead, -np.inf, tension))
+    return tension, np.where(unknown, np.nan, np.where(dead, np.inf, energy))
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import Model
-from ..result import common_unit
+from ..result import common_unit, input_force_units
 from ..status import NO_LEVERAGE, OK
 
 LEVERAGE_RTOL = 1e-9  # |n . dr_H/ds| below this times the mechanism size: no leverage
@@ -67,15 +67,6 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
     for force in forces:
         force[status != OK] = np.nan
     return status, common_unit(input_force_units(model.scene.drivers, units))
-
-
-def input_force_units(drivers, units: dict) -> list[str]:
-    """Each driver's input force unit: a generalized force, force*length for an angle driver
-    (a torque), force for a length driver or for any driver with an ``input`` point (the force
-    along its direction). ``units``: the scene's (:func:`linkpipe.result.units_of`)."""
-    force_unit, length_unit = units["force"], units["length"]
-    return [f"{force_unit}*{length_unit}" if d.kind == "angle" and d.input is None else force_unit
-            for d in drivers]
 
 
 def input_direction(model: Model, driver_input, X: np.ndarray) -> np.ndarray:

@@ -38,6 +38,7 @@ def write_h5(fit, path: str | os.PathLike) -> None:
     names = np.array(fit.names, dtype=object)
     before, after = fit.before.measurements, fit.after.measurements
     units = common_unit(before["units"])
+    per = {"measurement_units": ",".join(before["units"])}
     coords = [Variable("parameter", ("parameter",), names, ""),
               Variable("measurement", ("measurement",), np.array(before["names"], dtype=object), ""),
               Variable("step", ("step",), np.arange(len(before["residual"])), "1"),
@@ -51,9 +52,9 @@ def write_h5(fit, path: str | os.PathLike) -> None:
         Variable("cost", ("iteration",), np.asarray(fit.cost, float), "1",
                  {"long_name": "0.5 sum(((computed - measured) / sigma)^2) per evaluation"}),
         Variable("measured_residual_before", ("step", "measurement"), before["residual"], units,
-                 {"rms": before["rms"], "max_abs": before["max_abs"]}),
+                 {**per, "rms": before["rms"], "max_abs": before["max_abs"]}),
         Variable("measured_residual_after", ("step", "measurement"), after["residual"], units,
-                 {"rms": after["rms"], "max_abs": after["max_abs"]}),
+                 {**per, "rms": after["rms"], "max_abs": after["max_abs"]}),
     ]
     attrs = {"scene_name": fit.scene.name, "optimizer_message": str(fit.message),
              "evaluations": int(fit.n_evaluations), "stage1_solves": int(fit.stage1_solves)}

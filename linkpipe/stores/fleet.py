@@ -9,10 +9,14 @@ from . import hdf5
 from ..result import Variable
 
 
-def write(path, attributes: dict, labels: dict, columns: dict, units: dict) -> None:
-    """``labels`` {dimension: names}; ``columns`` {name: (dims, array)}; ``units`` {name: unit}."""
+def write(path, attributes: dict, labels: dict, columns: dict, units: dict,
+          attrs: dict | None = None) -> None:
+    """``labels`` {dimension: names}; ``columns`` {name: (dims, array)}; ``units`` {name: unit};
+    ``attrs`` {name: {attribute: value}} beside the units (each entry's own unit)."""
     coords = [Variable(dim, (dim,), np.array(names, dtype=object), "")
               for dim, names in labels.items() if names]
-    variables = [Variable(name, dims, data, units.get(name, "")) for name, (dims, data) in columns.items()]
+    attrs = attrs or {}
+    variables = [Variable(name, dims, data, units.get(name, ""), attrs.get(name, {}))
+                 for name, (dims, data) in columns.items()]
     hdf5.write_layout(path, attributes, coords, variables,
                       n_bytes=sum(np.asarray(d).nbytes for _, d in columns.values()))

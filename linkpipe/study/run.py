@@ -15,8 +15,7 @@ import pathlib
 import numpy as np
 
 from ..executors import EXECUTORS
-from ..forces.virtual_work import input_force_units
-from ..result import Variable, common_unit, units_of
+from ..result import Variable, common_unit, input_force_units, units_of
 from ..version import __version__
 from .batch import solve_batch
 

@@ -7,8 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..forces.virtual_work import input_force_units
-from ..result import units_of
+from ..result import input_force_units, units_of
 
 #: best variants solved again for their motion in the recording; bins of a metric's histogram
 N_MOTION, N_BINS = 3, 30

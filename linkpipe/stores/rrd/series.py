@@ -7,6 +7,7 @@ import rerun as rr
 
 from . import style
 from .mechanism import path_of
+from ...result import entry_units
 
 #: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
 PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle")
@@ -24,8 +25,8 @@ def series_of(result) -> list[tuple[str, str, np.ndarray, list[int]]]:
         var = variables.get(name)
         if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2:
             continue
-        for j, label in enumerate(labels[var.dims[1]]):
-            series.append((path_of("plots", name, label), f"{label} [{var.units}]", var.data[:, j],
+        for j, (label, unit) in enumerate(zip(labels[var.dims[1]], entry_units(var))):
+            series.append((path_of("plots", name, label), f"{label} [{unit}]", var.data[:, j],
                            style.colour(j)))
     for name in SOLVER:
         var = variables[name]
