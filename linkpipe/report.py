@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .result import input_force_units
+
 
 def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run``."""
@@ -49,11 +51,11 @@ def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     if sc.present_but_off:
         lines.append(f"  present but off: {', '.join(sc.present_but_off)}")
     if totals.input_force_min is not None:
-        unit = result.forces["input_force"][2]
+        units = input_force_units(sc.drivers, result.units())
         for j, name in enumerate(result.driver_names):
             if np.isfinite(totals.input_force_min[j]):
                 lines.append(f"  input force {name}: {totals.input_force_min[j]:.6g} .. "
-                             f"{totals.input_force_max[j]:.6g} {unit}")
+                             f"{totals.input_force_max[j]:.6g} {units[j]}")
     if result.measurements:
         m = result.measurements
         for k, (name, meas) in enumerate(zip(m["names"], result.scene.measurements)):

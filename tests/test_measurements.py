@@ -7,6 +7,7 @@ minus that noise, known exactly, at every step where both exist.
 """
 import importlib.util
 import pathlib
+import re
 import shutil
 
 import h5py
@@ -199,7 +200,7 @@ MEASURED = [("position.A.y", "mm"), ("velocity.A.x", "mm/s"), ("acceleration.P.y
             ("joint_force.A@crank.x", "kN"), ("ground_reaction.O2.y", "kN")]
 
 
-def test_each_measurement_and_driver_carries_its_own_unit(tmp_path):
+def test_each_measurement_and_driver_carries_its_own_unit(tmp_path, capsys):
     """Drivers of two kinds: ``input_force`` is "mixed" with ``driver_units`` beside it, and each
     measurement's unit (``measurement_units``, the summary, the recording's plot names, the fit's
     and the fleet's files) is the unit of the entry it measures, read back from the run's file:
@@ -216,9 +217,12 @@ def test_each_measurement_and_driver_carries_its_own_unit(tmp_path):
     text = text.replace('[analysis]', '[outputs]\nkinematics = ["velocity", "acceleration"]\n\n'
                         '[analysis]')
     (tmp_path / "mixed.toml").write_text(text)
-    assert main(["run", str(tmp_path / "mixed.toml"), "--out", str(tmp_path / "out"),
-                 "--quiet"]) == 0
+    assert main(["run", str(tmp_path / "mixed.toml"), "--out", str(tmp_path / "out")]) == 0
     want = [unit for _, unit in MEASURED]
+    printed = capsys.readouterr().out  # the summary: each driver's and measurement's own unit
+    assert re.search(r"input force crank: \S+ \.\. \S+ kN\*mm\n", printed)
+    assert re.search(r"input force cylinder: \S+ \.\. \S+ kN\n", printed)
+    assert re.search(r"measurement m5 \(of driver_velocity.crank\): .* degree/s\n", printed)
     with h5py.File(tmp_path / "out" / "mixed.h5", "r") as f:
         for name in ("input_force", "input_force_lagrange"):
             assert f[name].attrs["units"] == "mixed"

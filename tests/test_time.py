@@ -197,6 +197,58 @@ def test_a_version_1_sweep_writes_its_driver_rates_too(tmp_path):
             assert f["driver_velocity"].dims[1][0].name.endswith("driver")
 
 
+@pytest.mark.parametrize("method", ["auto", "newton"])
+def test_a_single_instant_is_a_sweep_of_one_step(method, tmp_path):
+    """[time] from = to = 2 s with steps = 1: the crank at 30 + 40 t + 25 t^2 / 2 degrees, t
+    counted from [time]'s from (30 degrees, 40 deg/s, 25 deg/s^2 there); positions, velocities
+    and accelerations are the four-bar's closed form, and the file holds that one instant."""
+    text = crank_rocker("from = 30.0\nrate = 40.0\nacceleration = 25.0",
+                        "from = 2.0\nto = 2.0\nsteps = 1")
+    text = text.replace("[outputs]", f'[solver]\nmethod = "{method}"\n\n[outputs]')
+    r = linkpipe.solve(scene_of(text))
+    assert r.n_steps == 1 and (r.status == OK).all()
+    np.testing.assert_array_equal(r.time, [2.0])
+    assert (r.driver_value[0, 0], r.driver_velocity[0, 0], r.driver_acceleration[0, 0]) == (
+        30.0, 40.0, 25.0)
+    form = closed_forms.detect(r.scene, r.position[0])
+    X, V, A = closed_forms.evaluate(form, r.scene, np.radians([30.0]), np.radians([40.0]),
+                                    np.radians([25.0]))
+    assert np.abs(X - r.position).max() <= 1e-12 * r.model.size
+    assert np.abs(V - r.velocity).max() <= 1e-11 * np.abs(V).max()
+    assert np.abs(A - r.acceleration).max() <= 1e-10 * np.abs(A).max()
+    path = tmp_path / "one.toml"
+    path.write_text(text)
+    assert main(["run", str(path), "--out", str(tmp_path), "--quiet"]) == 0
+    with h5py.File(tmp_path / f"{r.scene.name}.h5", "r") as f:
+        assert f["time"][:].tolist() == [2.0] and f["status"][:].tolist() == [OK]
+
+
+@pytest.mark.parametrize("time, key, hint", [
+    ("from = 1.0\nto = 3.0\nsteps = 1", "steps", "to = from for a single instant"),
+    ("from = 1.0\nto = 1.0\nsteps = 5", "steps", "steps = 1 for a single instant"),
+    ("from = 1.0\nto = 1.0\nstep = 0.1", "step", "steps = 1 for a single instant"),
+    ("from = 1.0\nto = 3.0\nsteps = 0", "steps", "steps >= 1"),
+    ("from = 3.0\nto = 1.0\nsteps = 5", "to", "give to > from")])
+def test_time_step_mistakes_point_to_a_fix_that_parses(time, key, hint):
+    """Each message's advice, taken, gives a scene that parses (they once sent a user round in
+    a loop between to = from and "time runs forward")."""
+    with pytest.raises(SceneError) as err:
+        scene_of(crank_rocker("from = 30.0\nrate = 40.0", time))
+    assert err.value.key == key and hint in str(err.value), str(err.value)
+    fixed = {"to = from for a single instant": "from = 1.0\nto = 1.0\nsteps = 1",
+             "steps = 1 for a single instant": "from = 1.0\nto = 1.0\nsteps = 1",
+             "steps >= 1": "from = 1.0\nto = 3.0\nsteps = 2",
+             "give to > from": "from = 1.0\nto = 3.0\nsteps = 5"}[hint]
+    assert scene_of(crank_rocker("from = 30.0\nrate = 40.0", fixed)).n_steps >= 1
+
+
+def test_a_law_needs_time_to_move_in():
+    with pytest.raises(SceneError) as err:
+        scene_of(crank_rocker('law = "cycloidal"\nfrom = 30.0\nto = 90.0',
+                              "from = 1.0\nto = 1.0\nsteps = 1"))
+    assert err.value.key == "law" and "single instant" in str(err.value)
+
+
 # ------------------------------------------------------------------ scene errors
 BAD = [
     ("steps", crank_rocker('law = "linear"\nfrom = 0.0\nto = 90.0\nsteps = 10'), "steps"),

@@ -182,26 +182,28 @@ class MotionTables:
         return driver_input
 
     @staticmethod
-    def driver_steps(table: _Table, start: float, stop: float) -> tuple[int, float | None]:
-        """Resolve ``steps`` or ``step`` into the step count (and the step, when given)."""
+    def driver_steps(table: _Table, start: float, stop: float,
+                     single: str = "position") -> tuple[int, float | None]:
+        """Resolve ``steps`` or ``step`` into the step count (and the step, when given);
+        ``single``: what one step is, in the messages (a position; [time]: an instant)."""
         span = f"from = {start:g}, to = {stop:g}"
         if table.one_of("steps", "step") == "steps":
             steps = table.integer("steps")
             if steps < 1:
                 raise table.error("steps", f"steps = {steps} gives no steps",
-                                  "use steps >= 1 (steps = 1 is a single position)")
+                                  f"use steps >= 1 (steps = 1 is a single {single})")
             if steps == 1 and start != stop:
                 raise table.error("steps", f"steps = 1 with {span} gives no steps: a single "
-                                  "position never reaches to",
-                                  "use steps >= 2 to sweep, or to = from for a single position")
+                                  f"{single} never reaches to",
+                                  f"use steps >= 2 to sweep, or to = from for a single {single}")
             if steps > 1 and start == stop:
                 raise table.error("steps", f"{span} with steps = {steps} gives no motion",
-                                  "use steps = 1 for a single position, or change from/to")
+                                  f"use steps = 1 for a single {single}, or change from/to")
             return steps, None
         step = table.number("step")
         if start == stop:
             raise table.error("step", f"{span} gives no motion",
-                              "use steps = 1 for a single position, or change from/to")
+                              f"use steps = 1 for a single {single}, or change from/to")
         if step == 0 or (step > 0) != (stop > start):
             better = abs(step) if step else abs(stop - start) / 10
             raise table.error("step", f"step = {step:g} with {span} gives no steps",
@@ -215,7 +217,7 @@ class MotionTables:
         steps = math.floor(count) + 1
         if steps == 1:
             raise table.error("step", f"step = {step:g} with {span} gives no steps: it "
-                              "oversteps to, leaving a single position",
+                              "oversteps to, leaving a single " + single,
                               f"use a step no larger than |to - from| = {abs(stop - start):g}")
         return steps, step
 

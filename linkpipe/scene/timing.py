@@ -55,12 +55,16 @@ class TimeTables:
             raise table.error("from", "missing: [time] needs from, to and steps (or step), "
                               "or log", 'add from = 0.0, to = 4.0, steps = 4001, or log = "run3"')
         start, stop = table.number("from"), table.number("to")
-        if not stop > start:
-            raise table.error("to", f"to = {stop:g} is not after from = {start:g}",
-                              "time runs forward: give to > from")
-        steps, step = self.driver_steps(table, start, stop)
+        if stop < start:
+            raise table.error("to", f"to = {stop:g} is before from = {start:g}",
+                              "time runs forward: give to > from (to = from with steps = 1 "
+                              "for a single instant)")
+        steps, step = self.driver_steps(table, start, stop, "instant")
         i = np.arange(steps, dtype=float)
-        instants = start + i * step if step is not None else start + i * (stop - start) / (steps - 1)
+        if step is not None:
+            instants = start + i * step
+        else:  # steps = 1: the single instant from = to
+            instants = start + i * ((stop - start) / max(steps - 1, 1))
         return TimeSweep(start, stop, steps, step, None, instants)
 
     def log_named(self, table: _Table, key: str, name: str, logs: dict[str, LogData]) -> LogData:
@@ -83,6 +87,11 @@ class TimeTables:
                     raise table.error(key, f"{key} belongs to a log driver",
                                       f'remove {key}, or drive by log = "<log>.<column>"')
         fields = dict(steps=time.steps, step=None, timed=how)
+        if how == "law" and time.to_value == time.from_value:
+            raise table.error("law", "a law moves from its from to its to over [time]'s span, "
+                              "and a single instant has none",
+                              "drive it by rate (rate = 0.0 holds it at from) or by log, or "
+                              "give [time] a span (to > from, steps >= 2)")
         if how == "law":
             if table.has("rate") or table.has("acceleration"):
                 key = "rate" if table.has("rate") else "acceleration"
