@@ -252,7 +252,7 @@ def _run(args) -> int:
                 bar.close()
             if not args.quiet:
                 total = time.perf_counter() - t0
-                print(summary(result, written, total, kept))
+                print(summary(result, written, total, kept, None if args.no_h5 else ".h5"))
                 if args.verbose:
                     print(stage_table(result.seconds, total, result.totals.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
@@ -304,7 +304,8 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
         t0 = time.perf_counter()
         target = None if args.no_rrd else out / f"{name}.rrd"
         kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
-                         max_steps=args.rrd_max_steps, max_bytes=max_bytes)
+                         max_steps=args.rrd_max_steps, max_bytes=max_bytes,
+                         every_step_in=None if args.no_h5 else ".h5")
         result.seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))
@@ -345,9 +346,17 @@ def _progress_bar(scene, args):
 def _check(args) -> int:
     from .pipeline import preflight
     from .segments import steps_per_segment
+    from .study import load_study
+    from .study.report import describe_study
+    from .study.spec import study_kind
 
     outcome = _Outcome()
-    for scene in _load_all(args.scenes, outcome):
+    kinds = {p: study_kind(p) for p in args.scenes}
+    for path in args.scenes:  # [study] checked as `study` would (its base solved once)
+        if kinds[path]:
+            with _reporting(path, outcome):
+                print(describe_study(load_study(path)))
+    for scene in _load_all([p for p in args.scenes if kinds[p] != "study"], outcome):
         with _reporting(scene.path, outcome):
             # memory (as run's defaults need it), degrees of freedom, the start assembles
             model, mob = preflight(scene, steps_per_segment(scene),

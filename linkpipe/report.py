@@ -8,7 +8,8 @@ import numpy as np
 from .result import input_force_units
 
 
-def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
+def summary(result, written=(), seconds_total=None, recording_kept=None,
+            every_step_in: str | None = ".h5") -> str:
     """Return the short per-scene report printed by ``run``."""
     sc, totals = result.scene, result.totals
     lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
@@ -62,7 +63,8 @@ def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
             lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
                          f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
     if recording_kept:
-        lines.append(f"  recording: {recording_kept}; the .h5 keeps every step")
+        lines.append(f"  recording: {recording_kept}; " + (
+            f"the {every_step_in} keeps every step" if every_step_in else "no .h5 written"))
     if written:
         lines.append("  wrote " + ", ".join(written))
     secs = ", ".join(f"{k} {v:.3f}" for k, v in result.seconds.items())

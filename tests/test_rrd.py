@@ -653,8 +653,18 @@ def test_a_long_sweep_is_recorded_at_a_stride_and_says_so(tmp_path, capsys):
     np.testing.assert_allclose(got, result.position[::4], rtol=1e-6, atol=1e-6)
     (text,) = rec.static("/info", "TextDocument:text")
     assert "every 4th step (91 of 361" in str(text)
+    assert "the .h5 keeps every step" in str(text)
     with h5py.File(tmp_path / "fourbar_crank_rocker.h5") as f:
         assert f["position"].shape[0] == 361
+    # with --no-h5 no file keeps every step: neither the summary nor the recording says one does
+    other = tmp_path / "no_h5"
+    assert main(["run", str(CONFIG_DIR / "fourbar_crank_rocker.toml"), "--out", str(other),
+                 "--rrd-max-steps", "100", "--no-h5"]) == 0
+    out = capsys.readouterr().out
+    assert "recording: every 4th step (91 of 361; --rrd-max-steps 100); no .h5 written" in out
+    (text,) = Recording(other / "fourbar_crank_rocker.rrd").static("/info", "TextDocument:text")
+    assert "no file of this run keeps every step" in str(text) and ".h5 keeps" not in str(text)
+    assert not (other / "fourbar_crank_rocker.h5").exists()
 
 
 def test_short_sweeps_keep_every_step_and_no_info(solve, tmp_path):

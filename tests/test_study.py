@@ -12,6 +12,7 @@ import pytest
 import tomli_w
 
 import linkpipe
+from linkpipe.__main__ import main
 from linkpipe.errors import SceneError
 from linkpipe.scene import parse_scene
 from linkpipe.status import OK
@@ -648,3 +649,36 @@ def test_an_interrupted_study_says_it_can_be_resumed(tmp_path, capsys, monkeypat
     assert main(["study", str(write_study(tmp_path)), "--out", str(tmp_path)]) == 130
     err = capsys.readouterr().err
     assert "the same command resumes" in err and len(err.strip().splitlines()) == 1
+
+
+def test_check_validates_a_study_and_run_points_to_study(tmp_path, capsys):
+    """``check`` on a study file checks it as ``study`` would (base scene, parameters, metrics)
+    and describes it, exit 0; a mistake in [study] is its one message, exit 2; ``run`` on a
+    study file says what it is and which command takes it; a scene holding its own [study] is
+    described both as a scene and as a study."""
+    path = write_study(tmp_path)
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    study = load_study(path)
+    assert out.startswith(f"goal: study of basketball_goal ({GOAL.as_posix()}), "
+                          f"{study.n_variants} variant(s) of 25 steps")
+    assert "parameter springs.left.k = 4 in the base: 2 .. 6 in 3 steps" in out
+    assert "parameter points.O4.y = -2 in the base: normal -2, 0.0005" in out
+    assert "metric p95_spring = percentile(spring_force.left, 95)" in out
+
+    bad = write_study(tmp_path, name="bad", extra='typo = "max(abs(input_forc.theta3a))"\n')
+    assert main(["check", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {bad}: [study.metrics] typo:") and len(err.splitlines()) == 1
+
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "this is a study file" in err and "python -m linkpipe study" in err
+    assert not (tmp_path / "out" / "goal.h5").exists()
+
+    inside = tmp_path / "goal_in_scene.toml"
+    inside.write_text(GOAL.read_text() + '\n[study]\n[study.parameters]\n'
+                      '"masses.backboard.mass" = { from = 1.0, to = 2.0, steps = 2 }\n')
+    assert main(["check", str(inside)]) == 0
+    out = capsys.readouterr().out
+    assert "basketball_goal: study of basketball_goal" in out and "is valid" in out

@@ -46,6 +46,11 @@ class GeometryTables:
 
     def point_table(self) -> None:
         raw = self.top("points")
+        if not raw and isinstance(self.top("study"), dict):
+            raise self.error("study", None, "this is a study file (a [study] table, no [points]): "
+                             "its scene is the base it names",
+                             "run it with python -m linkpipe study FILE (check it with "
+                             "python -m linkpipe check FILE)")
         if not raw:
             raise self.error("points", None, "no points: the scene needs a [points] table",
                              "add [points] with e.g. A = { x = 0.0, y = 0.0, fixed = true }")

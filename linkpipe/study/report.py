@@ -7,6 +7,24 @@ import numpy as np
 N_BEST = 3
 
 
+def describe_study(study) -> str:
+    """What ``check`` prints for a study file: its base scene, each parameter and how it
+    varies, the variants, batches and metrics, and the path that will solve them."""
+    V = study.n_variants
+    lines = [f"{study.name}: study of {study.scene.name} ({study.scene.path}), {V:,} variant(s) "
+             f"of {study.scene.n_steps} steps in {len(study.batches())} batch(es) of up to "
+             f"{study.batch_size:,}"]
+    for j, p in enumerate(study.parameters):
+        how = (f"{p.spec[0]:g} .. {p.spec[1]:g} in {p.spec[2]} steps" if p.kind == "grid"
+               else f"{p.kind} {', '.join(f'{v:g}' for v in p.spec)}")
+        lines.append(f"  parameter {p.address} = {p.initial:g} in the base: {how} "
+                     f"(variants {study.values[:, j].min():.6g} .. {study.values[:, j].max():.6g})")
+    for m in study.metrics:
+        lines.append(f"  metric {m.name} = {m.text}")
+    lines.append(f"  will solve {study.path_note}")
+    return "\n".join(lines)
+
+
 def study_table(study, path, seconds: float | None = None) -> str:
     """The summary of a written study file: counts, each metric's range and the variants with
     the lowest peak input force (first driver), or the first metric without forces."""

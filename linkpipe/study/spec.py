@@ -107,6 +107,20 @@ class Study:
         return [(b, lo, min(V, lo + n)) for b, lo in enumerate(range(0, V, n))]
 
 
+def study_kind(path) -> str | None:
+    """``"study"`` if ``path`` is readable TOML with a ``[study]`` table and no ``[points]`` (a
+    study file: its scene is the base it names), ``"scene"`` for a scene that holds a
+    ``[study]`` of its own, else None (no study, or a file the scene reader will explain)."""
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data.get("study"), dict):
+        return None
+    return "scene" if "points" in data else "study"
+
+
 def _read(path: str) -> tuple[str, dict]:
     try:
         text = Path(path).read_text(encoding="utf-8")

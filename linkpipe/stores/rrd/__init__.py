@@ -98,7 +98,8 @@ def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_
 
 
 def write(result, path, spawn: bool = False, connect: str | None = None,
-          max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES) -> str | None:
+          max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES,
+          every_step_in: str | None = ".h5") -> str | None:
     """Write the recording of ``result`` to ``path`` (``None``: no file) and optionally stream it.
 
     ``spawn=True`` starts a Rerun viewer and streams to it; ``connect`` streams to a running
@@ -106,8 +107,9 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     temporary name and renamed into place when complete. A sweep longer than ``max_steps``, or
     whose recording would exceed ``max_bytes``, is recorded at a uniform stride of steps
     (:func:`plan`), said in a static ``info`` text entity; the step timeline keeps the sweep's
-    own step numbers. Returns what was kept ("every 4th step (91 of 361; ...)"), or None
-    when every step was.
+    own step numbers; ``every_step_in``: the file that keeps every step, named in that note
+    (None: the run wrote none). Returns what was kept ("every 4th step (91 of 361; ...)"), or
+    None when every step was.
     """
     if path is None and not spawn and not connect:
         return None
@@ -121,7 +123,9 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
         rows = np.arange(0, result.n_steps, stride)
         kept = (f"every {_ordinal(stride * base)} step ({len(rows):,} of "
                 f"{result.totals.n_steps:,}; {why})")
-        info = f"This recording keeps {kept}; the .h5 keeps every step."
+        info = f"This recording keeps {kept}; " + (
+            f"the {every_step_in} keeps every step." if every_step_in else
+            "no file of this run keeps every step (it wrote no .h5).")
         result = result.strided(rows)
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
