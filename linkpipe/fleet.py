@@ -143,7 +143,8 @@ COLUMNS = {
             "peak_input_force": ("driver", np.nan, "force"),
             "rms_input_force": ("driver", np.nan, "force"),
             "measured_rms": ("measurement", np.nan, "measurement")},
-    "fit": {"fitted": ("parameter", np.nan, ""), "standard_error": ("parameter", np.nan, ""),
+    "fit": {"fitted": ("parameter", np.nan, "parameter"),
+            "standard_error": ("parameter", np.nan, "parameter"),
             "rms_before": ("measurement", np.nan, "measurement"),
             "rms_after": ("measurement", np.nan, "measurement"),
             "evaluations": (None, -1, "1")},
@@ -211,13 +212,18 @@ def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict) -> str:
 def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tuple:
     """Write ``<name>_fleet.h5`` (``fit``: ``<name>_fleet_fit.h5``) into the folder ``out``;
     return (its path, the table to print)."""
-    from .result import common_unit, input_force_units, measured_units, units_of
+    from .result import common_unit, input_force_units, measured_units, parameter_unit, units_of
     from .stores import fleet as fleet_store
 
     labels, columns = fleet_columns(kind, scene, paths, rows)
     # each entry's unit where drivers or measurements differ: driver_units, measurement_units
     per = {"force": ("driver_units", input_force_units(scene.drivers, units_of(scene))),
            "measurement": ("measurement_units", measured_units(scene))}
+    if kind == "fit":
+        from .fit import parameters_of
+
+        per["parameter"] = ("parameter_units", [
+            parameter_unit(scene, p.path) for p in parameters_of(scene, tomllib.loads(scene.text))])
     units, attrs = {}, {}
     for name, (_, _, key) in COLUMNS[kind].items():
         if key in per:

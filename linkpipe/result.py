@@ -80,6 +80,28 @@ def measured_units(scene: Scene) -> list[str]:
             else whole[m.of[0]] for m in scene.measurements]
 
 
+def parameter_unit(scene: Scene, path: tuple) -> str:
+    """The unit of the number at ``path`` in the scene's TOML data (a fitted or studied
+    parameter: ``("springs", 0, "k")``, ``("points", "S1", "y")``), from the scene's units;
+    "1" for a pure number, "" where the key has no fixed unit."""
+    u = units_of(scene)
+    L, T, F, M = u["length"], u["time"], u["force"], u["mass"]
+    keys = [p for p in path if isinstance(p, str)]
+    table, key = keys[0], keys[-1]
+    if table == "drivers" and isinstance(path[1], int):
+        d = driver_units_of(scene)[path[1]] if path[1] < len(scene.drivers) else ""
+        return {"from": d, "to": d, "step": d, "rate": f"{d}/{T}",
+                "acceleration": f"{d}/{T}^2"}.get(key, "")
+    if table == "torsion_springs":
+        return {"k": f"{F}*{L}/rad", "free_angle": "degree"}.get(key, "")
+    if table == "points" or "lengths" in keys or "local" in keys or "sides" in keys:
+        return L
+    return {"k": f"{F}/{L}", "free_length": L, "extended_length": L, "dead_length": L,
+            "preload": F, "force_extended": F, "force": F, "gamma": "1", "damping": f"{F}*{T}/{L}",
+            "mass": M, "inertia": f"{M}*{L}^2", "center": L, "torque": f"{F}*{L}",
+            "g": f"{L}/{T}^2", "direction": "1"}.get(key, "")
+
+
 def entry_units(var: "Variable") -> list[str]:
     """The unit of each entry along a variable's second dimension: its ``<dimension>_units``
     attribute (``driver_units``, ``measurement_units``) where the entries may differ, else the

@@ -148,6 +148,8 @@ def test_the_command_writes_the_fitted_scene_and_the_h5(tmp_path, capsys):
         assert f["measured_residual_after"].attrs["rms"][0] < 1e-9
         for name in ("measured_residual_before", "measured_residual_after"):  # a crank's torque
             assert f[name].attrs["units"] == f[name].attrs["measurement_units"] == "N*m"
+        for name in ("initial", "fitted", "standard_error"):  # a spring rate
+            assert f[name].attrs["units"] == f[name].attrs["parameter_units"] == "N/m"
 
 
 @pytest.mark.parametrize("params, words", [

@@ -70,6 +70,10 @@ def test_fit_over_a_glob_of_logs(logs, tmp_path):
         assert f["standard_error"][i, 0] == fr.standard_error[0]
         assert f["rms_after"][i, 0] == fr.after.measurements["rms"][0]
     assert f["fitted"][1, 0] > f["fitted"][0, 0] * 1.05  # 10 % more pressure: a heavier load
+    with h5py.File(tmp_path / "dump_truck_logged_fleet_fit.h5", "r") as h5:  # the mass, in kg
+        for name in ("fitted", "standard_error"):
+            assert h5[name].attrs["units"] == h5[name].attrs["parameter_units"] == "kg"
+        assert h5["rms_after"].attrs["measurement_units"] == h5["rms_after"].attrs["units"]
 
 
 def test_fleet_mistakes_are_one_message(tmp_path, capsys):

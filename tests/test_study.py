@@ -89,6 +89,9 @@ def test_study_rows_equal_one_by_one_runs(tmp_path):
     assert f["parameter"].tolist() == ["springs.left.k", "points.S1.y", "points.O4.y",
                                        "links.backboard.lengths.B-C"]
     assert f["parameter_value"].shape == (12, 4) and f["batch_done"].tolist() == [1, 1, 1]
+    with h5py.File(path, "r") as h5:  # the goal's units: a spring rate, then three lengths
+        assert h5["parameter_value"].attrs["units"] == "mixed"
+        assert h5["parameter_value"].attrs["parameter_units"] == "lbf/ft,ft,ft,ft"
     for v in range(study.n_variants):
         want = expected_row(one_by_one(study, v))
         for name, value in want.items():

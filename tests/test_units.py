@@ -105,3 +105,30 @@ def test_gravity_in_the_wrong_unit_is_a_warning_in_the_summary_and_the_h5(tmp_pa
 def test_gravity_in_the_scenes_unit_gives_no_warning():
     for name in ("basketball_goal", "excavator_arm", "dump_truck", "hatch_gas_spring"):
         assert linkpipe.load_scene(str(CONFIGS / f"{name}.toml")).warnings == ()
+
+
+@pytest.mark.parametrize("address, unit", [
+    ("springs.left.k", "lbf/ft"), ("springs.left.free_length", "ft"),
+    ("springs.right.damping", "lbf*s/ft"), ("points.S1.y", "ft"),
+    ("links.backboard.lengths.B-C", "ft"), ("masses.backboard.mass", "slug"),
+    ("masses.backboard.inertia", "slug*ft^2"), ("loads.hand.force.1", "lbf"),
+    ("loads.twist.torque", "lbf*ft"), ("gravity.g.1", "ft/s^2"),
+    ("drivers.theta3a.from", "degree"), ("drivers.theta3a.rate", "degree/s"),
+    ("torsion_springs.hinge.k", "lbf*ft/rad"), ("torsion_springs.hinge.free_angle", "degree")])
+def test_a_parameter_has_the_unit_of_the_number_it_addresses(address, unit):
+    """What ``fit`` and ``study`` write as ``parameter_units``: the scene's units by key (the
+    benchmark's basketball goal with every effect and a torsion spring: ft, lbf, slug, s)."""
+    import sys
+    import tomllib
+
+    from linkpipe.fit import locate
+    from linkpipe.result import parameter_unit
+
+    sys.path.insert(0, str(CONFIGS.parent / "benchmarks"))
+    from bench_study import goal_every_effect
+
+    text = goal_every_effect() + ('\n[[torsion_springs]]\nname = "hinge"\nlinks = ["upper", "ground"]\n'
+                                  "k = 2.5\nfree_angle = 30.0\n")
+    scene = parse_scene(text, "goal.toml")
+    path, _ = locate(scene, tomllib.loads(text), address)
+    assert parameter_unit(scene, tuple(path)) == unit

@@ -16,7 +16,7 @@ import numpy as np
 import tomlkit
 
 from . import atomic_path, hdf5
-from ..result import Variable, common_unit
+from ..result import Variable, common_unit, parameter_unit
 
 
 def write_toml(fit, path: str | os.PathLike) -> None:
@@ -39,15 +39,18 @@ def write_h5(fit, path: str | os.PathLike) -> None:
     before, after = fit.before.measurements, fit.after.measurements
     units = common_unit(before["units"])
     per = {"measurement_units": ",".join(before["units"])}
+    p_units = [parameter_unit(fit.scene, p.path) for p in fit.parameters]
+    p_unit, p_per = common_unit(p_units), {"parameter_units": ",".join(p_units)}
     coords = [Variable("parameter", ("parameter",), names, ""),
               Variable("measurement", ("measurement",), np.array(before["names"], dtype=object), ""),
               Variable("step", ("step",), np.arange(len(before["residual"])), "1"),
               Variable("iteration", ("iteration",), np.arange(len(fit.cost)), "1")]
     variables = [
-        Variable("initial", ("parameter",), np.array([p.initial for p in fit.parameters]), ""),
-        Variable("fitted", ("parameter",), np.asarray(fit.fitted, float), ""),
-        Variable("standard_error", ("parameter",), np.asarray(fit.standard_error, float), "",
-                 {"long_name": "one standard error; NaN where the data cannot identify it"}),
+        Variable("initial", ("parameter",), np.array([p.initial for p in fit.parameters]),
+                 p_unit, dict(p_per)),
+        Variable("fitted", ("parameter",), np.asarray(fit.fitted, float), p_unit, dict(p_per)),
+        Variable("standard_error", ("parameter",), np.asarray(fit.standard_error, float), p_unit,
+                 {**p_per, "long_name": "one standard error; NaN where the data cannot identify it"}),
         Variable("identifiable", ("parameter",), fit.identifiable.astype(np.int8), "1"),
         Variable("cost", ("iteration",), np.asarray(fit.cost, float), "1",
                  {"long_name": "0.5 sum(((computed - measured) / sigma)^2) per evaluation"}),

@@ -15,7 +15,7 @@ import pathlib
 import numpy as np
 
 from ..executors import EXECUTORS
-from ..result import Variable, common_unit, input_force_units, units_of
+from ..result import Variable, common_unit, input_force_units, parameter_unit, units_of
 from ..version import __version__
 from .batch import solve_batch
 
@@ -26,6 +26,7 @@ def layout(study) -> tuple[dict, list, list]:
     # each driver's input force unit (a torque for an angle driver without an input point)
     by_driver = input_force_units(study.scene.drivers, units_of(study.scene))
     force = common_unit(by_driver)
+    p_units = [parameter_unit(study.scene, p.path) for p in study.parameters]
     coords = [Variable("variant", ("variant",), np.arange(V, dtype=np.int64), "1"),
               Variable("parameter", ("parameter",), np.array(study.names, dtype=object), "",
                        {"kind": [p.kind for p in study.parameters]}),
@@ -34,8 +35,9 @@ def layout(study) -> tuple[dict, list, list]:
     nan = np.full((V, D), np.nan)
     per_driver = {"long_name": "over the variant's ok steps", "driver_units": ",".join(by_driver)}
     variables = [
-        Variable("parameter_value", ("variant", "parameter"), study.values, "",
-                 {"initial": [p.initial for p in study.parameters]}),
+        Variable("parameter_value", ("variant", "parameter"), study.values, common_unit(p_units),
+                 {"initial": [p.initial for p in study.parameters],
+                  "parameter_units": ",".join(p_units)}),
         Variable("peak_input_force", ("variant", "driver"), nan, force,
                  {**per_driver, "long_name": "max |input_force| over the variant's ok steps"}),
         Variable("rms_input_force", ("variant", "driver"), nan, force, per_driver),
