@@ -241,7 +241,15 @@ def test_each_measurement_and_driver_carries_its_own_unit(tmp_path, capsys):
     from linkpipe.result import measured_units
     assert measured_units(linkpipe.load_scene(tmp_path / "mixed.toml")) == want
 
-    # the recording names each series' own unit
+    # the recording names each series' own unit; a torque and a force get a view each (each on
+    # its own scale), a measurement's view its unit
+    from test_rrd import Recording
+    views = Recording(tmp_path / "out" / "mixed.rrd").views()
+    assert views["input_force [kN*mm]"] == ["/plots/input_force/crank"]
+    assert views["input_force [kN]"] == ["/plots/input_force/cylinder"]
+    assert "input_force [mixed]" not in views and views["spring_force [kN]"] == ["$origin/**"]
+    assert "m7: computed and measured [kN*mm]" in views
+    assert "m5: computed and measured [degree/s]" in views
     from linkpipe.stores.rrd.series import series_of
     r = linkpipe.solve(linkpipe.load_scene(tmp_path / "mixed.toml"))
     named = {entity: name for entity, name, _, _ in series_of(r)}

@@ -49,6 +49,20 @@ class Recording:
         return {str(name) for col in frame.columns if col.endswith("ViewBlueprint:display_name")
                 for value in frame[col].dropna() for name in value}
 
+    def views(self) -> dict[str, list[str]]:
+        """{display name: the view's contents queries} of the embedded blueprint."""
+        (entry,) = self.blueprints
+        store = self.reader.store(store=entry).stream().collect()
+        frame = store.reader(index="blueprint", contents="/view/**").to_pandas()
+        out = {}
+        for col in frame.columns:
+            if col.endswith(":ViewBlueprint:display_name"):
+                view = col.split(":", 1)[0]
+                (name,) = [n for v in frame[col].dropna() for n in v]
+                query = f"{view}/ViewContents:ViewContents:query"
+                out[str(name)] = [str(q) for v in frame[query].dropna() for q in v]
+        return out
+
     def static(self, entity, component):
         return self.store.reader(index=None, contents=entity).to_pandas()[f"{entity}:{component}"][0]
 

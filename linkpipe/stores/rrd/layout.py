@@ -9,6 +9,7 @@ from .forces import force_arrows, force_legend
 from .geometry import arrow_legend, arrow_scales, bounds, point_index
 from .mechanism import path_of
 from .series import PLOTTED, SOLVER
+from ...result import entry_units
 
 
 def view_bounds(result) -> tuple[np.ndarray, np.ndarray]:
@@ -46,12 +47,28 @@ def blueprint(result) -> rrb.Blueprint:
         origin="/", contents="mechanism/**", name=mechanism_title(result),
         visual_bounds=rrb.VisualBounds2D(x_range=[lo[0], hi[0]], y_range=[-hi[1], -lo[1]]))
     variables = {v.name: v for v in result.variables()}
-    plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{variables[name].units}]")
-             for name in PLOTTED if name in variables]
+    labels = {c.name: list(c.data) for c in result.coordinates()}
+    plots = []
+    for name in PLOTTED:
+        if name not in variables:
+            continue
+        var = variables[name]
+        units = entry_units(var) if len(var.dims) == 2 else [var.units]
+        if len(set(units)) == 1:
+            plots.append(rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{units[0]}]"))
+            continue
+        # entries in different units (a torque beside a force): one view per unit, each on
+        # its own scale
+        for unit in dict.fromkeys(units):
+            entries = [path_of("plots", name, label)
+                       for label, u in zip(labels[var.dims[1]], units) if u == unit]
+            plots.append(rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{unit}]",
+                                            contents=entries))
     if result.measurements:
         plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
-                                     name=f"{name}: computed and measured")
-                  for name in result.measurements["names"]]
+                                     name=f"{name}: computed and measured [{unit}]")
+                  for name, unit in zip(result.measurements["names"],
+                                        result.measurements["units"])]
     length = variables["residual"].units
     solver = [rrb.TimeSeriesView(origin="solver", name=f"log10 residual [{length}]",
                                  contents=["solver/log10_residual", "solver/log10_tolerance"])]
