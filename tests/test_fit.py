@@ -188,3 +188,27 @@ def test_a_measured_column_with_no_value_is_an_error_not_a_fit(tmp_path):
     with pytest.raises(linkpipe.errors.SceneError) as err:
         fit(load_scene(str(path)))
     assert 'measurements "torque"' in str(err.value) and "no step has both" in str(err.value)
+
+
+def test_a_torsion_springs_free_angle_solves_stage_1_again():
+    """Stage 1 takes whole turns off a torsion spring's angle to bring it within half a turn of
+    its free angle, so a trial free angle is not a force number alone: with 0 deg at the start,
+    free angles of 170 and 190 deg give angles a full turn apart (torsion_offset), and a fit
+    that kept the first trial's turns would disagree with the fitted scene's own run."""
+    from linkpipe.fit import Parameter
+    from linkpipe.forces.springs import torsion_offset
+    from linkpipe.model import build_model
+
+    assert Parameter("torsion_springs.h.k", ("torsion_springs", 0, "k"), 1.0).force_only
+    assert not Parameter("torsion_springs.h.free_angle", ("torsion_springs", 0, "free_angle"),
+                         170.0).force_only
+    assert Parameter("springs.lift.k", ("springs", 0, "k"), 1.0).force_only
+    text = (pathlib.Path(__file__).resolve().parents[1] / "configs" /
+            "fourbar_crank_rocker.toml").read_text()
+    turns = []
+    for free in (170.0, 190.0):
+        scene = linkpipe.parse_scene(text + '\n[[torsion_springs]]\nname = "h"\nlinks = ["crank", '
+                                f'"ground"]\nk = 1.0\nfree_angle = {free}\n', "t.toml")
+        model = build_model(scene)
+        turns.append(float(torsion_offset(model, np.zeros((3, len(scene.links))))[0]))
+    assert turns == [0.0, -2 * np.pi]

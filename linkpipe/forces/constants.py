@@ -18,7 +18,10 @@ class ForceConstants:
     ``spring_preload`` (NaN where none), ``spring_damping``: (n_springs,) or (S, n_springs);
     ``mass``, ``inertia``: (n_masses,) or (S, n_masses); ``gravity`` (2,) or (S, 2) (zeros when
     the scene has none); ``load_force`` (n_loads, 2) or (S, n_loads, 2) (zeros for a couple);
-    ``load_torque`` (n_loads,) or (S, n_loads); ``start_position`` (n_points, 2) or
+    ``load_torque`` (n_loads,) or (S, n_loads); a gas spring's ``gas_force_extended``,
+    ``gas_extended_length``, ``gas_dead_length``, ``gas_gamma`` (n_springs,) or (S, n_springs),
+    NaN for the other kinds; ``torsion_k`` (n_torsion_springs,) or (S, n_torsion_springs);
+    ``start_position`` (n_points, 2) or
     (S, n_points, 2), the drawn positions (a spring's start length); ``size`` the
     mechanism's length scale, a float or (S,) (the leverage an input must have); ``pivots``
     True where the mechanism's own fixed points differ row by row (a study's variants that move
@@ -35,6 +38,11 @@ class ForceConstants:
     gravity: np.ndarray
     load_force: np.ndarray
     load_torque: np.ndarray
+    gas_force_extended: np.ndarray
+    gas_extended_length: np.ndarray
+    gas_dead_length: np.ndarray
+    gas_gamma: np.ndarray
+    torsion_k: np.ndarray
     start_position: np.ndarray
     size: float | np.ndarray
     pivots: bool = False
@@ -58,12 +66,18 @@ class ForceConstants:
             load_force=np.array([ld.force if ld.point is not None else (0.0, 0.0)
                                  for ld in sc.loads], dtype=float).reshape(-1, 2),
             load_torque=col(ld.torque if ld.point is None else 0.0 for ld in sc.loads),
+            **{f"gas_{key}": col(getattr(sp, key) if sp.kind == "gas" else None
+                                 for sp in sc.springs)
+               for key in ("force_extended", "extended_length", "dead_length", "gamma")},
+            torsion_k=col(t.k for t in sc.torsion_springs),
             start_position=model.start_position, size=model.size)
 
     #: each field's number of axes without a step axis
     BASE_NDIM = {"spring_k": 1, "spring_free_length": 1, "spring_preload": 1,
                  "spring_damping": 1, "mass": 1, "inertia": 1, "gravity": 1, "load_force": 2,
-                 "load_torque": 1, "start_position": 2, "size": 0}
+                 "load_torque": 1, "gas_force_extended": 1, "gas_extended_length": 1,
+                 "gas_dead_length": 1, "gas_gamma": 1, "torsion_k": 1, "start_position": 2,
+                 "size": 0}
 
     def rows(self, steps: slice) -> "ForceConstants":
         """The constants at a slice of the steps (fields without a step axis as they are)."""

@@ -18,7 +18,8 @@ from .applied import Applied, couple_as_body, link_index, merge_bodies, scatter_
 @dataclass(frozen=True)
 class SpringGeometry:
     """Every spring's end points, length (S, n_springs), unit vector a->b (S, n_springs, 2),
-    free length, preload and stiffness (n_springs,) or (S, n_springs)."""
+    free length, preload and stiffness (n_springs,) or (S, n_springs), and a gas spring's
+    ``gas`` = (force_extended, extended_length, dead_length, gamma), each the same shape."""
 
     ia: np.ndarray
     ib: np.ndarray
@@ -27,6 +28,7 @@ class SpringGeometry:
     free_length: np.ndarray
     preload: np.ndarray
     k: np.ndarray
+    gas: tuple = ()
 
     @classmethod
     def of(cls, ctx) -> "SpringGeometry":
@@ -44,7 +46,8 @@ class SpringGeometry:
         free = np.where(given, c.spring_free_length, start_len)
         preload = np.where(given | np.isnan(c.spring_preload), 0.0, c.spring_preload)
         unit = d / np.where(length > 0, length, np.nan)[..., None]
-        return cls(ia, ib, length, unit, free, preload, c.spring_k)
+        gas = (c.gas_force_extended, c.gas_extended_length, c.gas_dead_length, c.gas_gamma)
+        return cls(ia, ib, length, unit, free, preload, c.spring_k, gas)
 
     def damping_force(self, ctx) -> np.ndarray:
         """(S, n_springs) the damper's force, c times the rate of lengthening."""
@@ -83,22 +86,26 @@ def spring_law(geo: SpringGeometry, springs) -> tuple[np.ndarray, np.ndarray, np
             tension[:, j] = np.where(active, t, 0.0)
             energy[:, j] = np.where(active, one_sided, 0.0)
         elif sp.kind == "gas":
-            tension[:, j], energy[:, j] = gas_law(geo.length[:, j], sp)
-            extension[:, j] = geo.length[:, j] - sp.extended_length
+            f1, l1, d, gamma = (a[..., j] for a in geo.gas)
+            tension[:, j], energy[:, j] = gas_law(geo.length[:, j], f1, l1, d, gamma)
+            extension[:, j] = geo.length[:, j] - l1
     return tension, energy, extension
 
 
-def gas_law(length: np.ndarray, sp) -> tuple[np.ndarray, np.ndarray]:
-    """(tension, energy) of a gas spring at ``length``: -inf and +inf at or below dead_length
-    (the gas volume is gone: that step's stored force is not finite, status non_finite)."""
-    f1, d, gamma = sp.force_extended, sp.dead_length, sp.gamma
+def gas_law(length: np.ndarray, f1, l1, d, gamma) -> tuple[np.ndarray, np.ndarray]:
+    """(tension, energy) (S,) of a gas spring at ``length`` (S,): force at the extended length
+    ``f1``, extended length ``l1``, dead length ``d``, exponent ``gamma``, each a number or (S,)
+    (a study's variants); -inf and +inf at or below the dead length (the gas volume is gone:
+    that step's stored force is not finite, status non_finite)."""
     volume = length - d
     alive = volume > 0
+    isothermal = gamma == 1.0
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        x = np.log((sp.extended_length - d) / np.where(alive, volume, 1.0))  # ln r
+        x = np.log((l1 - d) / np.where(alive, volume, 1.0))  # ln r
         tension = -f1 * np.exp(gamma * x)
-        shape = x if gamma == 1.0 else np.expm1((gamma - 1.0) * x) / (gamma - 1.0)
-        energy = f1 * (sp.extended_length - d) * shape
+        less = np.where(isothermal, 1.0, gamma - 1.0)
+        shape = np.where(isothermal, x, np.expm1(less * x) / less)
+        energy = f1 * (l1 - d) * shape
     # a NaN length (a failed step) stays NaN; a reached dead length is an infinite push
     unknown = np.isnan(length)
     dead = ~alive & ~unknown
@@ -118,17 +125,20 @@ class TorsionSprings:
     energy: np.ndarray
 
     @classmethod
-    def of(cls, model: Model, link_angle: np.ndarray, offset: np.ndarray) -> "TorsionSprings":
+    def of(cls, model: Model, link_angle: np.ndarray, offset: np.ndarray,
+           k: np.ndarray | None = None) -> "TorsionSprings":
         """The angle is first link minus second, continuous over the sweep (a full turn winds
         the spring): the links' angles ``link_angle`` (S, n_links), unwrapped along the whole
         sweep by stage 1, less ``offset`` (S, n_torsion_springs), the whole turns
         :func:`torsion_offset` takes off at the sweep's first solved step (so that the force
-        stage, run in chunks of steps, sees one continuous angle)."""
+        stage, run in chunks of steps, sees one continuous angle); ``k``: the rates,
+        (n_torsion_springs,) or per step (S, n_torsion_springs) (default: the scene's)."""
         tsprings = model.scene.torsion_springs
         first, second = torsion_links(model)
         angle = torsion_raw_angle(model, link_angle) - offset
         free = np.deg2rad([t.free_angle for t in tsprings])
-        k = np.array([t.k for t in tsprings], dtype=float)
+        if k is None:
+            k = np.array([t.k for t in tsprings], dtype=float)
         torque = k * (angle - free)
         return cls(first, second, angle, torque, 0.5 * k * (angle - free) ** 2)
 

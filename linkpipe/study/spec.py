@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import os
+import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -110,8 +112,11 @@ class Study:
 def study_kind(path) -> str | None:
     """``"study"`` if ``path`` is readable TOML with a ``[study]`` table and no ``[points]`` (a
     study file: its scene is the base it names), ``"scene"`` for a scene that holds a
-    ``[study]`` of its own, else None (no study, or a file the scene reader will explain)."""
+    ``[study]`` of its own, else None (no study, or a file the scene reader will explain: a
+    path that is no regular file is never opened here, a FIFO would block)."""
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return None
         with open(path, "rb") as f:
             data = tomllib.load(f)
     except (OSError, ValueError):

@@ -1,7 +1,8 @@
 """The vectorised path of a study: variants that differ only in force numbers share stage 1.
 
 When every parameter is a number of a force table (``springs.<name>.k | free_length |
-preload | damping``, ``masses.<link>.mass | inertia``, ``gravity.g.<i>``,
+preload | damping``, a gas spring's ``force_extended | extended_length | dead_length |
+gamma``, ``torsion_springs.<name>.k``, ``masses.<link>.mass | inertia``, ``gravity.g.<i>``,
 ``loads.<name>.force.<i> | torque``) or a coordinate of an *anchor* (a fixed point that no
 link, slider or driver uses: only springs and loads act there), every variant has the base
 scene's kinematics. Stage 1 is solved once (per process); a batch of V variants is then one
@@ -38,7 +39,11 @@ from . import pivots
 
 #: force tables and the keys of them the vectorised path varies: key -> ForceConstants field
 FORCE_KEYS = {"springs": {"k": "spring_k", "free_length": "spring_free_length",
-                          "preload": "spring_preload", "damping": "spring_damping"},
+                          "preload": "spring_preload", "damping": "spring_damping",
+                          "force_extended": "gas_force_extended",
+                          "extended_length": "gas_extended_length",
+                          "dead_length": "gas_dead_length", "gamma": "gas_gamma"},
+              "torsion_springs": {"k": "torsion_k"},
               "masses": {"mass": "mass", "inertia": "inertia"},
               "gravity": {"g": "gravity"}, "loads": {"force": "load_force", "torque": "load_torque"}}
 _BASE: dict = {}  # study fingerprint -> the base Result (stage 1 solved once per process)
@@ -65,8 +70,6 @@ def slot_of(scene, path: tuple):
     if table == "gravity" and len(path) == 3 and path[1] == "g":
         return ("gravity", path[2])
     if len(path) < 3 or path[2] not in keys:
-        return None
-    if table == "springs" and scene.springs[path[1]].kind == "gas":
         return None
     return (keys[path[2]],) + tuple(path[1:2]) + tuple(path[3:])
 
@@ -109,7 +112,8 @@ def plan(study) -> tuple[list | None, str]:
     for j, p in enumerate(study.parameters):
         slot = slot_of(scene, p.path)
         if slot is None:
-            return None, f"{p.address} changes the kinematics"
+            return None, (f"{p.address} is not one of the force numbers this path varies"
+                          if p.path[0] in FORCE_KEYS else f"{p.address} changes the kinematics")
         why = _anchor_reason(scene, slot[1]) if slot[0] == "point" else ""
         if why.endswith("moves"):  # a drawn coordinate of a moving point
             slot, why = ("drawn",) + slot[1:], ""
