@@ -408,6 +408,15 @@ def test_study_recording_draws_the_file(tmp_path):
     labels = rec.static("/study/pareto/peak_input_force.theta3a/input_force_range.theta3a/"
                         "front_points", "Points2D:labels")
     assert list(labels) == [f"variant {v}" for v in front]
+    # axes name their units: a spring rate (lbf/ft) against a metric of no declared unit, the
+    # handle force (lbf) against its range
+    axes = list(rec.static("/study/vs/springs.left.k/peak_ground/axes", "Points2D:labels"))
+    assert axes[4:] == ["springs.left.k [lbf/ft]", "peak_ground (up)"]
+    axes = list(rec.static("/study/vs/masses.backboard.inertia/peak_input_force.theta3a/axes",
+                           "Points2D:labels"))
+    assert axes[4:] == ["masses.backboard.inertia [slug*ft^2]", "peak_input_force.theta3a [lbf] (up)"]
+    table = str(rec.static("/study/best", "TextDocument:text"))
+    assert "| springs.left.k [lbf/ft] | points.S1.y [ft] |" in table
     assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
     assert {"/study/spread/peak_ground", "/study/spread/energy"} <= rec.entities  # histograms
     best = int(np.argmin(f["peak_input_force"][:, 0]))

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..result import input_force_units, units_of
+from ..result import input_force_units, parameter_unit, units_of
 
 #: best variants solved again for their motion in the recording; bins of a metric's histogram
 N_MOTION, N_BINS = 3, 30
@@ -18,7 +18,8 @@ class StudyView:
     """``metrics`` {label: (V,)}; ``parameters`` {address: (V,)}; ``status`` (V,) worst
     status; ``pareto`` (labels of the two metrics, indices of the Pareto set ordered by the
     first); ``best`` [(variant, Result)] by the first metric; ``spread`` each metric's
-    histogram over the variants (how tolerances spread it)."""
+    histogram over the variants (how tolerances spread it); ``parameter_units`` {address:
+    unit} ("" where the key has none)."""
 
     name: str
     metrics: dict
@@ -28,6 +29,12 @@ class StudyView:
     pareto: tuple
     best: list
     spread: dict  # {metric: (counts (n,), bin centres (n,), bin widths (n,))}
+    parameter_units: dict = None
+
+    def label(self, name: str) -> str:
+        """A metric's or parameter's axis label, with its unit where it has one."""
+        unit = self.units.get(name) or (self.parameter_units or {}).get(name)
+        return f"{name} [{unit}]" if unit else name
 
 
 def pareto_set(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -80,7 +87,8 @@ def study_view(study, columns: dict) -> StudyView:
                 best.append((int(v), result))
     params = {p: study.values[:, j] for j, p in enumerate(study.names)}
     return StudyView(study.name, metrics, units, params, np.asarray(columns["worst_status"]),
-                     pareto, best, {m: histogram(x) for m, x in metrics.items()})
+                     pareto, best, {m: histogram(x) for m, x in metrics.items()},
+                     {p.address: parameter_unit(study.scene, p.path) for p in study.parameters})
 
 
 def histogram(x: np.ndarray, bins: int = N_BINS) -> tuple:

@@ -83,13 +83,14 @@ def log_view(stream, view) -> None:
     colours = np.where((view.status == 0)[:, None], OK_COLOUR, FAILED_COLOUR).astype(np.uint8)
     for p, x in view.parameters.items():
         for m, y in view.metrics.items():
-            _scatter(stream, path_of("study", "vs", p, m), x, y, colours, p,
-                     f"{m} [{view.units[m]}]" if view.units[m] else m)
+            _scatter(stream, path_of("study", "vs", p, m), x, y, colours, view.label(p),
+                     view.label(m))
     (a, b), front = view.pareto
     if a:
         entity = path_of("study", "pareto", a, b)
         grey = np.tile(np.array(GREY, np.uint8), (len(view.status), 1))
-        pts = _scatter(stream, entity, view.metrics[a], view.metrics[b], grey, a, b,
+        pts = _scatter(stream, entity, view.metrics[a], view.metrics[b], grey, view.label(a),
+                       view.label(b),
                        (_near(view.metrics[a], front), _near(view.metrics[b], front)))[front]
         stream.log(f"{entity}/front", rr.LineStrips2D([pts], colors=[style.colour(1)], radii=0.004),
                    static=True)
@@ -101,8 +102,8 @@ def log_view(stream, view) -> None:
             stream.log(path_of("study", "spread", m), rr.BarChart(
                 counts, abscissa=centres, widths=widths.astype(np.float32),
                 color=style.colour(0)), static=True)
-    lines = ["| rank | variant | " + " | ".join(view.parameters) + " | "
-             + " | ".join(view.metrics) + " |",
+    lines = ["| rank | variant | " + " | ".join(map(view.label, view.parameters)) + " | "
+             + " | ".join(map(view.label, view.metrics)) + " |",
              "|---" * (2 + len(view.parameters) + len(view.metrics)) + "|"]
     for rank, (v, _) in enumerate(view.best, 1):
         lines.append(f"| {rank} | {v} | " + " | ".join(f"{x[v]:.6g}" for x in view.parameters.values())
