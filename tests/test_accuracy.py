@@ -409,6 +409,7 @@ def test_log_knobs_measure_a_log_of_the_law_against_the_law_itself():
     assert len(errors) == 3 and errors == sorted(errors)
     assert errors[0] > every[0].relative_error["velocity"]
     assert all(r.seconds_solve > 0 for r in every + smooth)
+    assert not any(r.base or r.newton_base for r in every + smooth)  # not the scene's own run
 
 
 def test_log_knobs_only_for_law_driven_time_scenes():

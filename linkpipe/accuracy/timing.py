@@ -112,9 +112,11 @@ def _measure(scene: Scene, quick: bool, repeats: int, tell, knobs) -> Ladder:
     runs = []  # (row, variant, [wall seconds], [stage seconds dicts], [last result])
     for knob, value, variant, stage in settings(scene, quick, knobs):
         row = Row(knob, value, variant.n_steps, stage, dc.asdict(variant.solver))
-        same_steps = variant.n_steps == scene.n_steps
-        row.base = row.solver == base_solver and same_steps
-        row.newton_base = row.solver == newton_solver and same_steps
+        # the scene's own run: its solver settings at its steps, its drivers as they are (a
+        # log row drives from samples of the laws instead: never the base)
+        own_run = variant.n_steps == scene.n_steps and not knob.startswith("log")
+        row.base = row.solver == base_solver and own_run
+        row.newton_base = row.solver == newton_solver and own_run
         rows.append(row)
         try:  # the first run: does the knob run at all (and warms up its code paths)
             result, first = _timed(lambda: solve(variant), 1)
