@@ -273,3 +273,16 @@ def test_bad_time_scenes_name_the_key(case, text, key):
 def test_a_rate_driver_may_state_its_end_value():
     scene = scene_of(crank_rocker("from = 0.0\nto = 40.0\nrate = 10.0\nacceleration = 10.0"))
     assert math.isclose(scene.drivers[0].to_value, 40.0)
+
+
+def test_keys_given_together_are_quoted_as_written():
+    """Two exclusive keys: the message quotes the file's own values, so either half of the
+    advice can be kept as it stands."""
+    with pytest.raises(SceneError) as err:
+        scene_of(crank_rocker('law = "polynomial345"\nfrom = 30.0\nto = 90.0\nrate = 12.5'))
+    assert err.value.key == "rate"
+    assert 'keep one of law = "polynomial345" or rate = 12.5' in str(err.value)
+    text = CRANK_ROCKER.replace("steps = 361", "steps = 361\nstep = 2.0")
+    with pytest.raises(SceneError) as err:
+        scene_of(text)
+    assert "keep one of steps = 361 or step = 2.0" in str(err.value)

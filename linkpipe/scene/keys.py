@@ -178,6 +178,10 @@ class _Table:
     def example(self, key: str) -> str:
         return f"{key} = {self.examples[key]}"
 
+    def as_given(self, key: str) -> str:
+        """``key = <the value the file gives>``, for a message about keys given together."""
+        return f"{key} = {_show(self.data[key])}"
+
     def has(self, key: str) -> bool:
         return key in self.data
 
@@ -298,7 +302,7 @@ class _Table:
         listed = ", ".join(keys[:-1]) + f" or {keys[-1]}"
         if len(given) > 1:
             raise self.error(given[1], f"give one of {listed}, not both {' and '.join(given)}",
-                             f"keep one of {' or '.join(self.example(k) for k in given)}")
+                             f"keep one of {' or '.join(self.as_given(k) for k in given)}")
         if not given:
             raise self.error(keys[0], f"missing: give {listed}",
                              "add " + " or ".join(self.example(k) for k in keys))
@@ -308,7 +312,7 @@ class _Table:
         """Which of two exclusive keys is given; raise when neither or both are."""
         if self.has(first) and self.has(second):
             raise self.error(second, f"give {first} or {second}, not both",
-                             f"keep one of {self.example(first)} or {self.example(second)}")
+                             f"keep one of {self.as_given(first)} or {self.as_given(second)}")
         if not (self.has(first) or self.has(second)):
             raise self.error(first, f"missing: give {first} or {second}",
                              f"add {self.example(first)} or {self.example(second)}")
