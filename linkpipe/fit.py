@@ -30,6 +30,7 @@ from scipy.optimize import least_squares
 
 from .errors import MemoryRefused, SceneError
 from .pipeline import solve
+from .result import measured_units
 from .scene import Scene
 from .scene.keys import TABLES, _suggest
 
@@ -193,6 +194,17 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     if not scene.measurements:
         raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "
                          "[[measurements]]", "add [[measurements]] with log, of and sigma")
+    units = measured_units(scene)
+    if len(set(units)) > 1:  # residuals in different units are added only once weighed
+        for m, unit in zip(scene.measurements, units):
+            if m.sigma is None:
+                others = sorted(set(units) - {unit})
+                raise SceneError(scene.path, f'measurements "{m.name}"', "sigma",
+                                 f"missing: this measurement is in {unit}, others in "
+                                 f"{', '.join(others)}; a fit adds their residuals squared, "
+                                 "which needs each divided by its own standard deviation",
+                                 f"add sigma = <its standard deviation, in {unit}> to every "
+                                 "measurement")
     x0 = np.array([p.initial for p in params])
     force_only = all(p.force_only for p in params)
     wanted = frozenset(m.of[0] for m in scene.measurements)  # trials read nothing else

@@ -212,3 +212,21 @@ def test_a_torsion_springs_free_angle_solves_stage_1_again():
         model = build_model(scene)
         turns.append(float(torsion_offset(model, np.zeros((3, len(scene.links))))[0]))
     assert turns == [0.0, -2 * np.pi]
+
+
+def test_measurements_in_different_units_need_their_sigmas(tmp_path, capsys):
+    """A torque (N*m) and a position (m) add into one cost only divided by their standard
+    deviations: without a sigma the fit stops with one message naming that measurement, before
+    any trial; with both it runs."""
+    second = ('[[measurements]]\nname = "height"\nlog = "run.torque"\nof = "position.A.y"\n')
+    path, _ = make(tmp_path, extra="")
+    text = path.read_text().replace("[fit]", second + "[fit]")
+    path.write_text(text)
+    assert main(["fit", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f'error: {path}: [measurements "height"] sigma: missing: this '
+                          "measurement is in m, others in N*m") and len(err.splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+    path.write_text(text.replace('of = "position.A.y"\n', 'of = "position.A.y"\nsigma = 0.01\n'))
+    res = fit(load_scene(str(path)))
+    assert res.stage1_solves == 1 and np.isfinite(res.fitted[0])
