@@ -710,6 +710,7 @@ seed = 11
 "springs.strut_right.dead_length" = {{ uniform = [-0.45, -0.35] }}
 "springs.strut_right.gamma" = {{ from = 1.0, to = 1.4, steps = 2 }}
 "torsion_springs.hinge.k" = {{ normal = [{k}, 2.0] }}
+"torsion_springs.hinge.free_angle" = {{ from = {free_lo}, to = {free_hi}, steps = 2 }}
 
 [study.metrics]
 peak = "max(abs(input_force.opening))"
@@ -718,26 +719,30 @@ peak = "max(abs(input_force.opening))"
 
 def test_gas_and_torsion_spring_numbers_take_the_vectorised_path_equal_to_one_by_one(tmp_path):
     """The tailgate's gas struts (force at the extended length, extended and dead length, the
-    exponent across the isothermal case gamma = 1) and a torsion spring's rate: stage 1 once,
-    every stored variable of every variant equal to its own run (they ran variant by variant
-    before, and the summary gave "changes the kinematics" as the reason)."""
+    exponent across the isothermal case gamma = 1) and a torsion spring's rate and free angle:
+    stage 1 once, every stored variable of every variant equal to its own run (they ran variant
+    by variant before, and the summary gave "changes the kinematics" as the reason). The two
+    free angles lie 10 degrees either side of half a turn from the spring's first angle: each
+    variant's own run takes a different whole turn off it, and so must the study."""
     from linkpipe.study.vector import variant_arrays
 
     scene = HATCH.read_text() + ('\n[[torsion_springs]]\nname = "hinge"\n'
                                  'links = ["tailgate", "ground"]\nk = 20.0\nfree_angle = -30.0\n')
     (tmp_path / "hatch.toml").write_text(scene)
     path = tmp_path / "gas.toml"
-    path.write_text(GAS_STUDY.format(k=20.0))
+    first = np.degrees(linkpipe.solve(linkpipe.load_scene(tmp_path / "hatch.toml"))
+                       .forces["torsion_spring_angle"][1][0, 0])
+    path.write_text(GAS_STUDY.format(k=20.0, free_lo=first + 170.0, free_hi=first + 190.0))
     study = load_study(path)
     assert study.slots is not None and study.path_note.startswith("vectorised")
     status, arrays = variant_arrays(study, study.slots, 0, study.n_variants)
     base = tomllib.loads(scene)
     for v in range(study.n_variants):
         data = copy.deepcopy(base)
-        f1, l1, d, gamma, k = study.values[v]
+        f1, l1, d, gamma, k, free = study.values[v]
         data["springs"][0]["force_extended"], data["springs"][0]["extended_length"] = f1, l1
         data["springs"][1]["dead_length"], data["springs"][1]["gamma"] = d, gamma
-        data["torsion_springs"][0]["k"] = k
+        data["torsion_springs"][0]["k"], data["torsion_springs"][0]["free_angle"] = k, free
         r = linkpipe.solve(parse_scene(tomli_w.dumps(data), str(tmp_path / "hatch.toml")))
         np.testing.assert_array_equal(status[v], r.status)
         stored = {x.name: x.data for x in r.variables() if x.dims[:1] == ("step",)}
@@ -746,7 +751,11 @@ def test_gas_and_torsion_spring_numbers_take_the_vectorised_path_equal_to_one_by
             np.testing.assert_allclose(arrays[name][v], want, rtol=1e-12, atol=1e-12,
                                        err_msg=f"variant {v} {name}")
     assert {round(g, 6) for g in study.values[:, 3]} == {1.0, 1.4}
-    assert study.n_variants == 2 * 2 * 3
+    assert study.n_variants == 2 * 2 * 2 * 3
+    # the two free angles' runs start a whole turn apart (each within half a turn of its own)
+    start = arrays["torsion_spring_angle"][:, 0, 0]
+    lo, hi = study.values[:, 5] < first + 180.0, study.values[:, 5] > first + 180.0
+    np.testing.assert_allclose(start[hi] - start[lo], 2 * np.pi, rtol=1e-12)
     f = read_arrays(run_study(study, tmp_path / "out"))
     np.testing.assert_array_equal(f["peak"], np.nanmax(np.abs(arrays["input_force"][:, :, 0]),
                                                        axis=1))

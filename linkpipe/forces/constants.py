@@ -20,7 +20,8 @@ class ForceConstants:
     the scene has none); ``load_force`` (n_loads, 2) or (S, n_loads, 2) (zeros for a couple);
     ``load_torque`` (n_loads,) or (S, n_loads); a gas spring's ``gas_force_extended``,
     ``gas_extended_length``, ``gas_dead_length``, ``gas_gamma`` (n_springs,) or (S, n_springs),
-    NaN for the other kinds; ``torsion_k`` (n_torsion_springs,) or (S, n_torsion_springs);
+    NaN for the other kinds; ``torsion_k`` and ``torsion_free_angle`` (degrees)
+    (n_torsion_springs,) or (S, n_torsion_springs);
     ``start_position`` (n_points, 2) or
     (S, n_points, 2), the drawn positions (a spring's start length); ``size`` the
     mechanism's length scale, a float or (S,) (the leverage an input must have); ``pivots``
@@ -43,6 +44,7 @@ class ForceConstants:
     gas_dead_length: np.ndarray
     gas_gamma: np.ndarray
     torsion_k: np.ndarray
+    torsion_free_angle: np.ndarray
     start_position: np.ndarray
     size: float | np.ndarray
     pivots: bool = False
@@ -70,13 +72,15 @@ class ForceConstants:
                                  for sp in sc.springs)
                for key in ("force_extended", "extended_length", "dead_length", "gamma")},
             torsion_k=col(t.k for t in sc.torsion_springs),
+            torsion_free_angle=col(t.free_angle for t in sc.torsion_springs),
             start_position=model.start_position, size=model.size)
 
     #: each field's number of axes without a step axis
     BASE_NDIM = {"spring_k": 1, "spring_free_length": 1, "spring_preload": 1,
                  "spring_damping": 1, "mass": 1, "inertia": 1, "gravity": 1, "load_force": 2,
                  "load_torque": 1, "gas_force_extended": 1, "gas_extended_length": 1,
-                 "gas_dead_length": 1, "gas_gamma": 1, "torsion_k": 1, "start_position": 2,
+                 "gas_dead_length": 1, "gas_gamma": 1, "torsion_k": 1, "torsion_free_angle": 1,
+                 "start_position": 2,
                  "size": 0}
 
     def rows(self, steps: slice) -> "ForceConstants":

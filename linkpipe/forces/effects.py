@@ -95,7 +95,7 @@ def springs(ctx: Context) -> Effect:
     if not ctx.model.scene.torsion_springs:
         return Effect(applied, variables=variables)
     tors = TorsionSprings.of(ctx.model, ctx.motion.link_angle, ctx.motion.torsion_offset,
-                             ctx.constants.torsion_k)
+                             ctx.constants.torsion_k, ctx.constants.torsion_free_angle)
     couples = tors.couples(len(ctx.model.scene.links))
     dims = ("step", "torsion_spring")
     variables.update({"torsion_spring_angle": (dims, tors.angle, "rad"),

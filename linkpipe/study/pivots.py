@@ -155,7 +155,9 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     der = a["der"]
     turns = None
     if scene.torsion_springs:  # each variant's own turns, at its own first solved step
-        turns = np.repeat(torsion_offset(model, a["link_angle"].reshape(V, S, -1)), S, axis=0)
+        free = per_row["torsion_free_angle"][::S]  # (V, n_torsion_springs)
+        turns = np.repeat(torsion_offset(model, a["link_angle"].reshape(V, S, -1), free), S,
+                          axis=0)
     forces = None
     if stages.forces:
         motion = Motion(s=a["s"], s_dot=a["s_dot"], s_ddot=a["s_ddot"], position=a["position"],

@@ -2,7 +2,7 @@
 
 When every parameter is a number of a force table (``springs.<name>.k | free_length |
 preload | damping``, a gas spring's ``force_extended | extended_length | dead_length |
-gamma``, ``torsion_springs.<name>.k``, ``masses.<link>.mass | inertia``, ``gravity.g.<i>``,
+gamma``, ``torsion_springs.<name>.k | free_angle``, ``masses.<link>.mass | inertia``, ``gravity.g.<i>``,
 ``loads.<name>.force.<i> | torque``) or a coordinate of an *anchor* (a fixed point that no
 link, slider or driver uses: only springs and loads act there), every variant has the base
 scene's kinematics. Stage 1 is solved once (per process); a batch of V variants is then one
@@ -32,6 +32,7 @@ from ..errors import SceneError
 from ..fit import scene_with
 from ..forces import compute_forces
 from ..forces.constants import ForceConstants
+from ..forces.springs import torsion_offset
 from ..model.build import mechanism_size
 from ..pipeline import solve, status_of
 from ..result import Motion, units_of
@@ -43,7 +44,7 @@ FORCE_KEYS = {"springs": {"k": "spring_k", "free_length": "spring_free_length",
                           "force_extended": "gas_force_extended",
                           "extended_length": "gas_extended_length",
                           "dead_length": "gas_dead_length", "gamma": "gas_gamma"},
-              "torsion_springs": {"k": "torsion_k"},
+              "torsion_springs": {"k": "torsion_k", "free_angle": "torsion_free_angle"},
               "masses": {"mass": "mass", "inertia": "inertia"},
               "gravity": {"g": "gravity"}, "loads": {"force": "load_force", "torque": "load_torque"}}
 _BASE: dict = {}  # study fingerprint -> the base Result (stage 1 solved once per process)
@@ -196,6 +197,10 @@ def _variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
         return None if a is None else np.tile(a, (V,) + (1,) * (a.ndim - 1))
 
     per_row = per_row_constants(study, model, slots, study.values[lo:hi], S)
+    turns = rows(k.torsion_offset)
+    if any(s[0] == "torsion_free_angle" for s in slots):  # each variant's own whole turns
+        free = per_row["torsion_free_angle"][::S]  # (V, n_torsion_springs)
+        turns = np.repeat(torsion_offset(model, k.link_angle[None], free), S, axis=0)
     X = rows(k.sweep.position)
     for field, p, axis in (s for s in slots if s[0] == "point"):
         X[:, p, axis] = per_row["start_position"][:, p, axis]
@@ -203,7 +208,7 @@ def _variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
                     velocity=rows(k.velocity), acceleration=rows(k.acceleration),
                     status=rows(k.der["status"]), influence=rows(k.der["influence"]),
                     link_angular_acceleration=rows(k.link_rates[1]), link_angle=rows(k.link_angle),
-                    torsion_offset=rows(k.torsion_offset))
+                    torsion_offset=turns)
     forces = compute_forces(model, motion, units_of(study.scene), ForceConstants(**per_row))
     status = status_of(model, motion.status, rows(k.sweep.residual),
                        [X, rows(k.link_angle), motion.velocity, motion.acceleration,
