@@ -454,3 +454,18 @@ def test_the_ladder_runs_on_a_logged_time_scene():
     (linear,) = rows(ladder, "derivatives", "linear")
     for r in rows(ladder, "derivatives", "finite_difference"):
         assert linear.relative_error["velocity"] < r.relative_error["velocity"] < 1e-3
+
+
+def test_a_single_instant_takes_only_the_rows_it_can():
+    """[time] from = to, steps = 1: no finite differences, predictors or logs (no second
+    instant to difference, predict from or sample); every row the ladder builds runs."""
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text()
+    law = LAW_SCENE_TAIL.replace("to = 2.0\nsteps = 401", "to = 0.0\nsteps = 1").replace(
+        'law = "cycloidal"\nfrom = 0.0\nto = 360.0', "rate = 30.0\nfrom = 10.0")
+    scene = linkpipe.scene.parse_scene(text[:text.index("[[drivers]]")] + law, "one.toml")
+    assert scene.n_steps == 1
+    assert accuracy.knobs.log_settings(scene) == []
+    ladder = accuracy.measure(scene, quick=True, repeats=1)
+    assert ladder.rows and all(r.failure == "" for r in ladder.rows)
+    assert {r.knob for r in ladder.rows} <= {"tol", "max_iter", "jacobian", "linear_algebra",
+                                              "method"}

@@ -759,3 +759,29 @@ def test_gas_and_torsion_spring_numbers_take_the_vectorised_path_equal_to_one_by
     f = read_arrays(run_study(study, tmp_path / "out"))
     np.testing.assert_array_equal(f["peak"], np.nanmax(np.abs(arrays["input_force"][:, :, 0]),
                                                        axis=1))
+
+
+def test_a_study_of_a_study_or_of_the_instants_is_one_clear_message(tmp_path):
+    """A base that is itself a study file names the study's own base key; a [time] value
+    would move the instants (the steps' count stays), which is what the message says."""
+    inner = write_study(tmp_path, name="inner")
+    outer = tmp_path / "outer.toml"
+    outer.write_text(f'[study]\nbase = "{inner.name}"\n[study.parameters]\n'
+                     '"springs.left.k" = { from = 1.0, to = 2.0, steps = 2 }\n')
+    with pytest.raises(SceneError) as err:
+        load_study(outer)
+    assert (err.value.path, err.value.table, err.value.key) == (str(outer), "study", "base")
+    assert "is a study file, not a scene" in str(err.value)
+
+    text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+    driver = text[text.index("[[drivers]]"):text.index("[outputs]")]
+    timed = text.replace(driver, '[time]\nfrom = 0.0\nto = 2.0\nsteps = 41\n\n[[drivers]]\n'
+                         'name = "crank"\nangle = ["O2", "A"]\nrate = 90.0\nfrom = 0.0\n\n')
+    (tmp_path / "timed.toml").write_text(timed)
+    for key in ("to", "from"):
+        study = tmp_path / f"t_{key}.toml"
+        study.write_text(f'[study]\nbase = "timed.toml"\n[study.parameters]\n'
+                         f'"time.{key}" = {{ from = 1.0, to = 2.0, steps = 2 }}\n')
+        with pytest.raises(SceneError) as err:
+            load_study(study)
+        assert err.value.key == f"time.{key}" and "would change the instants" in str(err.value)

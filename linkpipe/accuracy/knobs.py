@@ -7,6 +7,7 @@ import numpy as np
 
 from ..scene import Scene
 from ..scene.tables import LogData, TimeSweep
+from ..scene.timing import MIN_SMOOTHING_SAMPLES
 
 
 # The ladder. Step counts are multiples of the scene's own number of intervals.
@@ -156,8 +157,9 @@ def log_settings(scene: Scene, quick: bool = False) -> list[tuple[str, str, Scen
     out = [("log_every", str(k), variant(k, 0.0), "kinematics") for k in LOG_EVERY[quick]
            if (S - 1) // k >= 3]
     h = float(np.mean(np.diff(t))) if S > 1 else 1.0
-    out += [("log_smoothing", f"{f * h ** 3:.2e}", variant(1, f * h ** 3), "kinematics")
-            for f in LOG_SMOOTHING_H3[quick]]
+    if S >= MIN_SMOOTHING_SAMPLES:  # the smoothing spline's fewest samples
+        out += [("log_smoothing", f"{f * h ** 3:.2e}", variant(1, f * h ** 3), "kinematics")
+                for f in LOG_SMOOTHING_H3[quick]]
     return out
 
 

@@ -50,10 +50,11 @@ class SpringGeometry:
         return cls(ia, ib, length, unit, free, preload, c.spring_k, gas)
 
     def damping_force(self, ctx) -> np.ndarray:
-        """(S, n_springs) the damper's force, c times the rate of lengthening."""
-        c = ctx.constants.spring_damping
+        """(S, n_springs) the damper's force, c times the rate of lengthening; 0 where a spring
+        has no damper (c 0 or none), even where the rates are unknown (a singular step)."""
+        c = np.nan_to_num(ctx.constants.spring_damping)  # no damping given: none
         rate = np.einsum("skj,skj->sk", ctx.velocity[:, self.ib] - ctx.velocity[:, self.ia], self.unit)
-        return c * rate
+        return np.where(c != 0, c * rate, 0.0)
 
     def as_point_forces(self, ctx, force: np.ndarray) -> Applied:
         point_forces = ctx.zeros_points()

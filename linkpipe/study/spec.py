@@ -211,6 +211,9 @@ def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:
     if not base.is_file():
         raise SceneError(path, "study", "base", f'no scene file "{base}"',
                          "give the base scene's path relative to the study file")
+    if study_kind(base) == "study":
+        raise SceneError(path, "study", "base", f'"{base}" is a study file, not a scene',
+                         "give the scene that study varies (its own base) as base")
     scene_table = data.get("scene", {})
     if not isinstance(scene_table, dict) or set(scene_table) - {"name"}:
         raise SceneError(path, "scene", None, "a study file's [scene] holds its name only",
@@ -255,7 +258,10 @@ def _parameters(path, raw, scene: Scene, base: dict) -> tuple[StudyParameter, ..
     for address, spec in table.items():
         where = (path, "study.parameters", address)
         p_path, value = locate(scene, base, address, where)
-        if p_path[0] in ("time",) or p_path[-1] in _STEP_KEYS or _moves_step_count(base, p_path):
+        if p_path[0] == "time":
+            raise SceneError(*where, "would change the instants; the variants of a study share "
+                             "one sweep of steps (one time axis)", "vary another value")
+        if p_path[-1] in _STEP_KEYS or _moves_step_count(base, p_path):
             raise SceneError(*where, "would change the number of steps; the variants of a "
                              "study share one step axis", "vary another value")
         twin = next((q.address for q in out if q.path == p_path), None)

@@ -187,15 +187,23 @@ def test_singular_steps_keep_what_positions_alone_give_and_no_force(tmp_path):
     """The cylinder-driven rocker over its whole stroke (singular at both dead centres) with a
     spring of each kind from the base C to the pin B, whose length is the cylinder's: at the two
     singular steps the spring lengths, energies and forces are the closed forms at 0.2 and 1.8 m
-    (the torsion spring's at the rocker's angle); the input force and every reaction is NaN."""
+    (the torsion spring's at the rocker's angle), but for a damped spring's force (its damper's
+    part needs the unknown rates); the input force and every reaction is NaN."""
     scene = (ROOT / "configs" / "hard" / "cylinder_full_stroke.toml").read_text()
-    scene = scene.replace('effects = ["loads"]', 'effects = ["loads", "springs"]')
+    scene = scene.replace('effects = ["loads"]', 'effects = ["loads", "springs", "damping"]')
     scene += """
 [[springs]]
 name = "coil"
 between = ["C", "B"]
 k = 100.0
 free_length = 1.0
+
+[[springs]]
+name = "damped"
+between = ["C", "B"]
+k = 100.0
+free_length = 1.0
+damping = 3.0
 
 [[springs]]
 name = "cable"
@@ -229,6 +237,13 @@ free_angle = 0.0
     status = got["status"][0]
     singular = status == SINGULAR
     assert list(np.flatnonzero(singular)) == [0, 160]
+    # the damped spring's force holds its damper's, and the rates are unknown there: NaN; the
+    # others (no damper: none of its force is unknown) are kept
+    assert np.isnan(got["spring_force"][0][singular][:, 1]).all()
+    assert np.isfinite(got["spring_force"][0][~singular]).all()
+    assert np.isnan(got["spring_damping_force"][0][singular]).all()
+    for name in ("spring_length", "spring_energy", "spring_force", "spring_damping_force"):
+        got[name] = (np.delete(got[name][0], 1, axis=1), got[name][1])
     length = got["spring_length"][0][singular]
     np.testing.assert_allclose(length, [[0.2] * 4, [1.8] * 4], atol=1e-8)  # the double root
     s = np.array([0.2, 1.8])[:, None]
