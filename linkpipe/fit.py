@@ -6,8 +6,9 @@
 Each trial value is written into the scene's TOML data and read back through the scene parser,
 so every check of a scene applies to it. The objective is
 ``sum(((computed - measured) / sigma)^2)`` over every measurement and every step where both
-exist at the initial values (a step that fails at a trial value counts as 1000 sigma: the
-optimiser is pushed back, never handed a NaN). ``scipy.optimize.least_squares`` (trust-region
+exist at the initial values (a step that fails at a trial value, or a trial the scene refuses,
+counts as 1000 sigma, or ten times the start's largest weighted residual where that is more:
+the optimiser is pushed back, never handed a NaN). ``scipy.optimize.least_squares`` (trust-region
 reflective, bounds from ``[fit] bounds``) minimises it.
 
 When every parameter is a force parameter (``springs``, ``torsion_springs``, ``masses``,
@@ -225,6 +226,10 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
                              f'a computed one ("{m.address}")',
                              "check that the log column holds numbers at the steps that solve")
     sigma = np.array([m.sigma if m.sigma is not None else 1.0 for m in scene.measurements])
+    # a failed step, or a trial the scene cannot take, counts as FAILED_STEP_SIGMAS, or as ten
+    # times the start's largest weighted residual where that is larger: never a way down
+    start = np.abs(before.measurements["residual"] / sigma)[mask]
+    penalty = max(FAILED_STEP_SIGMAS, 10.0 * float(start.max()) if start.size else 0.0)
     cost: list[float] = []
 
     def residuals(x):
@@ -233,9 +238,9 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
         except MemoryRefused:
             raise  # the scene's size, not this trial's values
         except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
-            return np.full(int(mask.sum()), FAILED_STEP_SIGMAS)
+            return np.full(int(mask.sum()), penalty)
         weighted = r.measurements["residual"] / sigma
-        out = np.where(np.isfinite(weighted), weighted, FAILED_STEP_SIGMAS)[mask]
+        out = np.where(np.isfinite(weighted), weighted, penalty)[mask]
         cost.append(0.5 * float(out @ out))
         if progress is not None:
             progress(len(cost), cost[-1])
@@ -247,7 +252,14 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
                         max_nfev=max_evaluations)
     se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
                                                              for m in scene.measurements))
-    after = solve_at(sol.x, reuse)
+    try:
+        after = solve_at(sol.x, reuse)
+    except SceneError as exc:  # the optimiser stopped where the scene cannot go
+        values = ", ".join(f"{p.address} = {v:.6g}" for p, v in zip(params, sol.x))
+        raise SceneError(scene.path, "fit", "bounds", f"the fit ended at {values}, which the "
+                         f"scene refuses ([{exc.table}] {exc.key}: {exc.message})",
+                         "give [fit] bounds that keep each parameter where the scene is valid, "
+                         f'e.g. bounds = {{ "{params[0].address}" = [low, high] }}') from None
     fitted_data = copy.deepcopy(data)
     for p, v in zip(params, sol.x):
         _set(fitted_data, p.path, v)

@@ -230,3 +230,48 @@ def test_measurements_in_different_units_need_their_sigmas(tmp_path, capsys):
     path.write_text(text.replace('of = "position.A.y"\n', 'of = "position.A.y"\nsigma = 0.01\n'))
     res = fit(load_scene(str(path)))
     assert res.stage1_solves == 1 and np.isfinite(res.fitted[0])
+
+
+def test_a_fit_that_stops_where_the_scene_is_invalid_says_so_at_its_bounds(tmp_path, monkeypatch):
+    """Should the optimiser stop at a value the scene refuses (here: handed back a negative
+    spring rate), the fit's message names [fit] bounds, the values it ended at and the scene's
+    own reason, not the scene file's key as if the user had written that value."""
+    import linkpipe.fit as fit_module
+    from linkpipe.errors import SceneError
+
+    real = fit_module.least_squares
+
+    def ends_below_zero(*args, **kwargs):
+        sol = real(*args, **kwargs)
+        sol.x = np.array([-5.0])
+        return sol
+
+    monkeypatch.setattr(fit_module, "least_squares", ends_below_zero)
+    path, _ = make(tmp_path)
+    with pytest.raises(SceneError) as err:
+        fit(load_scene(str(path)))
+    assert (err.value.table, err.value.key) == ("fit", "bounds")
+    assert "the fit ended at springs.lift.k = -5, which the scene refuses ([springs \"lift\"] k:" \
+        in str(err.value)
+
+
+def test_a_refused_trial_costs_more_than_any_start_residual(tmp_path, monkeypatch):
+    """Residuals far above 1000 sigma at the start (sigma 1e-6 N m on a torque of ~10 N m): a
+    trial the scene refuses still counts as ten times the start's largest, so it is never a
+    way down for the optimiser."""
+    import linkpipe.fit as fit_module
+
+    seen = []
+    real = fit_module.least_squares
+
+    def watch(fun, x0, **kwargs):
+        seen.append((fun(x0), fun(np.array([-1.0]))))  # the start, and a refused rate
+        return real(fun, x0, **kwargs)
+
+    monkeypatch.setattr(fit_module, "least_squares", watch)
+    path, _ = make(tmp_path, sigma=1e-6)
+    res = fit(load_scene(str(path)))
+    start, refused = seen[0]
+    assert np.abs(start).max() > 1e3
+    np.testing.assert_array_equal(refused, np.full_like(start, 10 * np.abs(start).max()))
+    assert res.fitted[0] == pytest.approx(K_TRUE, rel=1e-9)
