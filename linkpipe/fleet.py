@@ -183,25 +183,37 @@ def fleet_columns(kind: str, scene: Scene, paths, rows) -> tuple[dict, dict]:
     return labels, columns
 
 
-def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict) -> str:
-    """What ``run --logs`` / ``fit --logs`` print: one line per log."""
+def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict, attrs: dict | None = None
+                ) -> str:
+    """What ``run --logs`` / ``fit --logs`` print: one line per log, each figure with its unit
+    (``attrs``: the columns' per-entry units, as written to the file)."""
+    attrs = attrs or {}
+
+    def units(name: str, n: int) -> list[str]:
+        per = next(iter(attrs.get(name, {}).values()), "")
+        return [f" {u}" if u else "" for u in per.split(",")] if per else [""] * n
+
     lines = [f"{scene.name}: {kind} over {len(labels['log'])} log(s)"]
+    pu = units("fitted", len(labels.get("parameter", ())))
+    fu = units("peak_input_force", len(labels["driver"]))
+    mu = units("measured_rms" if kind == "run" else "rms_after", len(labels["measurement"]))
     width = max(len(n) for n in labels["log"])
     for i, name in enumerate(labels["log"]):
         cells = []
         if kind == "fit" and "fitted" in columns:
-            cells += [f"{p} {columns['fitted'][1][i, j]:.6g} ± {columns['standard_error'][1][i, j]:.3g}"
+            cells += [f"{p} {columns['fitted'][1][i, j]:.6g} ± "
+                      f"{columns['standard_error'][1][i, j]:.3g}{pu[j]}"
                       for j, p in enumerate(labels["parameter"])]
-            cells += [f"rms {m} {columns['rms_after'][1][i, k]:.4g}"
+            cells += [f"rms {m} {columns['rms_after'][1][i, k]:.4g}{mu[k]}"
                       for k, m in enumerate(labels["measurement"])]
         elif kind == "run":
             if "steps_ok" in columns and columns["steps_ok"][1][i] >= 0:
                 cells.append(f"{columns['steps_ok'][1][i]}/{columns['n_steps'][1][i]} ok")
             if "peak_input_force" in columns:
-                cells += [f"peak {d} {columns['peak_input_force'][1][i, j]:.6g}"
+                cells += [f"peak {d} {columns['peak_input_force'][1][i, j]:.6g}{fu[j]}"
                           for j, d in enumerate(labels["driver"])]
             if "measured_rms" in columns:
-                cells += [f"rms {m} {columns['measured_rms'][1][i, k]:.4g}"
+                cells += [f"rms {m} {columns['measured_rms'][1][i, k]:.4g}{mu[k]}"
                           for k, m in enumerate(labels["measurement"])]
         message = columns["message"][1][i]
         failed = columns["log_failed"][1][i]
@@ -236,4 +248,4 @@ def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tupl
     path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
     fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
                              "logs_glob": pattern, "command": kind}, labels, columns, units, attrs)
-    return path, fleet_table(kind, scene, labels, columns)
+    return path, fleet_table(kind, scene, labels, columns, attrs)

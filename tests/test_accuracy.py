@@ -445,6 +445,7 @@ def test_the_ladder_runs_on_a_logged_time_scene():
     scene = linkpipe.load_scene(str(CONFIGS / "logged" / "dump_truck_logged.toml"))
     ladder = accuracy.measure(scene, quick=True, repeats=1, knobs=("derivatives", "predictor"))
     assert ladder.reference.startswith("closed form")
+    assert ladder.units["input_force"] == "N"  # one cylinder: its axial force (was "mixed")
     assert all(r.failure == "" for r in ladder.rows), [r.failure for r in ladder.rows]
     other = [r for r in ladder.rows if r.steps != scene.n_steps]
     assert {r.steps for r in other} == {2 * scene.n_steps - 1, (scene.n_steps - 1) // 4 + 1}

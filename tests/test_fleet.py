@@ -56,6 +56,11 @@ def test_run_over_a_glob_of_logs(logs, tmp_path, capsys):
         assert h5["peak_input_force"].attrs["units"] == r.forces["input_force"][2]
     out = capsys.readouterr().out
     assert "bad.csv      failed:" in out and "truck_2.csv" in out
+    # each figure with its unit: the cylinder's peak force in N, the pressure's rms in N
+    line = next(s for s in out.splitlines() if s.strip().startswith("truck_2.csv"))
+    peak = f["peak_input_force"][3, 0]
+    assert f"peak {r.driver_names[0]} {peak:.6g} N," in line
+    assert line.endswith(f"{f['measured_rms'][3, 0]:.4g} N")
 
 
 def test_fit_over_a_glob_of_logs(logs, tmp_path):

@@ -575,6 +575,12 @@ def test_best_and_pareto_rank_only_variants_that_finish_the_sweep(tmp_path, caps
     assert (f["worst_status"] != OK).any() and (f["worst_status"] == OK).any()
     best = [int(v) for v in __import__("re").findall(r"variant (\d+):", out)]
     assert best and all(f["worst_status"][v] == OK for v in best)
+    # each figure with its unit: the handle force in lbf, the anchor in ft, the rate in lbf/ft
+    assert __import__("re").search(r"\n  peak_input_force\.theta3a: \S+ \.\. \S+ lbf \(mean", out)
+    v = best[0]
+    assert (f"variant {v}: {f['peak_input_force'][v, 0]:.6g} lbf at points.O4.x = "
+            f"{f['parameter_value'][v, 0]:.6g} ft") in out
+    assert "lbf/ft" in out.split(f"variant {v}:")[1].splitlines()[0]
     view = study_view(load_study(path), f)
     assert all(f["worst_status"][v] == OK for v, _ in view.best)
     assert all(f["worst_status"][v] == OK for v in view.pareto[1])
@@ -674,7 +680,7 @@ def test_check_validates_a_study_and_run_points_to_study(tmp_path, capsys):
     study = load_study(path)
     assert out.startswith(f"goal: study of basketball_goal ({GOAL.as_posix()}), "
                           f"{study.n_variants} variant(s) of 25 steps")
-    assert "parameter springs.left.k = 4 in the base: 2 .. 6 in 3 steps" in out
+    assert "parameter springs.left.k = 4 in the base: 2 .. 6 in 3 steps (variants 2 .. 6 lbf/ft)" in out
     assert "parameter points.O4.y = -2 in the base: normal -2, 0.0005" in out
     assert "metric p95_spring = percentile(spring_force.left, 95)" in out
 

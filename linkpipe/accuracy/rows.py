@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..result import Variable
+from ..result import Variable, common_unit, input_force_units, units_of
 from ..scene import Scene
 
 
@@ -241,14 +241,9 @@ class Ladder:
 
 
 def _units(scene: Scene) -> dict[str, str]:
-    u = dict(scene.units)
-    L, T, F = u.get("length", "length"), u.get("time", "s"), u.get("force", "force")
-    kinds = {d.kind for d in scene.drivers}
-    if any(d.input is not None for d in scene.drivers) or kinds == {"coordinate"}:
-        force = F
-    elif kinds == {"angle"}:
-        force = f"{F}*{L}"
-    else:
-        force = "mixed"
+    """The unit of each quantity the ladder measures (the input force's: the drivers' shared
+    unit, else "mixed", as the run's own file)."""
+    u = units_of(scene)
+    L, T = u["length"], u["time"]
     return {"position": L, "velocity": f"{L}/{T}", "acceleration": f"{L}/{T}^2",
-            "input_force": force}
+            "input_force": common_unit(input_force_units(scene.drivers, u))}

@@ -193,8 +193,8 @@ class MotionTables:
                 raise table.error("steps", f"steps = {steps} gives no steps",
                                   f"use steps >= 1 (steps = 1 is a single {single})")
             if steps == 1 and start != stop:
-                raise table.error("steps", f"steps = 1 with {span} gives no steps: a single "
-                                  f"{single} never reaches to",
+                raise table.error("steps", f"steps = 1 with {span}: one step is a single "
+                                  f"{single}, at from, and never reaches to",
                                   f"use steps >= 2 to sweep, or to = from for a single {single}")
             if steps > 1 and start == stop:
                 raise table.error("steps", f"{span} with steps = {steps} gives no motion",

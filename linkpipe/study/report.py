@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..result import input_force_units, parameter_unit, units_of
+
 #: variants listed under "best"
 N_BEST = 3
 
@@ -15,10 +17,12 @@ def describe_study(study) -> str:
              f"of {study.scene.n_steps} steps in {len(study.batches())} batch(es) of up to "
              f"{study.batch_size:,}"]
     for j, p in enumerate(study.parameters):
+        unit = parameter_unit(study.scene, p.path)
         how = (f"{p.spec[0]:g} .. {p.spec[1]:g} in {p.spec[2]} steps" if p.kind == "grid"
                else f"{p.kind} {', '.join(f'{v:g}' for v in p.spec)}")
         lines.append(f"  parameter {p.address} = {p.initial:g} in the base: {how} "
-                     f"(variants {study.values[:, j].min():.6g} .. {study.values[:, j].max():.6g})")
+                     f"(variants {study.values[:, j].min():.6g} .. {study.values[:, j].max():.6g}"
+                     + (f" {unit})" if unit else ")"))
     for m in study.metrics:
         lines.append(f"  metric {m.name} = {m.text}")
     lines.append(f"  will solve {study.path_note}")
@@ -39,15 +43,18 @@ def study_table(study, path, seconds: float | None = None) -> str:
              + (f"; {seconds:.2f} s ({V / seconds:,.0f} variants/s)" if seconds else ""),
              f"  solved {study.path_note}"]
     names = ["peak_input_force", "rms_input_force"] + [m.name for m in study.metrics]
+    force = input_force_units(study.scene.drivers, units_of(study.scene))
+    p_units = [parameter_unit(study.scene, p.path) for p in study.parameters]
     for name in names:
         data = np.asarray(f[name], dtype=float).reshape(V, -1)
         for j in range(data.shape[1]):
             col = data[:, j]
-            label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or name in
-                            ("peak_input_force", "rms_input_force") else "")
+            forces = name in ("peak_input_force", "rms_input_force")
+            label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or forces else "")
+            unit = f" {force[j]}" if forces else ""
             fin = col[np.isfinite(col)]
             if len(fin):
-                lines.append(f"  {label}: {fin.min():.6g} .. {fin.max():.6g} (mean "
+                lines.append(f"  {label}: {fin.min():.6g} .. {fin.max():.6g}{unit} (mean "
                              f"{fin.mean():.6g}, sd {fin.std():.3g}, 5-95 % "
                              f"{np.percentile(fin, 5):.6g} .. {np.percentile(fin, 95):.6g})")
             if len(fin) < len(col):
@@ -67,6 +74,8 @@ def study_table(study, path, seconds: float | None = None) -> str:
                      + ("" if whole else "; no variant has every step ok: these fail some") + "):")
         varied = [j for j in range(len(study.names)) if np.ptp(study.values[:, j]) > 0]
         for v in order:
-            values = ", ".join(f"{study.names[j]} = {study.values[v, j]:.6g}" for j in varied)
-            lines.append(f"    variant {v}: {key[v]:.6g}" + (f" at {values}" if values else ""))
+            values = ", ".join(f"{study.names[j]} = {study.values[v, j]:.6g}"
+                               + (f" {p_units[j]}" if p_units[j] else "") for j in varied)
+            unit = f" {force[0]}" if by_force else ""
+            lines.append(f"    variant {v}: {key[v]:.6g}{unit}" + (f" at {values}" if values else ""))
     return "\n".join(lines)
