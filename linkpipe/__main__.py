@@ -412,15 +412,14 @@ def _fleet(kind: str, args, scenes: list) -> int:
     from tqdm import tqdm
 
     from .executors import executor_name
-    from .fleet import run_fleet, write_fleet
-    from .scene import load_scene
+    from .fleet import fleet_scene, run_fleet, write_fleet
 
     outcome = _Outcome()
     if len(scenes) != 1:
         print("error: --logs runs one scene over many logs: give one scene", file=sys.stderr)
         return 2
     with _reporting(scenes[0], outcome):
-        scene = load_scene(scenes[0])
+        scene = fleet_scene(scenes[0], args.logs, args.log_name)
         bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
         try:
             paths, rows = run_fleet(kind, scene, args.logs, args.log_name,

@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import glob
 import os
+import pathlib
 import tomllib
 
 import numpy as np
@@ -57,6 +58,33 @@ def log_entry(scene: Scene, data: dict, log_name: str | None) -> int:
         raise SceneError(scene.path, "logs", "name", f'no [[logs]] entry "{log_name}"',
                          _suggest(log_name, names))
     return names.index(log_name)
+
+
+def fleet_scene(path: str, pattern: str, log_name: str | None = None) -> Scene:
+    """The scene a fleet runs, loaded from ``path``: as it is, or, when the file of the
+    ``[[logs]]`` entry the fleet replaces does not exist, reading the glob's first log in its
+    place (the fleet replaces it for every log: the scene's own file is not needed)."""
+    from .scene import load_scene
+    from .scene.parse import _Parser
+
+    try:
+        return load_scene(path)
+    except SceneError as exc:
+        if exc.key != "file" or not exc.table.startswith("logs"):
+            raise
+        data = tomllib.loads(pathlib.Path(path).read_text(encoding="utf-8"))
+        entry = log_entry(_Named(path), data, log_name)
+        if exc.table != f'logs "{data["logs"][entry].get("name")}"':
+            raise  # another log's file: the fleet does not replace it
+        data["logs"][entry]["file"] = os.path.abspath(log_files(pattern)[0])
+        return _Parser(data, pathlib.Path(path).read_text(encoding="utf-8"), path).parse()
+
+
+class _Named:
+    """A scene's path, for the messages of :func:`log_entry` before the scene is parsed."""
+
+    def __init__(self, path: str):
+        self.path = path
 
 
 def scene_for_log(scene: Scene, data: dict, entry: int, path: str) -> tuple[Scene, dict]:

@@ -110,3 +110,22 @@ def test_logs_of_one_name_in_two_folders_keep_two_labels():
 
     assert log_labels(["rig/a_good.csv", "rig/sub/a_good.csv"]) == ["a_good.csv", "sub/a_good.csv"]
     assert log_labels(["/x/rig/b.csv", "/x/rig/c.csv"]) == ["b.csv", "c.csv"]
+
+
+def test_a_fleet_needs_no_log_file_of_the_scene_s_own(logs, tmp_path, capsys):
+    """The fleet replaces the scene's log file for every log: a scene whose own file is not
+    there (a template for the rig's logs) runs over the glob, each row equal to that log run
+    alone; run without --logs, the missing file is the scene's mistake (exit 2)."""
+    text = SCENE.read_text().replace('file = "logs/tipper_run.csv"', 'file = "not_here.csv"')
+    template = tmp_path / "template.toml"
+    template.write_text(text)
+    assert main(["run", str(template), "--logs", str(logs / "truck_*.csv"),
+                 "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    f = read_arrays(tmp_path / "out" / "dump_truck_logged_fleet.h5")
+    assert f["log"].tolist() == ["truck_0.csv", "truck_1.csv", "truck_2.csv"]
+    for i, name in enumerate(f["log"]):
+        r = linkpipe.solve(alone(logs / name))
+        assert f["peak_input_force"][i, 0] == np.abs(r.forces["input_force"][1]).max()
+    capsys.readouterr()
+    assert main(["run", str(template), "--out", str(tmp_path / "one")]) == 2  # not a fleet
+    assert 'no such log file' in capsys.readouterr().err
