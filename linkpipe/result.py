@@ -61,6 +61,12 @@ def measured_units(scene: Scene) -> list[str]:
     """Each ``[[measurements]]`` entry's unit: that of the stored entry its ``of`` names (a
     driver's own unit where drivers differ). ``tests/test_measurements.py`` proves it equal to
     the unit :meth:`Result.variables` writes for every measurable variable."""
+    return [entry_unit(scene, m.of[0], m.of[1]) for m in scene.measurements]
+
+
+def entry_unit(scene: Scene, variable: str, label: str | None = None) -> str:
+    """The unit of one stored entry, ``variable`` at ``label`` (a driver's, point's, spring's
+    name); "" for a variable this table does not know."""
     u = units_of(scene)
     L, T, F = u["length"], u["time"], u["force"]
     names = [d.name for d in scene.drivers]
@@ -75,9 +81,12 @@ def measured_units(scene: Scene) -> list[str]:
              "spring_length": L, "spring_extension": L, "spring_energy": f"{F}*{L}",
              "torsion_spring_angle": "rad", "torsion_spring_torque": f"{F}*{L}",
              "torsion_spring_energy": f"{F}*{L}", "link_force": F, "spring_force": F,
-             "slider_force": F, "joint_force": F, "ground_reaction": F}
-    return [per_driver[m.of[0]][names.index(m.of[1])] if m.of[0] in per_driver
-            else whole[m.of[0]] for m in scene.measurements]
+             "slider_force": F, "joint_force": F, "ground_reaction": F,
+             "spring_damping_force": F, "gravity_energy": f"{F}*{L}",
+             "power": f"{F}*{L}/{T}", "residual": L, "condition": "1", "iterations": "1"}
+    if variable in per_driver and label in names:
+        return per_driver[variable][names.index(label)]
+    return whole.get(variable, "")
 
 
 def parameter_unit(scene: Scene, path: tuple) -> str:

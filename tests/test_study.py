@@ -408,15 +408,18 @@ def test_study_recording_draws_the_file(tmp_path):
     labels = rec.static("/study/pareto/peak_input_force.theta3a/input_force_range.theta3a/"
                         "front_points", "Points2D:labels")
     assert list(labels) == [f"variant {v}" for v in front]
-    # axes name their units: a spring rate (lbf/ft) against a metric of no declared unit, the
-    # handle force (lbf) against its range
+    # axes name their units: a spring rate (lbf/ft) against a ground force (lbf), the handle
+    # force against the backboard's inertia
     axes = list(rec.static("/study/vs/springs.left.k/peak_ground/axes", "Points2D:labels"))
-    assert axes[4:] == ["springs.left.k [lbf/ft]", "peak_ground (up)"]
+    assert axes[4:] == ["springs.left.k [lbf/ft]", "peak_ground [lbf] (up)"]
     axes = list(rec.static("/study/vs/masses.backboard.inertia/peak_input_force.theta3a/axes",
                            "Points2D:labels"))
     assert axes[4:] == ["masses.backboard.inertia [slug*ft^2]", "peak_input_force.theta3a [lbf] (up)"]
     table = str(rec.static("/study/best", "TextDocument:text"))
     assert "| springs.left.k [lbf/ft] | points.S1.y [ft] |" in table
+    with h5py.File(tmp_path / "out" / "forces_study.h5", "r") as h5:  # a metric's own unit
+        assert h5["peak_ground"].attrs["units"] == "lbf"
+        assert h5["energy"].attrs["units"] == "lbf*ft"  # two energies added
     assert "/mechanism/links/upper" in rec.entities  # the best variant's motion
     assert {"/study/spread/peak_ground", "/study/spread/energy"} <= rec.entities  # histograms
     best = int(np.argmin(f["peak_input_force"][:, 0]))
@@ -791,3 +794,17 @@ def test_a_study_of_a_study_or_of_the_instants_is_one_clear_message(tmp_path):
         with pytest.raises(SceneError) as err:
             load_study(study)
         assert err.value.key == f"time.{key}" and "would change the instants" in str(err.value)
+
+
+@pytest.mark.parametrize("text, unit", [
+    ("max(abs(input_force.theta3a))", "lbf"), ("percentile(spring_force.left, 95)", "lbf"),
+    ("mean(position.B.x) - min(position.C.y)", "ft"),
+    ("mean(position.B.x) - 2 * min(spring_force.right) / 4", ""),  # ft and lbf: no one unit
+    ("max(spring_force.left) * mean(position.B.x)", "lbf*ft"),
+    ("max(spring_force.left) / 2", "lbf"), ("rms(link_angle.upper)", "rad"),
+    ("-min(driver_value.theta3a)", "degree"), ("max(condition)", "1")])
+def test_a_metric_has_the_unit_of_what_it_reduces(tmp_path, text, unit):
+    study_path = write_study(tmp_path).read_text()
+    path = tmp_path / "m.toml"
+    path.write_text(study_path.split("[study.metrics]")[0] + f'[study.metrics]\nm = "{text}"\n')
+    assert load_study(path).metric_units() == {"m": unit}

@@ -259,3 +259,30 @@ def compile_metric(path, name: str, text, catalog: dict):
         raise SceneError(path, "study.metrics", name, "names no stored variable",
                          'reduce a variable the scene stores, e.g. "max(abs(input_force.<driver>))"')
     return tree
+
+
+def unit_of(tree, entry_unit) -> str:
+    """The unit of a resolved reduction's value, from ``entry_unit(variable, label)`` of each
+    series it reads: a reduction, ``abs`` or a sign keep it; a sum or difference of one unit
+    keeps it; a product or quotient joins them (``a*b``, ``a/b``; a number leaves the other's);
+    "" where it cannot be told (units that differ in a sum, or an unknown variable)."""
+    tag = tree[0]
+    if tag == "num":
+        return "1"
+    if tag == "ref":
+        parts = tree[3].split(".")
+        return entry_unit(tree[1], parts[1] if len(parts) > 1 else None)
+    if tag == "neg":
+        return unit_of(tree[1], entry_unit)
+    if tag == "call":
+        return unit_of(tree[2][0], entry_unit)
+    a, b = unit_of(tree[2], entry_unit), unit_of(tree[3], entry_unit)
+    if tree[1] in "+-":
+        return a if a == b else ""
+    if not a or not b:
+        return ""
+    if b == "1":
+        return a
+    if a == "1":
+        return b if tree[1] == "*" else f"1/{b}"
+    return f"{a}{tree[1]}{b}"

@@ -23,8 +23,10 @@ def describe_study(study) -> str:
         lines.append(f"  parameter {p.address} = {p.initial:g} in the base: {how} "
                      f"(variants {study.values[:, j].min():.6g} .. {study.values[:, j].max():.6g}"
                      + (f" {unit})" if unit else ")"))
+    m_units = study.metric_units()
     for m in study.metrics:
-        lines.append(f"  metric {m.name} = {m.text}")
+        lines.append(f"  metric {m.name} = {m.text}" + (f" [{m_units[m.name]}]" if m_units[m.name]
+                                                          else ""))
     lines.append(f"  will solve {study.path_note}")
     return "\n".join(lines)
 
@@ -45,13 +47,14 @@ def study_table(study, path, seconds: float | None = None) -> str:
     names = ["peak_input_force", "rms_input_force"] + [m.name for m in study.metrics]
     force = input_force_units(study.scene.drivers, units_of(study.scene))
     p_units = [parameter_unit(study.scene, p.path) for p in study.parameters]
+    m_units = study.metric_units()
     for name in names:
         data = np.asarray(f[name], dtype=float).reshape(V, -1)
         for j in range(data.shape[1]):
             col = data[:, j]
             forces = name in ("peak_input_force", "rms_input_force")
             label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or forces else "")
-            unit = f" {force[j]}" if forces else ""
+            unit = f" {force[j]}" if forces else f" {m_units[name]}" if m_units.get(name) else ""
             fin = col[np.isfinite(col)]
             if len(fin):
                 lines.append(f"  {label}: {fin.min():.6g} .. {fin.max():.6g}{unit} (mean "
@@ -76,6 +79,7 @@ def study_table(study, path, seconds: float | None = None) -> str:
         for v in order:
             values = ", ".join(f"{study.names[j]} = {study.values[v, j]:.6g}"
                                + (f" {p_units[j]}" if p_units[j] else "") for j in varied)
-            unit = f" {force[0]}" if by_force else ""
+            unit = force[0] if by_force else m_units.get(key_name, "")
+            unit = f" {unit}" if unit else ""
             lines.append(f"    variant {v}: {key[v]:.6g}{unit}" + (f" at {values}" if values else ""))
     return "\n".join(lines)

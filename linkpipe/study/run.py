@@ -51,8 +51,8 @@ def layout(study) -> tuple[dict, list, list]:
                  {"long_name": "the highest status code met (codes of the scene's status)"}),
         Variable("first_failed_step", ("variant",), np.full(V, -2, np.int32), "1",
                  {"long_name": "first step that is not ok; -1 if none"}),
-        *[Variable(m.name, ("variant",), np.full(V, np.nan), "", {"reduction": m.text})
-          for m in study.metrics],
+        *[Variable(m.name, ("variant",), np.full(V, np.nan), study.metric_units()[m.name],
+                   {"reduction": m.text}) for m in study.metrics],
         Variable("batch_done", ("batch",), np.zeros(B, np.int8), "1",
                  {"long_name": "1 where the batch's rows are written"}),
     ]

@@ -103,6 +103,14 @@ class Study:
     def driver_names(self) -> tuple[str, ...]:
         return tuple(d.name for d in self.scene.drivers)
 
+    def metric_units(self) -> dict[str, str]:
+        """{metric: the unit of its value} ("" where it cannot be told:
+        :func:`.reductions.unit_of`)."""
+        from ..result import entry_unit
+
+        return {m.name: reductions.unit_of(m.tree, lambda v, label: entry_unit(self.scene, v, label))
+                for m in self.metrics}
+
     def batches(self) -> list[tuple[int, int, int]]:
         """``(batch, first variant, end)`` of every batch."""
         V, n = self.n_variants, self.batch_size

@@ -67,8 +67,9 @@ def study_view(study, columns: dict) -> StudyView:
         for j, driver in enumerate(study.driver_names):
             if np.isfinite(columns[name][:, j]).any():
                 metrics[f"{name}.{driver}"], units[f"{name}.{driver}"] = columns[name][:, j], force[j]
+    metric_units = study.metric_units()
     for m in study.metrics:
-        metrics[m.name], units[m.name] = np.asarray(columns[m.name], float), ""
+        metrics[m.name], units[m.name] = np.asarray(columns[m.name], float), metric_units[m.name]
     if np.isfinite(columns["min_transmission_angle"]).any():
         metrics["min_transmission_angle"] = columns["min_transmission_angle"]
         units["min_transmission_angle"] = "degree"
