@@ -252,7 +252,7 @@ def _run(args) -> int:
                 bar.close()
             if not args.quiet:
                 total = time.perf_counter() - t0
-                print(summary(result, written, total, kept, None if args.no_h5 else ".h5"))
+                print(summary(result, written, total, kept))
                 if args.verbose:
                     print(stage_table(result.seconds, total, result.totals.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
@@ -305,7 +305,7 @@ def _solve_and_write(scene, out: pathlib.Path, args, bar, segment: int):
         target = None if args.no_rrd else out / f"{name}.rrd"
         kept = rrd.write(result, target, spawn=args.spawn, connect=args.connect,
                          max_steps=args.rrd_max_steps, max_bytes=max_bytes,
-                         every_step_in=None if args.no_h5 else ".h5")
+                         h5_written=not args.no_h5)
         result.seconds["rrd"] = time.perf_counter() - t0
         if target is not None:
             written.append(str(target))

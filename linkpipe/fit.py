@@ -31,7 +31,7 @@ from scipy.optimize import least_squares
 
 from .errors import MemoryRefused, SceneError
 from .pipeline import solve
-from .result import measured_units
+from .output_units import measured_units
 from .scene import Scene
 from .scene.keys import TABLES, _suggest
 

@@ -40,22 +40,23 @@ def log_files(pattern: str) -> list[str]:
     return found
 
 
-def log_entry(scene: Scene, data: dict, log_name: str | None) -> int:
-    """The index of the ``[[logs]]`` entry the fleet replaces."""
+def log_entry(path: str, data: dict, log_name: str | None) -> int:
+    """The index of the ``[[logs]]`` entry the fleet replaces (``path``: the scene file's, for
+    the messages; ``data``: its TOML data)."""
     logs = data.get("logs") or []
     names = [entry.get("name") for entry in logs]
     if not logs:
-        raise SceneError(scene.path, "logs", None, "a fleet replaces the file of one [[logs]] "
+        raise SceneError(path, "logs", None, "a fleet replaces the file of one [[logs]] "
                          "entry, and this scene reads no log",
                          "add [[logs]] with name, file and time, and drive or measure from it")
     if log_name is None:
         if len(logs) == 1:
             return 0
-        raise SceneError(scene.path, "logs", None, f"a fleet replaces one log's file; the scene "
+        raise SceneError(path, "logs", None, f"a fleet replaces one log's file; the scene "
                          f"has {len(logs)} [[logs]]", "name it with --log-name"
                          + (f" ({', '.join(map(str, names))})" if names else ""))
     if log_name not in names:
-        raise SceneError(scene.path, "logs", "name", f'no [[logs]] entry "{log_name}"',
+        raise SceneError(path, "logs", "name", f'no [[logs]] entry "{log_name}"',
                          _suggest(log_name, names))
     return names.index(log_name)
 
@@ -72,19 +73,13 @@ def fleet_scene(path: str, pattern: str, log_name: str | None = None) -> Scene:
     except SceneError as exc:
         if exc.key != "file" or not exc.table.startswith("logs"):
             raise
-        data = tomllib.loads(pathlib.Path(path).read_text(encoding="utf-8"))
-        entry = log_entry(_Named(path), data, log_name)
+        text = pathlib.Path(path).read_text(encoding="utf-8")  # read and parsed already
+        data = tomllib.loads(text)
+        entry = log_entry(path, data, log_name)
         if exc.table != f'logs "{data["logs"][entry].get("name")}"':
             raise  # another log's file: the fleet does not replace it
         data["logs"][entry]["file"] = os.path.abspath(log_files(pattern)[0])
-        return _Parser(data, pathlib.Path(path).read_text(encoding="utf-8"), path).parse()
-
-
-class _Named:
-    """A scene's path, for the messages of :func:`log_entry` before the scene is parsed."""
-
-    def __init__(self, path: str):
-        self.path = path
+        return _Parser(data, text, path).parse()
 
 
 def scene_for_log(scene: Scene, data: dict, entry: int, path: str) -> tuple[Scene, dict]:
@@ -150,7 +145,7 @@ def run_fleet(kind: str, scene: Scene, pattern: str, log_name=None, executor="in
 
     paths = log_files(pattern)
     data = tomllib.loads(scene.text)
-    entry = log_entry(scene, data, log_name)
+    entry = log_entry(scene.path, data, log_name)
     if kind == "fit":
         from .fit import parameters_of
 
@@ -187,16 +182,15 @@ def log_labels(paths) -> list[str]:
     return [os.path.relpath(p, root) for p in paths]
 
 
-def fleet_columns(kind: str, scene: Scene, paths, rows) -> tuple[dict, dict]:
+def fleet_columns(kind: str, scene: Scene, paths, rows, params=()) -> tuple[dict, dict]:
     """``(labels {dimension: names}, columns {name: (dims, array)})`` of a fleet's rows: one
-    row per log, a failed log's cells at their fill values (NaN, -1) and its message kept."""
-    from .fit import parameters_of
-
+    row per log, a failed log's cells at their fill values (NaN, -1) and its message kept;
+    ``params``: a fit's parameters."""
     labels = {"log": log_labels(paths),
               "driver": [d.name for d in scene.drivers],
               "measurement": [m.name for m in scene.measurements]}
     if kind == "fit":
-        labels["parameter"] = [p.address for p in parameters_of(scene, tomllib.loads(scene.text))]
+        labels["parameter"] = [p.address for p in params]
     columns = {"message": (("log",), np.array([r.get("message", "") for r in rows], dtype=object)),
                "log_failed": (("log",), np.array([len(r) == 1 for r in rows], dtype=np.int8))}
     for name, (dim, fill, _) in COLUMNS[kind].items():
@@ -211,20 +205,12 @@ def fleet_columns(kind: str, scene: Scene, paths, rows) -> tuple[dict, dict]:
     return labels, columns
 
 
-def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict, attrs: dict | None = None
-                ) -> str:
+def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict, entry_units: dict) -> str:
     """What ``run --logs`` / ``fit --logs`` print: one line per log, each figure with its unit
-    (``attrs``: the columns' per-entry units, as written to the file)."""
-    attrs = attrs or {}
-
-    def units(name: str, n: int) -> list[str]:
-        per = next(iter(attrs.get(name, {}).values()), "")
-        return [f" {u}" if u else "" for u in per.split(",")] if per else [""] * n
-
+    (``entry_units`` {"force" | "measurement" | "parameter": each entry's unit})."""
+    pu, fu, mu = ([f" {u}" if u else "" for u in entry_units.get(key, ())]
+                  for key in ("parameter", "force", "measurement"))
     lines = [f"{scene.name}: {kind} over {len(labels['log'])} log(s)"]
-    pu = units("fitted", len(labels.get("parameter", ())))
-    fu = units("peak_input_force", len(labels["driver"]))
-    mu = units("measured_rms" if kind == "run" else "rms_after", len(labels["measurement"]))
     width = max(len(n) for n in labels["log"])
     for i, name in enumerate(labels["log"]):
         cells = []
@@ -252,28 +238,28 @@ def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict, attrs: dic
 def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tuple:
     """Write ``<name>_fleet.h5`` (``fit``: ``<name>_fleet_fit.h5``) into the folder ``out``;
     return (its path, the table to print)."""
-    from .result import common_unit, input_force_units, measured_units, parameter_unit, units_of
+    from .fit import parameters_of
+    from .output_units import (common_unit, input_force_units, measured_units, parameter_units,
+                               units_of)
     from .stores import fleet as fleet_store
 
-    labels, columns = fleet_columns(kind, scene, paths, rows)
-    # each entry's unit where drivers or measurements differ: driver_units, measurement_units
-    per = {"force": ("driver_units", input_force_units(scene.drivers, units_of(scene))),
-           "measurement": ("measurement_units", measured_units(scene))}
-    if kind == "fit":
-        from .fit import parameters_of
-
-        per["parameter"] = ("parameter_units", [
-            parameter_unit(scene, p.path) for p in parameters_of(scene, tomllib.loads(scene.text))])
+    params = parameters_of(scene, tomllib.loads(scene.text)) if kind == "fit" else ()
+    labels, columns = fleet_columns(kind, scene, paths, rows, params)
+    # each entry's unit (an attribute beside a column whose entries may differ)
+    entry_units = {"force": input_force_units(scene.drivers, units_of(scene)),
+                   "measurement": measured_units(scene),
+                   "parameter": parameter_units(scene, params)}
+    attribute = {"force": "driver_units", "measurement": "measurement_units",
+                 "parameter": "parameter_units"}
     units, attrs = {}, {}
     for name, (_, _, key) in COLUMNS[kind].items():
-        if key in per:
-            attr, entries = per[key]
-            units[name] = common_unit(entries) if entries else ""
-            attrs[name] = {attr: ",".join(entries)}
+        if key in entry_units:
+            units[name] = common_unit(entry_units[key]) if entry_units[key] else ""
+            attrs[name] = {attribute[key]: ",".join(entry_units[key])}
         else:
             units[name] = key
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
     fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
                              "logs_glob": pattern, "command": kind}, labels, columns, units, attrs)
-    return path, fleet_table(kind, scene, labels, columns, attrs)
+    return path, fleet_table(kind, scene, labels, columns, entry_units)

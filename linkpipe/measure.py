@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .result import measured_units
+from .output_units import measured_units
 
 
 def computed_series(result, of: tuple) -> np.ndarray:
@@ -23,7 +23,7 @@ def computed_series(result, of: tuple) -> np.ndarray:
 def compare(result) -> dict | None:
     """Return {names, measured (S, M), residual (S, M) computed - measured, rms (M,), max_abs
     (M,)} over the steps where both are finite (NaN where none), or None without measurements.
-    Units: the measured entry's, per measurement (:func:`~linkpipe.result.measured_units`)."""
+    Units: the measured entry's, per measurement (:func:`~linkpipe.output_units.measured_units`)."""
     ms = result.scene.measurements
     if not ms:
         return None

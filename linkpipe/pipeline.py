@@ -11,7 +11,8 @@ from threadpoolctl import threadpool_limits
 
 from . import kinematics as kin
 from .model import build_model
-from .result import Result, units_of
+from .result import Result
+from .output_units import units_of
 from .stage1 import Kinematics, mobility_of, whole_stage1
 from .stage1 import time_axis as stage1_time_axis
 from .status import assign, code_counts

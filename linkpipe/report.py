@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .result import input_force_units
+from .output_units import input_force_units
 
 
-def summary(result, written=(), seconds_total=None, recording_kept=None,
-            every_step_in: str | None = ".h5") -> str:
-    """Return the short per-scene report printed by ``run``."""
+def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
+    """Return the short per-scene report printed by ``run`` (``written``: the files' paths)."""
     sc, totals = result.scene, result.totals
     lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
              f"{totals.n_steps - totals.n_ok} failed)"]
@@ -63,8 +62,9 @@ def summary(result, written=(), seconds_total=None, recording_kept=None,
             lines.append(f"  measurement {name} (of {meas.address}): computed - measured rms "
                          f"{m['rms'][k]:.4g}, max {m['max_abs'][k]:.4g} {m['units'][k]}")
     if recording_kept:
-        lines.append(f"  recording: {recording_kept}; " + (
-            f"the {every_step_in} keeps every step" if every_step_in else "no .h5 written"))
+        h5 = any(str(w).endswith(".h5") for w in written)
+        lines.append(f"  recording: {recording_kept}; "
+                     + ("the .h5 keeps every step" if h5 else "no .h5 written"))
     if written:
         lines.append("  wrote " + ", ".join(written))
     secs = ", ".join(f"{k} {v:.3f}" for k, v in result.seconds.items())

@@ -33,7 +33,8 @@ from threadpoolctl import threadpool_limits
 from .model import build_model
 from .pipeline import (DEFAULT_THREADS, Stages, bytes_per_step, check_memory, result_of,
                        solve, status_of)
-from .result import Result, Totals, units_of
+from .result import Result, Totals
+from .output_units import units_of
 from .scene import Scene
 from .stage1 import Stage1
 

@@ -238,7 +238,7 @@ def test_each_measurement_and_driver_carries_its_own_unit(tmp_path, capsys):
             assert got == unit_in_file == unit, of
         assert f["measured"].attrs["units"] == "mixed"
         assert f["measured_residual"].attrs["measurement_units"] == ",".join(want)
-    from linkpipe.result import measured_units
+    from linkpipe.output_units import measured_units
     assert measured_units(linkpipe.load_scene(tmp_path / "mixed.toml")) == want
 
     # the recording names each series' own unit; a torque and a force get a view each (each on

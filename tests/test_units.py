@@ -122,7 +122,7 @@ def test_a_parameter_has_the_unit_of_the_number_it_addresses(address, unit):
     import tomllib
 
     from linkpipe.fit import locate
-    from linkpipe.result import parameter_unit
+    from linkpipe.output_units import parameter_unit
 
     sys.path.insert(0, str(CONFIGS.parent / "benchmarks"))
     from bench_study import goal_every_effect

@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..result import Variable, common_unit, input_force_units, units_of
+from ..result import Variable
+from ..output_units import common_unit, input_force_units, units_of
 from ..scene import Scene
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import Model
-from ..result import common_unit, input_force_units
+from ..output_units import common_unit, input_force_units
 from ..status import NO_LEVERAGE, OK
 
 LEVERAGE_RTOL = 1e-9  # |n . dr_H/ds| below this times the mechanism size: no leverage

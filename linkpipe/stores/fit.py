@@ -16,7 +16,8 @@ import numpy as np
 import tomlkit
 
 from . import atomic_path, hdf5
-from ..result import Variable, common_unit, parameter_unit
+from ..result import Variable
+from ..output_units import common_unit, parameter_units
 
 
 def write_toml(fit, path: str | os.PathLike) -> None:
@@ -39,7 +40,7 @@ def write_h5(fit, path: str | os.PathLike) -> None:
     before, after = fit.before.measurements, fit.after.measurements
     units = common_unit(before["units"])
     per = {"measurement_units": ",".join(before["units"])}
-    p_units = [parameter_unit(fit.scene, p.path) for p in fit.parameters]
+    p_units = parameter_units(fit.scene, fit.parameters)
     p_unit, p_per = common_unit(p_units), {"parameter_units": ",".join(p_units)}
     coords = [Variable("parameter", ("parameter",), names, ""),
               Variable("measurement", ("measurement",), np.array(before["names"], dtype=object), ""),

@@ -43,7 +43,8 @@ from ..model.build import build_model
 from ..model.rows import variant_rows
 from ..pipeline import Stages, result_of, status_of
 from ..stage1 import Kinematics
-from ..result import Motion, units_of
+from ..result import Motion
+from ..output_units import units_of
 from ..status import NO_ASSEMBLY
 from . import vector
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..result import input_force_units, parameter_unit, units_of
+from ..output_units import input_force_units, units_of
 
 #: variants listed under "best"
 N_BEST = 3
@@ -16,8 +16,7 @@ def describe_study(study) -> str:
     lines = [f"{study.name}: study of {study.scene.name} ({study.scene.path}), {V:,} variant(s) "
              f"of {study.scene.n_steps} steps in {len(study.batches())} batch(es) of up to "
              f"{study.batch_size:,}"]
-    for j, p in enumerate(study.parameters):
-        unit = parameter_unit(study.scene, p.path)
+    for j, (p, unit) in enumerate(zip(study.parameters, study.parameter_units())):
         how = (f"{p.spec[0]:g} .. {p.spec[1]:g} in {p.spec[2]} steps" if p.kind == "grid"
                else f"{p.kind} {', '.join(f'{v:g}' for v in p.spec)}")
         lines.append(f"  parameter {p.address} = {p.initial:g} in the base: {how} "
@@ -46,8 +45,7 @@ def study_table(study, path, seconds: float | None = None) -> str:
              f"  solved {study.path_note}"]
     names = ["peak_input_force", "rms_input_force"] + [m.name for m in study.metrics]
     force = input_force_units(study.scene.drivers, units_of(study.scene))
-    p_units = [parameter_unit(study.scene, p.path) for p in study.parameters]
-    m_units = study.metric_units()
+    p_units, m_units = study.parameter_units(), study.metric_units()
     for name in names:
         data = np.asarray(f[name], dtype=float).reshape(V, -1)
         for j in range(data.shape[1]):

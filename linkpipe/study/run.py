@@ -15,7 +15,8 @@ import pathlib
 import numpy as np
 
 from ..executors import EXECUTORS
-from ..result import Variable, common_unit, input_force_units, parameter_unit, units_of
+from ..result import Variable
+from ..output_units import common_unit, input_force_units, units_of
 from ..version import __version__
 from .batch import solve_batch
 
@@ -26,7 +27,7 @@ def layout(study) -> tuple[dict, list, list]:
     # each driver's input force unit (a torque for an angle driver without an input point)
     by_driver = input_force_units(study.scene.drivers, units_of(study.scene))
     force = common_unit(by_driver)
-    p_units = [parameter_unit(study.scene, p.path) for p in study.parameters]
+    p_units, m_units = study.parameter_units(), study.metric_units()
     coords = [Variable("variant", ("variant",), np.arange(V, dtype=np.int64), "1"),
               Variable("parameter", ("parameter",), np.array(study.names, dtype=object), "",
                        {"kind": [p.kind for p in study.parameters]}),
@@ -51,7 +52,7 @@ def layout(study) -> tuple[dict, list, list]:
                  {"long_name": "the highest status code met (codes of the scene's status)"}),
         Variable("first_failed_step", ("variant",), np.full(V, -2, np.int32), "1",
                  {"long_name": "first step that is not ok; -1 if none"}),
-        *[Variable(m.name, ("variant",), np.full(V, np.nan), study.metric_units()[m.name],
+        *[Variable(m.name, ("variant",), np.full(V, np.nan), m_units[m.name],
                    {"reduction": m.text}) for m in study.metrics],
         Variable("batch_done", ("batch",), np.zeros(B, np.int8), "1",
                  {"long_name": "1 where the batch's rows are written"}),

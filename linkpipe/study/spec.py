@@ -106,10 +106,16 @@ class Study:
     def metric_units(self) -> dict[str, str]:
         """{metric: the unit of its value} ("" where it cannot be told:
         :func:`.reductions.unit_of`)."""
-        from ..result import entry_unit
+        from ..output_units import entry_unit
 
         return {m.name: reductions.unit_of(m.tree, lambda v, label: entry_unit(self.scene, v, label))
                 for m in self.metrics}
+
+    def parameter_units(self) -> list[str]:
+        """Each parameter's unit, in order ("" where its key has none)."""
+        from ..output_units import parameter_units
+
+        return parameter_units(self.scene, self.parameters)
 
     def batches(self) -> list[tuple[int, int, int]]:
         """``(batch, first variant, end)`` of every batch."""

@@ -35,7 +35,8 @@ from ..forces.constants import ForceConstants
 from ..forces.springs import torsion_offset
 from ..model.build import mechanism_size
 from ..pipeline import solve, status_of
-from ..result import Motion, units_of
+from ..result import Motion
+from ..output_units import units_of
 from . import pivots
 
 #: force tables and the keys of them the vectorised path varies: key -> ForceConstants field

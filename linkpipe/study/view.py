@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..result import input_force_units, parameter_unit, units_of
+from ..output_units import input_force_units, units_of
 
 #: best variants solved again for their motion in the recording; bins of a metric's histogram
 N_MOTION, N_BINS = 3, 30
@@ -29,11 +29,11 @@ class StudyView:
     pareto: tuple
     best: list
     spread: dict  # {metric: (counts (n,), bin centres (n,), bin widths (n,))}
-    parameter_units: dict = None
+    parameter_units: dict
 
     def label(self, name: str) -> str:
         """A metric's or parameter's axis label, with its unit where it has one."""
-        unit = self.units.get(name) or (self.parameter_units or {}).get(name)
+        unit = self.units.get(name) or self.parameter_units.get(name)
         return f"{name} [{unit}]" if unit else name
 
 
@@ -89,7 +89,7 @@ def study_view(study, columns: dict) -> StudyView:
     params = {p: study.values[:, j] for j, p in enumerate(study.names)}
     return StudyView(study.name, metrics, units, params, np.asarray(columns["worst_status"]),
                      pareto, best, {m: histogram(x) for m, x in metrics.items()},
-                     {p.address: parameter_unit(study.scene, p.path) for p in study.parameters})
+                     dict(zip(study.names, study.parameter_units())))
 
 
 def histogram(x: np.ndarray, bins: int = N_BINS) -> tuple:

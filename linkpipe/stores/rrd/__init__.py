@@ -99,7 +99,7 @@ def plan(result, max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_
 
 def write(result, path, spawn: bool = False, connect: str | None = None,
           max_steps: int | None = MAX_STEPS, max_bytes: int | None = MAX_BYTES,
-          every_step_in: str | None = ".h5") -> str | None:
+          h5_written: bool = True) -> str | None:
     """Write the recording of ``result`` to ``path`` (``None``: no file) and optionally stream it.
 
     ``spawn=True`` starts a Rerun viewer and streams to it; ``connect`` streams to a running
@@ -107,8 +107,8 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     temporary name and renamed into place when complete. A sweep longer than ``max_steps``, or
     whose recording would exceed ``max_bytes``, is recorded at a uniform stride of steps
     (:func:`plan`), said in a static ``info`` text entity; the step timeline keeps the sweep's
-    own step numbers; ``every_step_in``: the file that keeps every step, named in that note
-    (None: the run wrote none). Returns what was kept ("every 4th step (91 of 361; ...)"), or
+    own step numbers; ``h5_written``: whether the run's .h5 (which keeps every step) exists,
+    said in that note. Returns what was kept ("every 4th step (91 of 361; ...)"), or
     None when every step was.
     """
     if path is None and not spawn and not connect:
@@ -124,7 +124,7 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
         kept = (f"every {_ordinal(stride * base)} step ({len(rows):,} of "
                 f"{result.totals.n_steps:,}; {why})")
         info = f"This recording keeps {kept}; " + (
-            f"the {every_step_in} keeps every step." if every_step_in else
+            "the .h5 keeps every step." if h5_written else
             "no file of this run keeps every step (it wrote no .h5).")
         result = result.strided(rows)
     scene = result.scene

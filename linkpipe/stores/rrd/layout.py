@@ -9,7 +9,7 @@ from .forces import force_arrows, force_legend
 from .geometry import arrow_legend, arrow_scales, bounds, point_index
 from .mechanism import path_of
 from .series import PLOTTED, SOLVER
-from ...result import entry_units
+from ...output_units import entry_units
 
 
 def view_bounds(result) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,7 @@ import rerun as rr
 
 from . import style
 from .mechanism import path_of
-from ...result import entry_units
+from ...output_units import entry_units
 
 #: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
 PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle")
