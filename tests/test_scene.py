@@ -320,6 +320,8 @@ ERRORS = [
      ["unknown unit key", 'did you mean "length"?', "length, mass, time, force"]),
     ("units-not-strings", '[scene]\nunits = { length = 1 }\n' + BASE, "scene.units", "length",
      ["expected a string"]),
+    ("unit-with-a-comma", '[scene]\nunits = { force = "kgf, cm" }\n' + BASE, "scene.units",
+     "force", ["holds a comma", "driver_units", 'force = "kgf cm"']),
     ("no-points", BASE.split("[[links]]", 1)[0].replace("O2 =", "#").replace("A  =", "#")
      .replace("B  =", "#").replace("O4 =", "#").replace("P  =", "#") + "[[links]]"
      + BASE.split("[[links]]", 1)[1], "points", None, ["no points"]),

@@ -161,6 +161,11 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                     raise self.error("scene.units", key, f"expected a string, got "
                                      f"{_type_name(value)} ({_show(value)})",
                                      f'units are free text: write e.g. {key} = "m"')
+                if "," in value:  # the outputs list several entries' units comma-separated
+                    raise self.error("scene.units", key, f"{_show(value)} holds a comma, which "
+                                     "the outputs use between entries' units (driver_units, "
+                                     "measurement_units)", f'write it without one, e.g. '
+                                     f'{key} = "{" ".join(value.replace(",", " ").split()) or "m"}"')
                 units[key] = value
         return {"name": name, "description": table.string("description", ""), "units": units}
 
