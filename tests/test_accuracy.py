@@ -470,3 +470,19 @@ def test_a_single_instant_takes_only_the_rows_it_can():
     assert ladder.rows and all(r.failure == "" for r in ladder.rows)
     assert {r.knob for r in ladder.rows} <= {"tol", "max_iter", "jacobian", "linear_algebra",
                                               "method"}
+
+
+def test_finite_differences_on_a_logged_drive_converge_as_the_ladder_says():
+    """The logged tipper (1001 log samples, 0 .. 40 s): finite differences approach the
+    drive's splines at order 2 (velocity) and 1 (acceleration: a cubic spline's third
+    derivative jumps at every sample, so the second difference across a sample errs by
+    O(h)) once the instants are finer than the samples (2001 -> 4001 instants, each a whole
+    refinement keeping the log's stamps); the printed line says so and names the log."""
+    scene = linkpipe.load_scene(str(CONFIGS / "logged" / "dump_truck_logged.toml"))
+    ladder = accuracy.measure(scene, repeats=1, knobs=("derivatives",))
+    finest = max(rows(ladder, "derivatives", "finite_difference"), key=lambda r: r.steps)
+    assert finest.steps == 4 * (scene.n_steps - 1) + 1
+    assert abs(finest.observed_order["velocity"] - 2.0) < 0.2
+    assert abs(finest.observed_order["acceleration"] - 1.0) < 0.2
+    line = accuracy.orders_line(ladder)
+    assert "1001 in log rig" in line and "order 2 (velocity) and 1" in line

@@ -25,8 +25,19 @@ def orders_line(ladder: Ladder) -> str:
                          and r.value == "finite_difference" and r.available),
                         key=lambda r: r.steps)
     steps = " -> ".join(str(r.steps) for r in everything)
-    return (f"  finite differences along the sweep, observed order of convergence (steps "
+    line = (f"  finite differences along the sweep, observed order of convergence (steps "
             f"{steps}): " + "; ".join(parts))
+    logged = sorted({d.log[0] for d in ladder.scene.drivers if d.timed == "log"})
+    if logged:
+        samples = {log.name: len(log.t) for log in ladder.scene.logs}
+        where = ", ".join(f"{samples[name]} in log {name}" for name in logged)
+        line += ("\n  (logged drivers move on cubic splines through their samples (" + where
+                 + "): differences of the positions approach the splines' rates only on "
+                 "instants finer than the samples, then at order 2 (velocity) and 1 "
+                 "(acceleration: a cubic's third derivative jumps at every sample); the "
+                 "ladder's other step counts resample the instants, evenly where the count "
+                 "is not a whole refinement of the log's)")
+    return line
 
 
 def _fmt_err(v: float) -> str:
