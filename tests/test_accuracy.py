@@ -486,3 +486,93 @@ def test_finite_differences_on_a_logged_drive_converge_as_the_ladder_says():
     assert abs(finest.observed_order["acceleration"] - 1.0) < 0.2
     line = accuracy.orders_line(ladder)
     assert "1001 in log rig" in line and "order 2 (velocity) and 1" in line
+
+
+#: a crank lifting 10 kg (its input a torque, N*m) beside a cylinder raising a 1 kg lever (its
+#: input a force, N): two independent mechanisms, so two input-force units in one scene
+MIXED_UNITS = """\
+[scene]
+name = "crank_and_cylinder"
+units = { length = "m", mass = "kg", time = "s", force = "N" }
+
+[points]
+O = { x = 0.0, y = 0.0, fixed = true }
+A = { x = 1.0, y = 0.0 }
+O2 = { x = 0.0, y = -3.0, fixed = true }
+C = { x = 1.5, y = -3.0, fixed = true }
+P = { x = 1.0, y = -2.0 }
+
+[[links]]
+name = "crank"
+points = ["O", "A"]
+
+[[links]]
+name = "lever"
+points = ["O2", "P"]
+
+[[drivers]]
+name = "crank"
+angle = ["O", "A"]
+from = 0.0
+to = 60.0
+steps = 13
+
+[[drivers]]
+name = "cylinder"
+distance = ["C", "P"]
+from = 1.118033988749895
+to = 1.3
+steps = 13
+
+[analysis]
+effects = ["gravity"]
+
+[gravity]
+g = [0.0, -9.81]
+
+[[masses]]
+link = "crank"
+mass = 10.0
+center = "A"
+
+[[masses]]
+link = "lever"
+mass = 1.0
+center = "P"
+"""
+
+
+def test_drivers_of_different_units_are_each_scaled_by_their_own_unit(tmp_path):
+    """A torque (N*m) and a force (N) share no scale: each driver's input-force error is
+    divided by the largest reference magnitude among the drivers of its unit. An error of
+    0.01 in both columns at one step is 0.01 / (the cylinder's largest force) relative,
+    not 0.01 / (the crank's far larger torque), which one scale for both had reported."""
+    scene = linkpipe.scene.parse_scene(MIXED_UNITS, str(tmp_path / "mixed.toml"))
+    ref = accuracy.References(scene).at(scene.n_steps)
+    scales = accuracy._scales(ref, ["N*m", "N"])
+    magnitude = np.abs(ref.values["input_force"]).max(axis=0)  # (2,): torque, force
+    assert magnitude[0] > 5 * magnitude[1]  # ~98 N*m against ~10 N
+    np.testing.assert_array_equal(scales["input_force_per_driver"], magnitude)
+    assert math.isnan(scales["input_force"])
+    assert accuracy._scales(ref)["input_force"] == magnitude.max()  # one unit: one scale
+
+    r = linkpipe.solve(accuracy._all_orders(scene))
+    name, F = r.forces["input_force"][0], r.forces["input_force"][1].copy()
+    F[5] = ref.values["input_force"][5] + 0.01  # N*m and N
+    off = dc.replace(r, forces={**r.forces, "input_force": (name, F)})
+    row = accuracy.Row("tol", "x", scene.n_steps, "positions", {})
+    accuracy._measure_errors(row, off, ref, scales)
+    assert row.relative_error["input_force"] == pytest.approx(0.01 / magnitude[1], rel=1e-6)
+    assert math.isnan(row.error["input_force"])  # no one unit for an absolute error
+
+    ladder = accuracy.measure(scene, repeats=1, knobs=("tol",))
+    assert ladder.units["input_force"] == "mixed"
+    text = accuracy.header(ladder)
+    assert f"input_force by unit {magnitude[0]:.4g} N*m and {magnitude[1]:.4g} N" in text
+    path = tmp_path / "mixed_accuracy.h5"
+    store.write_h5(ladder, path)
+    with h5py.File(path) as f:
+        assert f.attrs["units_input_force_per_driver"] == "N*m,N"
+        np.testing.assert_array_equal(f.attrs["scale_input_force_per_driver"], magnitude)
+        tight = [i for i, v in enumerate(f["value"].asstr()[:]) if v.startswith("1e-12")]
+        assert f["relative_error"][tight[0], -1] < 1e-9  # the scene's own tolerance, both units

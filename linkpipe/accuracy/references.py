@@ -135,17 +135,45 @@ class References:
         return self._cache[steps]
 
 
-def _scales(ref: Reference) -> dict[str, float]:
-    out = {"position": ref.size}
+def _scales(ref: Reference, force_units: list[str] | None = None) -> dict:
+    """The scale each quantity's relative error divides by: the mechanism's size for
+    positions, the largest reference magnitude over the sweep for the others (1 where that
+    is 0; NaN where nothing is measured).
+
+    The input force is scaled by unit: each driver by the largest reference magnitude among
+    the drivers of its own unit (``force_units``, each driver's: :func:`input_force_units`;
+    None: one unit), in ``input_force_per_driver`` (nd,). With one unit that is the one
+    ``input_force`` scale, as before; where the units differ (a crank's torque beside a
+    cylinder's force) ``input_force`` is NaN: no one number scales them both."""
+    out: dict = {"position": ref.size}
     for q in ("velocity", "acceleration", "input_force"):
         v = ref.values.get(q)
         if v is None or not np.isfinite(v).any():
             out[q] = math.nan
             continue
-        mag = np.abs(v) if q == "input_force" else np.linalg.norm(v, axis=-1)
-        m = float(np.nanmax(mag))
+        if q == "input_force":
+            out.update(_force_scales(np.abs(v), force_units))
+            continue
+        m = float(np.nanmax(np.linalg.norm(v, axis=-1)))
         out[q] = m if m > 0 else 1.0
     return out
+
+
+def _force_scales(magnitude: np.ndarray, units: list[str] | None) -> dict:
+    """``input_force`` and ``input_force_per_driver`` of :func:`_scales` from the reference's
+    |input force| (S, nd)."""
+    nd = magnitude.shape[1]
+    units = list(units) if units is not None else [""] * nd
+    largest = np.where(np.isfinite(magnitude), magnitude, -np.inf).max(axis=0)  # (nd,)
+    per_driver = np.full(nd, math.nan)
+    for unit in set(units):
+        group = [j for j in range(nd) if units[j] == unit]
+        m = float(largest[group].max())
+        if np.isfinite(m):
+            per_driver[group] = m if m > 0 else 1.0
+    one = len(set(units)) == 1
+    return {"input_force": float(np.nanmax(per_driver)) if one else math.nan,
+            "input_force_per_driver": per_driver}
 
 
 def _measure_errors(row: Row, result, ref: Reference, scales: dict[str, float]) -> None:
@@ -170,8 +198,14 @@ def _measure_errors(row: Row, result, ref: Reference, scales: dict[str, float]) 
         both = want & have  # whole steps only: a failed step's fixed points say nothing
         if not both.any():
             continue
-        diff = np.abs(a - b) if q == "input_force" else np.linalg.norm(a - b, axis=-1)
-        err = float(diff[both].max())
+        if q == "input_force":  # each driver against its own unit's scale (_scales)
+            per_driver = np.abs(a - b)[both].max(axis=0)  # (nd,)
+            relative = per_driver / scales["input_force_per_driver"]
+            row.error[q] = float(per_driver.max()) if np.isfinite(scales[q]) else math.nan
+            row.relative_error[q] = (float(np.nanmax(relative)) if np.isfinite(relative).any()
+                                     else math.nan)
+            continue
+        err = float(np.linalg.norm(a - b, axis=-1)[both].max())
         row.error[q] = err
         row.relative_error[q] = err / scales[q] if np.isfinite(scales[q]) else math.nan
     row.steps_failed = int(failed.sum())

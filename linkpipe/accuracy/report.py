@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 
+from ..output_units import input_force_units, units_of
 from ..scene import load_scene
 from .rows import ERROR_FLOOR, Ladder, Row
 from .timing import measure
@@ -109,11 +110,22 @@ def table(ladder: Ladder, markdown: bool = False, compact: bool = False) -> str:
     return "\n".join(out)
 
 
+def _scale_text(ladder: Ladder, q: str) -> str:
+    """``q``'s scale as the header prints it: the input force's per unit where drivers'
+    units differ (each driver's error is divided by its own unit's scale)."""
+    if q != "input_force" or np.isfinite(ladder.scales[q]):
+        return f"{q} {ladder.scales[q]:.4g} {ladder.units[q]}"
+    units = input_force_units(ladder.scene.drivers, units_of(ladder.scene))
+    per = ladder.scales.get("input_force_per_driver")
+    by_unit = {u: per[j] for j, u in enumerate(units)} if per is not None else {}
+    return ("input_force by unit " + " and ".join(f"{v:.4g} {u}" for u, v in by_unit.items())
+            + " (each driver against its own unit's)")
+
+
 def header(ladder: Ladder, markdown: bool = False) -> str:
     """Return the lines that say what the table's numbers are."""
     sc = ladder.scene
-    scales = ", ".join(
-        f"{q} {ladder.scales[q]:.4g} {ladder.units[q]}" for q in ladder.quantities)
+    scales = ", ".join(_scale_text(ladder, q) for q in ladder.quantities)
     first = (f"{sc.name}: what accuracy costs ({'quick' if ladder.quick else 'full'} ladder, "
              f"{sc.n_steps} steps, median of {ladder.repeats} runs)")
     rest = [

@@ -155,7 +155,8 @@ class Ladder:
             "timing": (f"median of {self.repeats} runs in one process; seconds: the stage the "
                        "knob acts on; seconds_solve: the whole solve"),
             "relative_error": ("position: max error / mechanism size; others: max error / "
-                               "max |reference|"),
+                               "max |reference|; input force: each driver's error / max "
+                               "|reference| over the drivers of its unit"),
             "branch_fraction": BRANCH_FRACTION,
             "time_noise": self.time_noise,
         }
@@ -163,6 +164,9 @@ class Ladder:
             attrs[f"scale_{q}"] = s
         for q, u in self.units.items():
             attrs[f"units_{q}"] = u
+        if "input_force_per_driver" in self.scales:  # beside scale_input_force_per_driver
+            attrs["units_input_force_per_driver"] = ",".join(
+                input_force_units(self.scene.drivers, units_of(self.scene)))
         for k, v in self.checks.items():
             attrs[f"check_{k}"] = v
         return attrs

@@ -18,6 +18,7 @@ from ..scene import Scene, load_scene
 from .knobs import KNOBS, settings
 from .references import References, _measure_errors, _scales
 from .rows import Ladder, Row, _units
+from ..output_units import input_force_units, units_of
 
 
 def _timed(fn, repeats: int):
@@ -103,7 +104,8 @@ def measure(scene: Scene | str, quick: bool = False, repeats: int = 5, echo=None
 
 def _measure(scene: Scene, quick: bool, repeats: int, tell, knobs) -> Ladder:
     refs = References(scene)
-    scales = _scales(refs.at(scene.n_steps))
+    scales = _scales(refs.at(scene.n_steps),
+                     input_force_units(scene.drivers, units_of(scene)))
     quantities = ("position", "velocity", "acceleration") + (
         ("input_force",) if refs.has_forces else ())
     base_solver = dc.asdict(scene.solver)
