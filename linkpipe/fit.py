@@ -51,10 +51,11 @@ class Parameter:
 
     @property
     def force_only(self) -> bool:
-        """True when the number leaves stage 1 as it is: a force table's, but for a torsion
-        spring's free angle (stage 1 takes the whole turns off each torsion spring's angle to
-        bring it within half a turn of its free angle: :func:`linkpipe.forces.springs.torsion_offset`)."""
-        return self.path[0] in FORCE_TABLES and self.path[-1] != "free_angle"
+        """True when the number leaves stage 1 as it is: a force table's. A torsion spring's
+        free angle is one too: the whole turns stage 1 takes off the spring's angle (to bring
+        it within half a turn of its free angle) are taken again for each trial on the reused
+        link angles (``pipeline._turns_for``)."""
+        return self.path[0] in FORCE_TABLES
 
 
 @dataclass

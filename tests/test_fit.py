@@ -190,28 +190,47 @@ def test_a_measured_column_with_no_value_is_an_error_not_a_fit(tmp_path):
     assert 'measurements "torque"' in str(err.value) and "no step has both" in str(err.value)
 
 
-def test_a_torsion_springs_free_angle_solves_stage_1_again():
-    """Stage 1 takes whole turns off a torsion spring's angle to bring it within half a turn of
-    its free angle, so a trial free angle is not a force number alone: with 0 deg at the start,
-    free angles of 170 and 190 deg give angles a full turn apart (torsion_offset), and a fit
-    that kept the first trial's turns would disagree with the fitted scene's own run."""
-    from linkpipe.fit import Parameter
-    from linkpipe.forces.springs import torsion_offset
-    from linkpipe.model import build_model
+def torsion_text(free: float, fit_params='["springs.lift.k"]') -> str:
+    """The sprung crank with a torsion spring "h" between crank and ground (k 2 N*m/rad)."""
+    return scene_text(k=K_TRUE, fit_params=fit_params, extra=(
+        f'[[torsion_springs]]\nname = "h"\nlinks = ["crank", "ground"]\nk = 2.0\n'
+        f"free_angle = {free}\n"))
 
-    assert Parameter("torsion_springs.h.k", ("torsion_springs", 0, "k"), 1.0).force_only
-    assert not Parameter("torsion_springs.h.free_angle", ("torsion_springs", 0, "free_angle"),
-                         170.0).force_only
-    assert Parameter("springs.lift.k", ("springs", 0, "k"), 1.0).force_only
-    text = (pathlib.Path(__file__).resolve().parents[1] / "configs" /
-            "fourbar_crank_rocker.toml").read_text()
-    turns = []
+
+def test_a_torsion_springs_free_angle_reuses_stage_1_with_its_own_turns(tmp_path):
+    """Stage 1 takes whole turns off a torsion spring's angle to bring it within half a turn of
+    its free angle: from the crank's 0 deg start, free angles of 150 and 170 deg take none and
+    190 deg a whole turn (the angle then reads 360 deg more). A reused stage 1 takes them again
+    for the trial's free angle, so a force run on the stage 1 of 150 deg gives, for 170 and
+    190 deg, the very arrays of the scene's own run (bit for bit); a fit of the free angle
+    solves stage 1 once and finds the true value from noise-free torques."""
+    from linkpipe.fit import Parameter
+
+    assert Parameter("torsion_springs.h.free_angle", ("torsion_springs", 0, "free_angle"),
+                     170.0).force_only
+    t = np.linspace(0.0, 2.0, 81)
+    write_log(tmp_path, np.zeros_like(t), t, 45.0 * t)
+    path = tmp_path / "t.toml"
+    runs = {}
+    for free in (150.0, 170.0, 190.0):
+        path.write_text(torsion_text(free))
+        runs[free] = linkpipe.solve(load_scene(str(path)))
+    reused = runs[150.0].kinematics
+    assert runs[190.0].kinematics.torsion_offset[0, 0] == -2 * np.pi  # a whole turn, 150: none
+    assert runs[150.0].kinematics.torsion_offset[0, 0] == 0.0
     for free in (170.0, 190.0):
-        scene = linkpipe.parse_scene(text + '\n[[torsion_springs]]\nname = "h"\nlinks = ["crank", '
-                                f'"ground"]\nk = 1.0\nfree_angle = {free}\n', "t.toml")
-        model = build_model(scene)
-        turns.append(float(torsion_offset(model, np.zeros((3, len(scene.links))))[0]))
-    assert turns == [0.0, -2 * np.pi]
+        path.write_text(torsion_text(free))
+        again = linkpipe.solve(load_scene(str(path)), kinematics=reused)
+        for name in ("torsion_spring_angle", "torsion_spring_torque", "input_force"):
+            np.testing.assert_array_equal(again.forces[name][1], runs[free].forces[name][1])
+
+    truth = runs[190.0].forces["input_force"][1][:, 0]
+    write_log(tmp_path, truth, t, 45.0 * t)
+    path.write_text(torsion_text(185.0, '["torsion_springs.h.free_angle"]'))
+    res = fit(load_scene(str(path)))
+    assert res.stage1_solves == 1
+    assert res.fitted[0] == pytest.approx(190.0, abs=1e-7)  # deg: the optimiser's xtol 1e-12
+    assert res.after.measurements["rms"][0] < 1e-9
 
 
 def test_measurements_in_different_units_need_their_sigmas(tmp_path, capsys):
