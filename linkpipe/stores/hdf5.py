@@ -80,7 +80,7 @@ class SweepWriter:
         self._finished = False
         self._thread: ThreadPoolExecutor | None = None  # writes a part's rows while the next solves
         self._pending: Future | None = None
-        self._fd: int | None = None  # the temporary file's descriptor (writeback after a part)
+        self._fd: int | None = None  # the temporary file's descriptor (each part synced)
 
     def __enter__(self) -> "SweepWriter":
         return self
@@ -164,16 +164,20 @@ class SweepWriter:
 
     @_clean_failures
     def _write_rows(self, part, rows: slice, steps: np.ndarray) -> None:
-        """Write ``part``'s rows (the writer's thread), then start them to the disk without
-        waiting for it (``posix_fadvise(DONTNEED)`` starts the writeback of the file's dirty
-        pages: the final fsync has less left to wait for, and a Ctrl-C never waits for a
-        disk here, only for this copy into the page cache)."""
+        """Write ``part``'s rows (the writer's thread), then, but for the sweep's last part,
+        wait for them to reach the disk (``fdatasync``) while the caller solves the next
+        part: the disk works alongside the solve, and the final fsync (``atomic_path``) has
+        only the last part and HDF5's metadata left to wait for. Measured on the 360k-step
+        crank-rocker (134 MB, 22 parts, 2026-11-25): a run 0.84 -> 0.68 s (median of 6),
+        the final fsync 0.17 -> 0.00 s; starting the writeback alone
+        (``posix_fadvise(DONTNEED)``) had left 0.17 s. A Ctrl-C meanwhile waits for at most
+        this part's sync (12 MB: milliseconds on a local disk)."""
         self._datasets["step"][rows] = steps
         for var in part.variables():
             if var.dims[:1] == ("step",):
                 self._datasets[var.name][rows] = _array(var.data)
-        if self._fd is not None and hasattr(os, "posix_fadvise"):
-            os.posix_fadvise(self._fd, 0, 0, os.POSIX_FADV_DONTNEED)
+        if self._fd is not None and rows.stop < self.n_steps:
+            _sync_data(self._fd)
 
     def _wait(self) -> None:
         """Wait for the part being written; raise its failure."""
@@ -209,6 +213,11 @@ class SweepWriter:
         for key, value in result.attributes().items():
             _set_attr(self._file.attrs, key, value)
         self._finished = True
+
+
+def _sync_data(fd: int) -> None:
+    """The file's data on the disk: ``fdatasync`` (``fsync`` where the platform has none)."""
+    getattr(os, "fdatasync", os.fsync)(fd)
 
 
 def _new_file(path) -> h5py.File:
