@@ -431,3 +431,16 @@ class Result:
         for stage, sec in self.seconds.items():
             attrs[f"seconds_{stage}"] = float(sec)
         return attrs
+
+
+def combine_flags(into: dict, part: dict) -> None:
+    """Fold the per-sweep flags of one chunk (or segment) of steps, ``part`` {name: (dims, data,
+    units)}, into ``into``: each variable without a step axis (the ``*_unique`` flags: no
+    self-stress reaches that force at any ok step) is the minimum over the chunks."""
+    for name, (dims, data, unit) in part.items():
+        if dims[:1] == ("step",):
+            continue
+        if name in into:
+            np.minimum(into[name][1], data, out=into[name][1])
+        else:
+            into[name] = (dims, data.copy(), unit)

@@ -33,7 +33,7 @@ from threadpoolctl import threadpool_limits
 from .model import build_model
 from .pipeline import (DEFAULT_THREADS, Stages, bytes_per_step, check_memory, result_of,
                        solve, status_of)
-from .result import Result, Totals
+from .result import Result, Totals, combine_flags
 from .output_units import units_of
 from .scene import Scene
 from .stage1 import Stage1
@@ -139,8 +139,6 @@ class Sampled:
         self.parts.append(part.strided(np.arange((-lo) % self.stride, part.n_steps, self.stride)))
         totals = Totals.of(part)
         self.totals = totals if self.totals is None else self.totals.merged(totals)
-        from .forces import combine_flags
-
         combine_flags(self.flags, part.forces or {})
 
     def result(self, seconds: dict) -> Result:

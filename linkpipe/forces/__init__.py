@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
-from ..result import Forces, Motion
+from ..result import Forces, Motion, combine_flags  # combine_flags: also this package's API
 from ..status import NO_ASSEMBLY, NO_INPUT, NOT_CONVERGED, OK, SINGULAR
 from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
 from .constants import ForceConstants
@@ -89,19 +89,6 @@ def _gathered(out: Forces | None, part: Forces, n_steps: int) -> Forces:
                       status=np.empty(n_steps, part.status.dtype), undefined=part.undefined)
     combine_flags(out.variables, part.variables)
     return out
-
-
-def combine_flags(into: dict, part: dict) -> None:
-    """Fold the per-sweep flags of one chunk (or segment) of steps, ``part`` {name: (dims, data,
-    units)}, into ``into``: each variable without a step axis (the ``*_unique`` flags: no
-    self-stress reaches that force at any ok step) is the minimum over the chunks."""
-    for name, (dims, data, unit) in part.items():
-        if dims[:1] == ("step",):
-            continue
-        if name in into:
-            np.minimum(into[name][1], data, out=into[name][1])
-        else:
-            into[name] = (dims, data.copy(), unit)
 
 
 #: the scene entries each effect reads: an effect is computed again only when these change

@@ -15,7 +15,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from ..forces import combine_flags
+from ..result import combine_flags
 from ..result import Variable
 from ..workers import held_interrupts
 from . import atomic_path
