@@ -361,7 +361,9 @@ def _check(args) -> int:
             # memory (as run's defaults need it), degrees of freedom, the start assembles
             model, mob = preflight(scene, steps_per_segment(scene),
                                    min(scene.n_steps, RRD_MAX_STEPS))
-            print(describe(scene, mob))
+            from .kinematics.start import drawing_warnings
+
+            print(describe(scene, mob, tuple(scene.warnings) + drawing_warnings(model)))
     return outcome.code
 
 

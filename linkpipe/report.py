@@ -13,7 +13,7 @@ def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     sc, totals = result.scene, result.totals
     lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
              f"{totals.n_steps - totals.n_ok} failed)"]
-    lines += [f"  warning: {w}" for w in sc.warnings]
+    lines += [f"  warning: {w}" for w in result.warnings]
     if np.isfinite(totals.max_residual_solved):
         how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else
                f"Newton iterations mean {totals.iterations_sum / totals.n_steps:.2f} max "
@@ -88,8 +88,9 @@ def stage_table(seconds: dict, total: float, n_steps: int) -> str:
     return "\n".join(lines)
 
 
-def describe(scene, mob) -> str:
-    """What ``check`` prints of a valid scene."""
+def describe(scene, mob, warnings=()) -> str:
+    """What ``check`` prints of a valid scene (``warnings``: what is legal but probably not
+    meant, the scene's and its drawing's)."""
     lines = [f"{scene.path}: scene {scene.name!r} is valid",
              f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}",
              f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}"]
@@ -105,6 +106,7 @@ def describe(scene, mob) -> str:
     lines.append(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
     if scene.present_but_off:
         lines.append(f"  present but off: {', '.join(scene.present_but_off)}")
+    lines += [f"  warning: {w}" for w in warnings]
     return "\n".join(lines)
 
 

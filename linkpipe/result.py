@@ -296,6 +296,14 @@ class Result:
         return counts(self.status)
 
     # ------------------------------------------------------------------ the output table
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What is legal but probably not meant: the scene's (parsing) and the drawing's (a
+        drawn pose far from an assembled one: :func:`linkpipe.kinematics.start.drawing_warnings`)."""
+        from .kinematics.start import drawing_warnings
+
+        return tuple(self.scene.warnings) + drawing_warnings(self.model)
+
     def units(self) -> dict[str, str]:
         """Unit strings from the scene (free text), with neutral defaults."""
         return units_of(self.scene)
@@ -425,7 +433,7 @@ class Result:
                 attrs[key] = value
         if self.time_note:
             attrs["time_note"] = self.time_note
-        attrs["warnings"] = list(self.scene.warnings)  # legal but probably not meant
+        attrs["warnings"] = list(self.warnings)  # legal but probably not meant
         for key, val in self.units().items():
             attrs[f"units_{key}"] = val
         for stage, sec in self.seconds.items():

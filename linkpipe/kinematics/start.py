@@ -140,3 +140,53 @@ def carry_steps(model: Model, X0: np.ndarray, s0: np.ndarray, size):
     delta[:, angle] = (delta[:, angle] + np.pi) % (2 * np.pi) - np.pi  # the shorter way round
     step = np.where(angle, CARRY_ANGLE_STEP, CARRY_LENGTH_STEP * np.asarray(size)[..., None])
     return delta, np.max(np.abs(delta) / step, axis=-1)
+
+
+#: a drawing whose assembled pose (at its own driver values) puts a point farther than this
+#: fraction of the mechanism's size from where it is drawn is probably not what was meant
+#: (shipped scenes: at most 0.006; a `local` coordinate given as a fraction of its link, 0.55)
+DRAWING_MOVED_FRACTION = 0.1
+
+
+def drawing_offset(model: Model) -> tuple[str, float] | None:
+    """``(point, distance)``: the moving point that the drawing's own assembly (Newton from
+    the drawn pose at the driver values the drawing itself has) moves farthest, and how far
+    (length units); None without unknowns or drivers, or where the drawing does not assemble
+    at its own driver values (the start is then solved at the sweep's first values directly)."""
+    if not model.n_q or not model.n_drivers:
+        return None
+    X0 = model.start_position[None]
+    drawn = model.driver_values_at(X0)[0]
+    if not np.isfinite(drawn).all():
+        return None
+    q0 = model.q_of(X0)
+    tol_abs = model.scene.solver.tol * model.size
+    fast = _step_kernels(model)
+    q, _, _, conv = (fast.newton(q0[0], drawn, tol_abs, 50) if fast is not None
+                     else newton(model, q0, drawn[None], tol_abs, 50))
+    if not conv[0]:
+        return None
+    moved = np.hypot(*(np.asarray(q).reshape(-1, 2) - q0[0].reshape(-1, 2)).T)  # (n_moving,)
+    k = int(np.argmax(moved))
+    return model.point_names[model.moving[k]], float(moved[k])
+
+
+def drawing_warnings(model: Model) -> tuple[str, ...]:
+    """The warning (one, or none) that the drawn pose is far from an assembled one
+    (:data:`DRAWING_MOVED_FRACTION`), computed once per model."""
+    from ..cache import derived
+
+    return derived(model, "drawing_warnings", _drawing_warnings)
+
+
+def _drawing_warnings(model: Model) -> tuple[str, ...]:
+    found = drawing_offset(model)
+    if found is None or not found[1] > DRAWING_MOVED_FRACTION * model.size:
+        return ()
+    name, distance = found
+    length = dict(model.scene.units).get("length", "length units")
+    return (f"{model.scene.path}: [points] {name}: the drawing is not an assembled pose: "
+            f"assembled at the drivers' drawn values, {name} lands {distance:.3g} {length} "
+            f"from where it is drawn ({100 * distance / model.size:.0f} % of the mechanism's "
+            "size), and the sweep starts from that pose; check the link lengths, `local` "
+            "coordinates and sides, or draw the points nearer the pose you mean",)
