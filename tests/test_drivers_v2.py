@@ -308,6 +308,8 @@ BAD = [
      "relative_to", "belongs to an angle driver"),
     ("distance-and-angle", lambda t: t.replace('distance = ["C", "B"]', 'distance = ["C", "B"]\nangle = ["O", "B"]'),
      "distance", "not both angle and distance"),
+    ("cylinder-without-steps", lambda t: t.replace("steps = 71\n", ""), "steps",
+     "add steps = 46 or step = 0.01"),  # a length's example, not an angle's 361 steps
 ]
 
 
@@ -361,3 +363,35 @@ def test_relative_angle_of_a_link_against_itself_on_the_command_line(tmp_path, c
     assert err.count("error:") == 1 and "Traceback" not in err
     assert str(path) in err and "relative_to" in err and "against itself" in err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_rate_that_shortens_a_cylinder_past_zero_blames_the_rate_and_names_the_instant():
+    """length = 0.9 - 0.13 t over [time] 0 .. 16 s (0.1 s apart): first not positive at 7 s
+    (0.9 - 0.91 = -0.01 m), lowest -1.18 m at 16 s. The driver writes no `to`: the message is
+    about its `rate`."""
+    text = cylinder_rocker().text.replace(
+        "from = 0.9\nto = 1.6\nsteps = 71\nrate = 0.1", "from = 0.9\nrate = -0.13") + (
+        "[time]\nfrom = 0.0\nto = 16.0\nsteps = 161\n")
+    with pytest.raises(linkpipe.SceneError) as err:
+        parse_scene(text, "bad.toml")
+    assert (err.value.table, err.value.key) == ('drivers "cylinder"', "rate")
+    assert "falls to -1.18 within [time] (first not positive at the instant 7)" in str(err.value)
+
+
+def test_a_logged_first_value_out_of_reach_names_the_log_column(tmp_path):
+    """The rocker (R 1, C 0.943 from O) reaches cylinder lengths 0.057 .. 1.943: a log whose
+    first sample is 3000 mm cannot assemble, and the message names the log key and column
+    (with its scale), not a `from` the driver cannot have."""
+    (tmp_path / "run.csv").write_text("t,len_mm\n0.0,3000.0\n1.0,1200.0\n2.0,1300.0\n")
+    text = cylinder_rocker().text.replace(
+        "from = 0.9\nto = 1.6\nsteps = 71\nrate = 0.1\nacceleration = 0.0",
+        'log = "run.len_mm"\nscale = 0.001') + (
+        '[time]\nlog = "run"\n[[logs]]\nname = "run"\nfile = "run.csv"\ntime = "t"\n')
+    path = tmp_path / "logged.toml"
+    path.write_text(text)
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.solve(linkpipe.load_scene(str(path)))
+    msg = str(err.value)
+    assert '[drivers "cylinder"] log is still off' in msg, msg
+    assert 'the first value of log column "run.len_mm" (times scale = 0.001)' in msg
+    assert "`from`" not in msg

@@ -86,8 +86,18 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
                      f"the start configuration cannot be assembled at the first driver value: "
                      f"at the best fit the constraint of {where} is still off by {worst:.3g} "
                      f"{length} (tolerance {tol_abs:.3g})",
-                     "check the link lengths, the `local` coordinates and the drivers' `from`; "
-                     "the points' x, y must be close to an assembled position")
+                     "check the link lengths, the `local` coordinates and "
+                     + _first_values(model.scene.drivers)
+                     + "; the points' x, y must be close to an assembled position")
+
+
+def _first_values(drivers) -> str:
+    """Where the drivers' first values come from, as a start-up message's advice names them."""
+    logged = [d for d in drivers if d.timed == "log"]
+    parts = ["the drivers' `from`"] if len(logged) < len(drivers) else []
+    parts += [f'the first value of log column "{d.log[0]}.{d.log[1]}"'
+              + (f" (times scale = {d.scale:g})" if d.scale != 1.0 else "") for d in logged]
+    return " and ".join(parts)
 
 
 def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):

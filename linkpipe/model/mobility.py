@@ -146,6 +146,7 @@ def constraint_source(model: Model, row: int) -> tuple[str, str]:
     if row < len(moving):
         return f'sliders "{moving[row].name}"', "along"
     row -= len(moving)
-    if 0 <= row < len(sc.drivers):
-        return f'drivers "{sc.drivers[row].name}"', "from"
+    if 0 <= row < len(sc.drivers):  # its first value: a log's first sample, or `from`
+        driver = sc.drivers[row]
+        return f'drivers "{driver.name}"', "log" if driver.timed == "log" else "from"
     return "points", None

@@ -131,6 +131,9 @@ SYNONYMS = {"rpm": "rate", "speed": "rate", "omega": "rate", "velocity": "rate",
             "angular_velocity": "rate", "angular_speed": "rate", "alpha": "acceleration",
             "angular_acceleration": "acceleration", "accel": "acceleration"}
 
+#: a length driver's (distance, coordinate) examples in place of the angle's degrees
+LENGTH_DRIVER_EXAMPLES = {"from": "1.2", "to": "1.65", "steps": "46", "step": "0.01"}
+
 #: the keys of ``[scene].units`` (their values are free text, recorded in the outputs)
 UNIT_KEYS = ("length", "mass", "time", "force")
 

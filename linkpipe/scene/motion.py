@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from . import units
-from .keys import EFFECT_NEEDS, _Table, _show, _suggest, _table_ref
+from .keys import EFFECT_NEEDS, LENGTH_DRIVER_EXAMPLES, _Table, _show, _suggest, _table_ref
 from .timing import check_not_timed
 from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver
 
@@ -44,6 +44,8 @@ class MotionTables:
 
     def driver(self, table: _Table) -> Driver:
         kind = table.exactly_one(("angle", "coordinate", "distance"))
+        if kind != "angle":  # a length: its hints in length units, not degrees
+            table.examples = {**table.examples, **LENGTH_DRIVER_EXAMPLES}
         relative_to = bodies = None
         axis = None
         if kind == "coordinate":
@@ -152,17 +154,21 @@ class MotionTables:
     def check_distance_values(self, table: _Table, fields: dict) -> None:
         """A cylinder has a positive length at every step: from and to (a law moves between
         them; a rate, from + rate t + acceleration t^2/2, is checked at every instant)."""
-        for key, value in (("from", fields["from_value"]), ("to", fields["to_value"])):
+        written = ("from",) if fields.get("timed") == "rate" else ("from", "to")  # a rate's
+        for key in written:                                  # `to` is its own, checked below
+            value = fields[f"{key}_value"]
             if not value > 0:
                 raise table.error(key, f"{key} = {value:g}: a cylinder's length must be positive",
                                   "give the pin-to-pin length, e.g. from = 1.2, to = 1.65")
         if fields.get("timed") == "rate":
             t = self.time.instants - self.time.from_value
-            low = float(np.min(fields["from_value"] + fields["rate"] * t
-                               + 0.5 * fields["acceleration"] * t * t))
-            if not low > 0:
+            length = (fields["from_value"] + fields["rate"] * t
+                      + 0.5 * fields["acceleration"] * t * t)
+            if not length.min() > 0:
+                first = float(self.time.instants[np.argmax(~(length > 0))])
                 raise table.error("rate", f"the cylinder's length from + rate t + acceleration "
-                                  f"t^2/2 falls to {low:g} within [time]",
+                                  f"t^2/2 falls to {float(length.min()):g} within [time] "
+                                  f"(first not positive at the instant {first:g})",
                                   "a cylinder's length must stay positive: change rate, "
                                   "acceleration or [time]")
 
