@@ -363,8 +363,22 @@ def _check(args) -> int:
                                    min(scene.n_steps, RRD_MAX_STEPS))
             from .kinematics.start import drawing_warnings
 
-            print(describe(scene, mob, tuple(scene.warnings) + drawing_warnings(model)))
+            params = _fit_checked(scene)
+            print(describe(scene, mob, tuple(scene.warnings) + drawing_warnings(model), params))
     return outcome.code
+
+
+def _fit_checked(scene) -> list:
+    """A scene's [fit] parameters checked as ``fit`` checks them before its first trial
+    (addresses, bounds, measurements and their sigmas); [] without [fit]."""
+    import tomllib
+
+    data = tomllib.loads(scene.text)
+    if "fit" not in data:
+        return []
+    from .fit import fit_parameters
+
+    return fit_parameters(scene, data)
 
 
 def _accuracy(args) -> int:

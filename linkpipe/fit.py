@@ -188,9 +188,11 @@ def scene_with(scene: Scene, data: dict, params, x) -> Scene:
     return _Parser(trial, scene.text, scene.path).parse()
 
 
-def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
-    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
-    ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
+def fit_parameters(scene: Scene, data: dict | None = None) -> list[Parameter]:
+    """``scene``'s ``[fit]`` parameters, with every check a fit makes before its first
+    trial (the addresses, the bounds around each initial value, measurements to fit to and
+    their sigmas where their units differ): what ``check`` runs on a scene with ``[fit]``.
+    ``data``: as :func:`fit`."""
     data = tomllib.loads(scene.text) if data is None else data
     params = parameters_of(scene, data)
     if not scene.measurements:
@@ -207,6 +209,14 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
                                  "which needs each divided by its own standard deviation",
                                  f"add sigma = <its standard deviation, in {unit}> to every "
                                  "measurement")
+    return params
+
+
+def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
+    """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
+    ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
+    data = tomllib.loads(scene.text) if data is None else data
+    params = fit_parameters(scene, data)
     x0 = np.array([p.initial for p in params])
     force_only = all(p.force_only for p in params)
     wanted = frozenset(m.of[0] for m in scene.measurements)  # trials read nothing else

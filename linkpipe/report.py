@@ -88,9 +88,9 @@ def stage_table(seconds: dict, total: float, n_steps: int) -> str:
     return "\n".join(lines)
 
 
-def describe(scene, mob, warnings=()) -> str:
+def describe(scene, mob, warnings=(), fit_parameters=()) -> str:
     """What ``check`` prints of a valid scene (``warnings``: what is legal but probably not
-    meant, the scene's and its drawing's)."""
+    meant, the scene's and its drawing's; ``fit_parameters``: its checked [fit] parameters)."""
     lines = [f"{scene.path}: scene {scene.name!r} is valid",
              f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}",
              f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}"]
@@ -106,6 +106,10 @@ def describe(scene, mob, warnings=()) -> str:
     lines.append(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
     if scene.present_but_off:
         lines.append(f"  present but off: {', '.join(scene.present_but_off)}")
+    if fit_parameters:
+        each = [f"{p.address} (from {p.initial:g}, bounds {p.bounds[0]:g} .. {p.bounds[1]:g})"
+                for p in fit_parameters]
+        lines.append(f"  fit: {', '.join(each)} to {len(scene.measurements)} measurement(s)")
     lines += [f"  warning: {w}" for w in warnings]
     return "\n".join(lines)
 

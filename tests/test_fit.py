@@ -294,3 +294,26 @@ def test_a_refused_trial_costs_more_than_any_start_residual(tmp_path, monkeypatc
     assert np.abs(start).max() > 1e3
     np.testing.assert_array_equal(refused, np.full_like(start, 10 * np.abs(start).max()))
     assert res.fitted[0] == pytest.approx(K_TRUE, rel=1e-9)
+
+
+def test_check_checks_the_fit_as_fit_does_before_its_first_trial(tmp_path, capsys):
+    """`check` on a scene with [fit] locates its parameters and their bounds: a mistyped
+    address or bounds that leave out the initial value is the same one message `fit` gives
+    (exit 2); a good one is described with its start value and bounds."""
+    path, _ = make(tmp_path)
+    assert main(["check", str(path)]) == 0
+    assert ("  fit: springs.lift.k (from 10, bounds -inf .. inf) to 1 measurement(s)"
+            in capsys.readouterr().out)
+    for edit, words in (('["springs.lift.kk"]', '[fit] parameters: "springs.lift.kk": no "kk" '
+                                                'there'),
+                        ('["springs.lift.k"]\nbounds = { "springs.lift.k" = [20.0, 60.0] }',
+                         "[fit.bounds] springs.lift.k: expected [low, high] with low < high "
+                         "around the value 10")):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(path.read_text().replace('parameters = ["springs.lift.k"]',
+                                                f"parameters = {edit}"))
+        assert main(["check", str(bad)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"error: {bad}: {words}") and len(err.splitlines()) == 1, err
+        assert main(["fit", str(bad), "--out", str(tmp_path / "out")]) == 2
+        assert capsys.readouterr().err.strip() == err  # the very message fit gives
