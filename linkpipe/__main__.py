@@ -243,8 +243,9 @@ def _run(args) -> int:
             # before the progress bar: a sweep too big for memory is a scene error
             check_memory(scene, segment, _recorded_steps(scene, args))
             bar = _progress_bar(scene, args)
-            out.mkdir(parents=True, exist_ok=True)
-            from .stores import output_lock
+            from .stores import output_folder, output_lock
+
+            output_folder(out)
 
             with output_lock(out, scene.name):  # another run of this name waits: .h5, .rrd pair
                 result, written, kept = _solve_and_write(scene, out, args, bar, segment)
@@ -413,8 +414,9 @@ def _fit(args) -> int:
             result = fit(scene, progress=progress)
         finally:
             bar.close()
-        out = pathlib.Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+        from .stores import output_folder
+
+        out = output_folder(args.out)
         paths = [out / f"{scene.name}_fit.toml", out / f"{scene.name}_fit.h5"]
         fit_store.write_toml(result, paths[0])
         fit_store.write_h5(result, paths[1])

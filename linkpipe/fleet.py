@@ -258,7 +258,9 @@ def write_fleet(kind: str, scene: Scene, pattern: str, paths, rows, out) -> tupl
             attrs[name] = {attribute[key]: ",".join(entry_units[key])}
         else:
             units[name] = key
-    out.mkdir(parents=True, exist_ok=True)
+    from .stores import output_folder
+
+    out = output_folder(out)
     path = out / f"{scene.name}_fleet{'_fit' if kind == 'fit' else ''}.h5"
     fleet_store.write(path, {"scene_name": scene.name, "scene_toml": scene.text,
                              "logs_glob": pattern, "command": kind}, labels, columns, units, attrs)

@@ -88,6 +88,14 @@ def test_out_that_is_a_file(tmp_path, capsys):
     target.write_text("")
     assert main(["run", str(CONFIGS / "shear_press.toml"), "--out", str(target)]) == 2
     assert "is a file, not a folder" in capsys.readouterr().err
+    # a folder below a file cannot be made either: every command says so, exit 2
+    below = target / "sub"
+    study = CONFIGS / "studies" / "basketball_goal.toml"
+    for command in (["run", str(CONFIGS / "shear_press.toml")], ["study", str(study)]):
+        assert main([*command, "--out", str(below)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"error: --out {below}: cannot be the output folder: {target} is a file, "
+                       "not a folder — give --out a folder (made if missing)"), err
 
 
 def test_bad_scene_does_not_stop_the_others(tmp_path, capsys):

@@ -170,9 +170,9 @@ def run_accuracy(path, out: pathlib.Path = pathlib.Path("outputs"), quick: bool 
         if front:
             print(f"  {name}: " + ", ".join(
                 r.label for r in sorted(front, key=lambda r: r.seconds_solve)))
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    from ..stores import accuracy as store
+    from ..stores import accuracy as store, output_folder
+
+    out = output_folder(out)
 
     h5 = out / f"{scene.name}_accuracy.h5"
     rrd = out / f"{scene.name}_accuracy.rrd"

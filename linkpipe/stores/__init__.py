@@ -177,6 +177,23 @@ def _fsync(path: pathlib.Path) -> None:
         raise failed[0]
 
 
+def output_folder(out: str | os.PathLike) -> pathlib.Path:
+    """``out`` made (with its parents) as the folder outputs go to; a path that cannot be one
+    (a file there or on the way, no permission, a read-only disk) is the user's to fix: one
+    message, exit 2."""
+    out = pathlib.Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), out)
+        raise LinkpipeError(f"--out {out}: cannot be the output folder: {blocking} is a file, "
+                            "not a folder — give --out a folder (made if missing)") from None
+    except OSError as exc:  # no permission, a read-only or full disk, a path /proc refuses
+        raise LinkpipeError(f"--out {out}: cannot be made: {exc.strerror or exc} — give --out "
+                            "a folder you may write to") from None
+    return out
+
+
 @contextlib.contextmanager
 def output_lock(folder: str | os.PathLike, name: str) -> Iterator[None]:
     """Hold an advisory lock on one output name in ``folder`` (``.<name>.lock``, flock) while its

@@ -71,10 +71,9 @@ def run_study(study, out, executor: str = "in_process", workers=None, scheduler=
 
     ``after_batch(n_written)``: called after each batch is written (a test stops a study
     half-way by raising there)."""
-    from ..stores import output_lock
+    from ..stores import output_folder, output_lock
 
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_folder(out)
     # a second run of the same study into the same folder waits for the first (it would
     # otherwise take the first one's unfinished file for one cut short by a kill)
     with output_lock(out, f"{study.name}_study"):
