@@ -247,3 +247,20 @@ def test_a_parquet_time_column_of_dates_is_seconds_from_its_first_row(tmp_path, 
     np.testing.assert_allclose(by_dates.time, by_seconds.time, rtol=0, atol=1e-9)  # ns stamps
     np.testing.assert_allclose(by_dates.position, by_seconds.position, rtol=0, atol=1e-9)
     assert (by_dates.status == OK).all()
+
+
+def test_a_ragged_csv_row_is_named_in_one_line(tmp_path, capsys):
+    """A data row with one field more than the header (line 6 of the file): one line naming
+    the line and both counts, not the CSV parser's own two-line text."""
+    write_log(tmp_path / "enc.csv", encoder_frame())
+    lines = (tmp_path / "enc.csv").read_text().splitlines()
+    header = len(lines[0].split(","))
+    lines[5] += ",9.0"
+    (tmp_path / "enc.csv").write_text("\n".join(lines) + "\n")
+    path = tmp_path / "encoder.toml"
+    path.write_text(scene_text(file="enc.csv"))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f'error: {path}: [logs "enc"] file: cannot read "{tmp_path / "enc.csv"}": '
+                   f"line 6 has {header + 1} fields, the header {header} — give every row the "
+                   "header's columns (a comma inside a value needs quotes)"), err

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +45,14 @@ def read_frame(table: _Table, path: Path):
         else:
             frame = pd.read_parquet(path)
     except Exception as exc:  # pandas raises many kinds (parser, arrow, empty, encoding)
-        raise table.error("file", f'cannot read "{path}": {type(exc).__name__}: {exc}',
+        text = " ".join(str(exc).split())  # one line, whatever the library wrote
+        ragged = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
+        if ragged:
+            want, line, saw = ragged.groups()
+            raise table.error("file", f'cannot read "{path}": line {line} has {saw} fields, '
+                              f"the header {want}", "give every row the header's columns "
+                              "(a comma inside a value needs quotes)") from None
+        raise table.error("file", f'cannot read "{path}": {type(exc).__name__}: {text}',
                           "write the log as CSV with a header row, or as Parquet") from None
     _FRAMES.clear()  # keep one file's table: bounded memory
     _FRAMES[key] = frame
