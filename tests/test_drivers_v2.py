@@ -181,6 +181,10 @@ kinematics = ["velocity", "acceleration"]
 def test_motor_between_links_is_forward_kinematics_and_statics():
     r = linkpipe.solve(two_link_arm(load=(20.0, -50.0)))
     assert r.message == "all 91 steps ok"
+    # an open chain: the note says why the dyads leave it (the motor), not "a loop"
+    assert r.solver_note == ("auto: no closed-form dyad places point(s) B (the dyads do not "
+                             "take a motor between links (relative_to: elbow)); general Newton "
+                             "path")
     s1 = np.radians(np.linspace(0.0, 90.0, 91))
     s2 = np.radians(np.linspace(120.0, 30.0, 91))
     w1, w2 = np.radians(10.0), np.radians(-9.0)

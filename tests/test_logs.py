@@ -8,6 +8,7 @@ largest spacing), which the tests take four times over for the not-a-knot ends a
 uneven mesh (spacing ratio up to 3).
 """
 import pathlib
+import tempfile
 
 import h5py
 import numpy as np
@@ -264,3 +265,20 @@ def test_a_ragged_csv_row_is_named_in_one_line(tmp_path, capsys):
     assert err == (f'error: {path}: [logs "enc"] file: cannot read "{tmp_path / "enc.csv"}": '
                    f"line 6 has {header + 1} fields, the header {header} — give every row the "
                    "header's columns (a comma inside a value needs quotes)"), err
+
+
+def test_too_few_samples_for_a_smoothing_spline_says_where_the_count_comes_from():
+    """Three samples: enough for the interpolating spline (2), not for a smoothing one (5):
+    the message says the 5 comes from smoothing and that smoothing = 0 would take them."""
+    from linkpipe.scene.timing import MIN_SMOOTHING_SAMPLES
+
+    assert MIN_SMOOTHING_SAMPLES == 5
+    with tempfile.TemporaryDirectory() as folder:
+        path = write_scene(pathlib.Path(folder), encoder_frame(np.array([0.0, 0.1, 0.2])),
+                           driver_extra="smoothing = 0.5")
+        with pytest.raises(linkpipe.SceneError) as err:
+            linkpipe.load_scene(str(path))
+    assert (err.value.table, err.value.key) == ('drivers "crank"', "log")
+    assert ("has 3 value(s): a smoothing spline (smoothing = 0.5) needs at least 5; the "
+            "interpolating one (smoothing = 0) needs 2 — give the log more samples, or set "
+            "smoothing = 0") in str(err.value)

@@ -152,6 +152,20 @@ def test_an_angle_driver_without_input_point_has_torque_units(tmp_path):
             assert h5[name].attrs["units"] == "lbf*ft" and h5[name].attrs["driver_units"] == "lbf*ft"
 
 
+def test_a_negative_zero_prints_as_zero(tmp_path, capsys):
+    """-max(abs(spring_force.left)) at k = 0 is -0.0 (stored as such): the summary prints 0,
+    not "-0", at the top of the metric's range."""
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"springs.left.k" = { from = 0.0, to = 1.0, steps = 2 }\n'
+                    '[study.metrics]\nneg = "-max(abs(spring_force.left))"\n')
+    assert main(["study", str(path), "--out", str(tmp_path / "out")]) == 0
+    (line,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("  neg:")]
+    assert " .. 0 lbf (mean " in line and "-0 " not in line, line
+    with h5py.File(tmp_path / "out" / "s_study.h5") as f:
+        assert np.signbit(f["neg"][0])  # the file keeps the value itself
+
+
 def test_a_variant_that_cannot_assemble_is_a_row(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'

@@ -271,8 +271,12 @@ def decompose(model: Model) -> DyadChain:
         pass
     if not placer.known.all():
         left = [model.point_names[p] for p in range(model.n_points) if not placer.known[p]]
+        motors = [model.scene.drivers[j].name for j in range(model.n_drivers)
+                  if model.drv_kind[j] == eq.RELATIVE and not placer.used_driver[j]]
+        why = (f"the dyads do not take a motor between links (relative_to: "
+               f"{', '.join(motors)})" if motors else "a loop that needs simultaneous solution")
         return DyadChain(model, placer.steps, f"no closed-form dyad places point(s) "
-                         f"{', '.join(left)} (a loop that needs simultaneous solution)")
+                         f"{', '.join(left)} ({why})")
     if not all(placer.used_driver):
         left = [model.scene.drivers[j].name for j, used in enumerate(placer.used_driver) if not used]
         return DyadChain(model, placer.steps,

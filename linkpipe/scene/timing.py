@@ -159,8 +159,12 @@ class TimeTables:
         finite = int(np.isfinite(values).sum())
         need = MIN_SMOOTHING_SAMPLES if smoothing > 0 else 2
         if finite < need:
+            why = (f"a smoothing spline (smoothing = {smoothing:g}) needs at least {need}; "
+                   "the interpolating one (smoothing = 0) needs 2" if smoothing > 0 else
+                   f"the spline needs at least {need}")
             raise table.error("log", f'column "{column}" of "{log.path}" has {finite} value(s): '
-                              f"the spline needs at least {need}", "give the log more samples")
+                              + why, "give the log more samples"
+                              + (", or set smoothing = 0" if smoothing > 0 and finite >= 2 else ""))
         logfiles.check_spans(log, time.instants, self.table("time"),
                              "log" if time.log else "to")
         low, high = logfiles.finite_values(values * scale)

@@ -53,7 +53,7 @@ def study_table(study, path, seconds: float | None = None) -> str:
             forces = name in ("peak_input_force", "rms_input_force")
             label = name + (f".{study.driver_names[j]}" if data.shape[1] > 1 or forces else "")
             unit = f" {force[j]}" if forces else f" {m_units[name]}" if m_units.get(name) else ""
-            fin = col[np.isfinite(col)]
+            fin = col[np.isfinite(col)] + 0.0  # + 0.0: a -0.0 prints as 0
             if len(fin):
                 lines.append(f"  {label}: {fin.min():.6g} .. {fin.max():.6g}{unit} (mean "
                              f"{fin.mean():.6g}, sd {fin.std():.3g}, 5-95 % "
@@ -79,5 +79,5 @@ def study_table(study, path, seconds: float | None = None) -> str:
                                + (f" {p_units[j]}" if p_units[j] else "") for j in varied)
             unit = force[0] if by_force else m_units.get(key_name, "")
             unit = f" {unit}" if unit else ""
-            lines.append(f"    variant {v}: {key[v]:.6g}{unit}" + (f" at {values}" if values else ""))
+            lines.append(f"    variant {v}: {key[v] + 0.0:.6g}{unit}" + (f" at {values}" if values else ""))
     return "\n".join(lines)
