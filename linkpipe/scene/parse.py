@@ -73,6 +73,10 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                                       f"give each of the [[{name}]] its own name")
                 first_at[entry_name] = f"{name}[{i}]"
                 table.label = f'{name} "{entry_name}"'
+            by_link = [r.get("link") for r in self.top(name) or [] if isinstance(r, dict)]
+            if (not named and isinstance(raw.get("link"), str)
+                    and by_link.count(raw["link"]) == 1):  # [[masses]]: known by its link,
+                table.label = f'{name} "{raw["link"]}"'  # as [fit] addresses it
             table.check_keys()
             if named and "name" not in raw:
                 table.name()  # "missing", once a misspelt name key has had its hint

@@ -178,9 +178,10 @@ def _fsync(path: pathlib.Path) -> None:
 
 
 def output_folder(out: str | os.PathLike) -> pathlib.Path:
-    """``out`` made (with its parents) as the folder outputs go to; a path that cannot be one
-    (a file there or on the way, no permission, a read-only disk) is the user's to fix: one
-    message, exit 2."""
+    """``out`` made (with its parents) as the folder outputs go to. A file there or on the
+    way is a wrong argument (one message naming that file, exit 2, as an ``--out`` that is a
+    file); a folder the machine will not make (no permission, a read-only or full disk) is an
+    output not written (:class:`OutputError`, one line, exit 1: docs/faults.md)."""
     out = pathlib.Path(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -188,9 +189,9 @@ def output_folder(out: str | os.PathLike) -> pathlib.Path:
         blocking = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), out)
         raise LinkpipeError(f"--out {out}: cannot be the output folder: {blocking} is a file, "
                             "not a folder — give --out a folder (made if missing)") from None
-    except OSError as exc:  # no permission, a read-only or full disk, a path /proc refuses
-        raise LinkpipeError(f"--out {out}: cannot be made: {exc.strerror or exc} — give --out "
-                            "a folder you may write to") from None
+    except OSError as exc:  # no permission, a read-only or full disk: the machine's (exit 1)
+        raise OutputError(exc.errno, f"--out {out}: cannot be made: {exc.strerror or exc} — "
+                          "give --out a folder you may write to") from None
     return out
 
 

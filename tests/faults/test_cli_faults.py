@@ -59,11 +59,19 @@ def test_a_path_that_is_no_regular_file_is_refused_without_reading(tmp_path, cap
 
 
 def test_an_output_folder_that_cannot_be_made_is_one_line_exit_1(tmp_path, capsys):
-    out = pathlib.Path("/dev/null/outputs")  # mkdir fails: not a directory (root or not)
-    assert main(["run", str(CRANK_ROCKER), "--out", str(out), "--quiet"]) == 1
+    """A folder the machine will not make (/proc takes no new entries, root or not): an
+    output not written, exit 1. A file in the way (/dev/null) is a wrong --out: exit 2,
+    naming the file."""
+    assert main(["run", str(CRANK_ROCKER), "--out", "/proc/linkpipe_out", "--quiet"]) == 1
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
-    assert str(CRANK_ROCKER) in err and "internal error" not in err
+    assert err.startswith("error: --out /proc/linkpipe_out: cannot be made: ")
+    assert "internal error" not in err
+    assert main(["run", str(CRANK_ROCKER), "--out", "/dev/null/outputs", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == ("error: --out /dev/null/outputs: cannot be the output folder: "
+                           "/dev/null is a file, not a folder — give --out a folder (made if "
+                           "missing)")
 
 
 @pytest.mark.parametrize("signum, code, delay_s", [(signal.SIGINT, 130, 3.0), (signal.SIGTERM, 130, 3.0),
