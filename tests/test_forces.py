@@ -488,3 +488,64 @@ def test_per_step_constants_are_cut_into_the_same_chunks(tmp_path):
     assert not np.allclose(whole.variables["input_force"][1], r.forces["input_force"][1])
     for name, (dims, data, unit) in whole.variables.items():
         np.testing.assert_array_equal(chunked.variables[name][1], data, err_msg=name)
+
+
+def _cross(r, f):
+    return r[..., 0] * f[..., 1] - r[..., 1] * f[..., 0]
+
+
+def test_an_input_point_is_where_the_reactions_see_the_actuator_push():
+    """With `input` the input force is a push at input.point along input.direction, and the
+    reactions are those of that push (not of a torque at the driver's pivot): the crank-rocker
+    pushed up at the coupler point P against a load at B is in equilibrium, force and moment
+    about the origin (to rounding: 1e-12 N, N m on ~10 N); the crank, which nothing then
+    turns, is a two-force member (its pins' forces cancel and lie along it); the Lagrange
+    input force still equals the virtual-work one."""
+    text = (CONFIGS / "fourbar_crank_rocker.toml").read_text().replace("steps = 361", "steps = 37")
+    text = text.replace("rate = ", 'input = { point = "P", direction = [0.0, 1.0] }\nrate = ', 1)
+    text += ('\n[analysis]\neffects = ["loads"]\n[[loads]]\nname = "w"\npoint = "B"\n'
+             "force = [3.0, 4.0]\n")
+    r = linkpipe.solve(linkpipe.parse_scene(text, "pushed.toml"))
+    assert r.message == "all 37 steps ok"
+    X, names = r.position, r.point_names
+    push = r.forces["input_force"][1][:, 0, None] * np.array([0.0, 1.0])  # (S, 2) at P
+    load = np.array([3.0, 4.0])
+    R = r.forces["ground_reaction"][1]  # at O2, O4
+    assert r.force_coords["fixed_point"] == ["O2", "O4"]
+    net = R.sum(axis=1) + load + push
+    moment = (_cross(X[:, names.index("O2")], R[:, 0]) + _cross(X[:, names.index("O4")], R[:, 1])
+              + _cross(X[:, names.index("B")], load) + _cross(X[:, names.index("P")], push))
+    assert np.abs(net).max() < 1e-12 and np.abs(moment).max() < 1e-12
+    labels, F = r.force_coords["joint"], r.forces["joint_force"][1]
+    at_a, at_o2 = F[:, labels.index("A@crank")], F[:, labels.index("O2@crank")]
+    assert np.abs(at_a + at_o2).max() < 1e-12
+    assert np.abs(_cross(X[:, names.index("A")] - X[:, names.index("O2")], at_a)).max() < 1e-12
+    np.testing.assert_allclose(r.forces["input_force_lagrange"][1], r.forces["input_force"][1],
+                               rtol=0, atol=1e-12)
+
+
+def test_the_basketball_goals_reactions_balance_the_hand_on_its_handle():
+    """configs/basketball_goal.toml (the hand pushes up at H; springs, gravity, inertia): the
+    ground reactions, the push, the weight and the backboard's m a_G and I alpha balance at
+    every step, force and moment (springs end on fixed points: internal to mechanism and ground); 1e-9 of
+    the largest reaction (lbf, lbf ft): rounding of ~100 lbf figures."""
+    r = linkpipe.solve(str(CONFIGS / "basketball_goal.toml"))
+    assert r.scene.drivers[0].input.point == "H"
+    X, A, names = r.position, r.acceleration, r.point_names
+    push = r.forces["input_force"][1][:, 0, None] * np.array([0.0, 1.0])
+    R = r.forces["ground_reaction"][1]
+    fixed = [names.index(p) for p in r.force_coords["fixed_point"]]
+    from linkpipe.forces.applied import body_point, center_frame
+
+    net = R.sum(axis=1) + push
+    moment = sum(_cross(X[:, p], R[:, k]) for k, p in enumerate(fixed)) + _cross(
+        X[:, names.index("H")], push)
+    g = np.array(r.scene.gravity)
+    for m in r.scene.masses:
+        ia, ib, u, v, L = center_frame(r.model, m.link, m.center)
+        xg, ag = body_point(X, ia, ib, u, v, L), body_point(A, ia, ib, u, v, L)
+        net += m.mass * g - m.mass * ag
+        alpha = r.link_angular_acceleration[:, [ln.name for ln in r.scene.links].index(m.link)]
+        moment += _cross(xg, m.mass * g - m.mass * ag) - m.inertia * alpha
+    scale = np.abs(R).max()
+    assert np.abs(net).max() < 1e-9 * scale and np.abs(moment).max() < 1e-9 * scale * 10

@@ -25,7 +25,7 @@ from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
 from .constants import ForceConstants
 from .effects import EFFECTS, Context, applies
 from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
-from .virtual_work import Influence, along_input_directions
+from .virtual_work import Influence, actuator_forces, along_input_directions
 
 __all__ = ["compute_forces", "EFFECTS"]
 
@@ -226,6 +226,16 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
                                           motion.status, units, Xz, ctx.constants.size)
     variables["input_force"] = (("step", "driver"), input_force, unit)
     variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
+    actuators = actuator_forces(model, input_force, Xz)
+    if actuators is not None:  # the reactions of the actuators `input` describes (a push at
+        pushes, on_bodies = actuators  # its point), not of a torque at the driver's pivot
+        q_minus_m_qdd = q_minus_m_qdd + pushes
+        ok = status == OK  # where the push is known (not no_leverage)
+        lam, undetermined = multipliers(model, Xz, motion.s,
+                                        q_minus_m_qdd[:, model.moving].reshape(n_steps, -1), ok,
+                                        ctx.constants.pivots, ctx.constants.model_rows)
+        for li, body in on_bodies.items():  # part of the body's own Q_k
+            merge_bodies(bodies.setdefault(li, {}), body, -1.0)
     internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)
     variables.update(internal)
     coords.update(internal_coords)

@@ -81,3 +81,43 @@ def input_direction(model: Model, driver_input, X: np.ndarray) -> np.ndarray:
     d = X[:, model.link_b[li]] - X[:, model.link_a[li]]
     e = d / np.hypot(d[:, 0], d[:, 1])[:, None]
     return np.stack([n[0] * e[:, 0] - n[1] * e[:, 1], n[0] * e[:, 1] + n[1] * e[:, 0]], axis=1)
+
+
+def actuator_forces(model: Model, input_force: np.ndarray, X: np.ndarray):
+    """The actuators the scene's ``input`` tables describe, as forces: ``(point_forces (S, P, 2),
+    {link: {point: force (S, 2)}})``, each driver's input force (S, n_drivers, along its
+    direction: :func:`along_input_directions`) times its direction at its input point, and the
+    body it pushes on; None where no driver has ``input``.
+
+    The body: ``input.link`` where the point is on it, else the one link the point is on, else
+    (a pin) the link sharing most points with the driver's own, the first in scene order on a
+    tie. The reactions and internal forces take these forces as applied loads (the driver's
+    own multiplier then vanishes): they are those of the actuator the input force describes,
+    not of a torque at the driver's pivot."""
+    drivers = [(j, d) for j, d in enumerate(model.scene.drivers) if d.input is not None]
+    if not drivers:
+        return None
+    points = np.zeros(X.shape[:2] + (2,))
+    bodies: dict = {}
+    for j, driver in drivers:
+        p = model.point_names.index(driver.input.point)
+        force = input_force[:, j, None] * input_direction(model, driver.input, X)  # (S, 2)
+        points[:, p] += force
+        li = _pushed_link(model.scene, driver)
+        if li is not None:
+            body = bodies.setdefault(li, {})
+            body[p] = body[p] + force if p in body else force
+    return points, bodies
+
+
+def _pushed_link(scene, driver) -> int | None:
+    """The link (index) an actuator at ``driver.input.point`` pushes on (see
+    :func:`actuator_forces`); None where no link carries the point."""
+    point = driver.input.point
+    on = [li for li, ln in enumerate(scene.links) if point in ln.points]
+    names = [scene.links[li].name for li in on]
+    if driver.input.link in names:
+        return on[names.index(driver.input.link)]
+    if len(on) <= 1:
+        return on[0] if on else None
+    return max(on, key=lambda li: (len(set(scene.links[li].points) & set(driver.points)), -li))
