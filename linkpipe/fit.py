@@ -15,7 +15,8 @@ When every parameter is a force parameter (``springs``, ``torsion_springs``, ``m
 ``loads``, ``gravity``), stage 1 is solved once and reused for every trial (only the force
 stage runs again). Standard errors come from the Jacobian at the solution: the covariance is
 ``inv(J^T J)`` with J of the sigma-weighted residuals, scaled by the residual variance
-``2 cost / (N - p)`` when some measurement has no ``sigma``. A parameter the data cannot
+``cost / (N - p)`` when some measurement has no ``sigma`` (``cost``: the objective,
+the sum of the squared weighted residuals; scipy's own is half of it). A parameter the data cannot
 identify (a singular value of J below ``IDENTIFIABLE_RCOND`` of the largest, with the parameter
 in the null direction) is reported as not identifiable, with no standard error.
 """
@@ -252,7 +253,7 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
             return np.full(int(mask.sum()), penalty)
         weighted = r.measurements["residual"] / sigma
         out = np.where(np.isfinite(weighted), weighted, penalty)[mask]
-        cost.append(0.5 * float(out @ out))
+        cost.append(float(out @ out))  # the objective: sum(((computed - measured) / sigma)^2)
         if progress is not None:
             progress(len(cost), cost[-1])
         return out

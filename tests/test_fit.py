@@ -145,6 +145,10 @@ def test_the_command_writes_the_fitted_scene_and_the_h5(tmp_path, capsys):
         assert names == ["springs.lift.k"]
         assert f["initial"][0] == 10.0 and f["fitted"][0] == pytest.approx(K_TRUE, rel=1e-9)
         assert len(f["cost"][:]) >= 2 and f["cost"][-1] < f["cost"][0]
+        # the first evaluation is the start: its cost is the objective itself, the sum of the
+        # squared sigma-weighted residuals (the contract's), not scipy's half of it
+        before = f["measured_residual_before"][:, 0] / SIGMA
+        assert f["cost"][0] == pytest.approx(float(before @ before), rel=1e-12)
         assert f["measured_residual_after"].attrs["rms"][0] < 1e-9
         for name in ("measured_residual_before", "measured_residual_after"):  # a crank's torque
             assert f[name].attrs["units"] == f[name].attrs["measurement_units"] == "N*m"

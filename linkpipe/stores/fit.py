@@ -54,7 +54,7 @@ def write_h5(fit, path: str | os.PathLike) -> None:
                  {**p_per, "long_name": "one standard error; NaN where the data cannot identify it"}),
         Variable("identifiable", ("parameter",), fit.identifiable.astype(np.int8), "1"),
         Variable("cost", ("iteration",), np.asarray(fit.cost, float), "1",
-                 {"long_name": "0.5 sum(((computed - measured) / sigma)^2) per evaluation"}),
+                 {"long_name": "sum(((computed - measured) / sigma)^2) per evaluation: the objective"}),
         Variable("measured_residual_before", ("step", "measurement"), before["residual"], units,
                  {**per, "rms": before["rms"], "max_abs": before["max_abs"]}),
         Variable("measured_residual_after", ("step", "measurement"), after["residual"], units,
