@@ -35,8 +35,11 @@ class Stages:
         eff = set(scene.effects)
         out = scene.outputs
         vectors = bool(out.vectors)
-        acc = "inertia" in eff or "acceleration" in out.kinematics or vectors
-        vel = acc or "damping" in eff or "velocity" in out.kinematics or vectors
+        measured = {m.of[0] for m in scene.measurements}  # a measurement calls for its rate
+        acc = ("inertia" in eff or "acceleration" in out.kinematics or vectors
+               or bool(measured & {"acceleration", "link_angular_acceleration"}))
+        vel = (acc or "damping" in eff or "velocity" in out.kinematics or vectors
+               or bool(measured & {"velocity", "link_angular_velocity"}))
         return cls(velocity=vel, acceleration=acc, forces=bool(eff))
 
     @property

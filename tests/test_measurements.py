@@ -108,17 +108,50 @@ def test_a_measurement_needs_time_from_its_log():
     assert "needs [time] log" in str(err.value)
 
 
-def test_measuring_what_the_scene_does_not_compute_is_its_mistake(tmp_path, capsys):
+def test_measuring_a_force_without_the_force_stage_is_a_scene_error_check_finds(tmp_path, capsys):
+    """input_force with no effects (no force stage), spring_force without "springs": one
+    message at the measurement's `of` from `check` and from `run` alike, before any solve."""
     folder = tmp_path / "scene"
     shutil.copytree(SCENE.parent / "logs", folder / "logs")
     path = folder / "m.toml"
-    text = _scene_text().replace('of = "link_angle.rocker"', 'of = "input_force.crank"')
-    path.write_text(text.replace('effects = ["inertia"]', "effects = []"))
-    out = tmp_path / "out"
-    assert main(["run", str(path), "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert '[measurements "rocker_angle"] of: "input_force" is not computed by this scene' in err
-    assert not out.exists() or not any(p for p in out.iterdir() if not p.name.startswith("."))
+    for of, effects, words in (
+            ("input_force.crank", "effects = []", '"input_force" is computed by the force stage, '
+             "which runs only with [analysis] effects; this scene has none"),
+            ("spring_force.s", 'effects = ["inertia"]', '"spring_force" is computed by "springs" '
+             "in [analysis] effects; this scene has effects ['inertia']")):
+        text = _scene_text().replace('of = "link_angle.rocker"', f'of = "{of}"')
+        text = text.replace('effects = ["inertia"]', effects)
+        if of.startswith("spring"):
+            text = text.replace("[outputs]", '[[springs]]\nname = "s"\nbetween = ["A", "O4"]\n'
+                                "k = 1.0\nfree_length = 3.0\n\n[outputs]")
+        path.write_text(text)
+        for command in (["check", str(path)], ["run", str(path), "--out", str(tmp_path / "out")]):
+            assert main(command) == 2
+            err = capsys.readouterr().err.strip()
+            assert err.startswith(f'error: {path}: [measurements "rocker_angle"] of: {words}'), err
+            assert len(err.splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_measured_rate_is_computed_though_no_output_asks_for_it(tmp_path):
+    """A measurement of the coupler point's velocity in a scene that asks for positions only
+    (no [outputs] kinematics, no vectors, no effects): the velocity is computed, stored and
+    compared (the measurement calls for it); its residual is the stored velocity minus the
+    measured column, exactly."""
+    folder = tmp_path / "scene"
+    shutil.copytree(SCENE.parent / "logs", folder / "logs")
+    text = _scene_text().replace('of = "link_angle.rocker"', 'of = "velocity.P.x"')
+    text = text.replace('effects = ["inertia"]', "effects = []")
+    text = text.replace('kinematics = ["velocity", "acceleration"]\ntrace = ["P"]\nvectors = ["P"]',
+                        'trace = ["P"]')
+    assert "vectors" not in text and "kinematics =" not in text
+    path = folder / "m.toml"
+    path.write_text(text)
+    r = linkpipe.solve(linkpipe.load_scene(str(path)))
+    assert r.velocity is not None and r.acceleration is None
+    p = r.point_names.index("P")
+    measured = r.measurements["measured"][:, 0]
+    np.testing.assert_array_equal(r.measurements["residual"][:, 0], r.velocity[:, p, 0] - measured)
 
 
 # ------------------------------------------------------------------ units of mixed drivers

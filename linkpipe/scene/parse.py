@@ -133,7 +133,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                      outputs=outputs, torsion_springs=torsion_springs, time=self.time,
                      logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects),
                      measurements=self.measurement_tables(drivers, springs, torsion_springs,
-                                                          sliders))
+                                                          sliders, effects))
 
 
     def warnings(self, gravity, effects) -> tuple[str, ...]:

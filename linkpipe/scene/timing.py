@@ -203,10 +203,18 @@ MEASURABLE = {
 }
 
 
+#: the measurable variables the force stage gives: a scene measuring one needs effects (and,
+#: for a spring's or torsion spring's own variables, the springs effect)
+FORCE_STAGE = {"input_force", "input_force_lagrange", "link_force", "slider_force",
+               "joint_force", "ground_reaction", "spring_force", "spring_length",
+               "spring_extension", "spring_energy", "torsion_spring_angle",
+               "torsion_spring_torque", "torsion_spring_energy"}
+
+
 class MeasurementTables:
     """The ``[[measurements]]`` reader of :class:`~.parse._Parser` (after logs and [time])."""
 
-    def measurement_tables(self, drivers, springs, torsion_springs, sliders) -> tuple:
+    def measurement_tables(self, drivers, springs, torsion_springs, sliders, effects=()) -> tuple:
         out = []
         for table in self.entries("measurements"):
             if self.time is None or self.time.log is None:
@@ -236,6 +244,16 @@ class MeasurementTables:
                 raise table.error("sigma", f"must be positive, got {sigma:g}",
                                   "the measurement's standard deviation, in its scaled unit")
             of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
+            need = ("springs" if of[0].startswith(("spring_", "torsion_spring_")) else
+                    "effects" if of[0] in FORCE_STAGE else "")
+            if need == "effects" and not effects or need == "springs" and "springs" not in effects:
+                what = ('"springs" in [analysis] effects' if need == "springs" else
+                        "the force stage, which runs only with [analysis] effects")
+                raise table.error("of", f'"{of[0]}" is computed by {what}; this scene has '
+                                  + (f"effects {list(effects)}" if effects else "none"),
+                                  'add it, e.g. [analysis] effects = ["springs"]' if need ==
+                                  "springs" else 'add the effects the machine has, e.g. '
+                                  '[analysis] effects = ["gravity"]')
             out.append(Measurement(table.data["name"], log.name, column, scale, of, sigma,
                                    log.columns[column] * scale))
         return tuple(out)
