@@ -15,6 +15,7 @@ from hypothesis import given, settings, strategies as st
 import linkpipe
 from linkpipe.model import build_model
 from linkpipe.scene import parse_scene
+from linkpipe.status import NO_LEVERAGE, OK
 
 from test_kernels import _derivatives_agree, _layouts_agree
 
@@ -399,3 +400,22 @@ def test_a_logged_first_value_out_of_reach_names_the_log_column(tmp_path):
     assert '[drivers "cylinder"] log is still off' in msg, msg
     assert 'the first value of log column "run.len_mm" (times scale = 0.001)' in msg
     assert "`from`" not in msg
+
+
+def test_no_leverage_at_one_driver_leaves_the_others_input_force():
+    """The shoulder pushed at B along O->B as it lies at the first step has no leverage there:
+    that step is no_leverage and the shoulder's input force NaN, but the elbow's torque is
+    what statics gives (the payload's moment about A), as at every other step (1e-8 N m, as
+    the test above)."""
+    base = two_link_arm(load=(20.0, -50.0))
+    first = linkpipe.solve(base).position[0, base.point_names.index("B")]
+    d = first / np.hypot(*first)
+    text = base.text.replace("rate = 10.0", f'rate = 10.0\ninput = {{ point = "B", direction = '
+                                            f"[{float(d[0])!r}, {float(d[1])!r}] }}")
+    r = linkpipe.solve(parse_scene(text, "arm.toml"))
+    assert r.status[0] == NO_LEVERAGE and (r.status[1:] == OK).all()
+    torque = r.forces["input_force"][1]
+    assert np.isnan(torque[0, 0]) and np.isfinite(torque[1:, 0]).all()
+    A, B = (r.position[:, r.point_names.index(p)] for p in ("A", "B"))
+    elbow = -((B - A)[:, 0] * -50.0 - (B - A)[:, 1] * 20.0)
+    assert np.abs(torque[:, 1] - elbow).max() < 1e-8

@@ -48,9 +48,12 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
                            X: np.ndarray, size=None):
     """Divide each driver's generalized forces by its input point's leverage ``n . dr_H/ds``
     where the scene gives ``input`` (``n`` global, or turning with ``input.link``: positions X
-    (S, P, 2)); a step where that leverage vanishes gets NO_LEVERAGE (and NaN); any step not ok
-    gets NaN. ``size``: the mechanism's length scale, float or (S,) (default ``model.size``).
+    (S, P, 2)); a step where that leverage vanishes gets NO_LEVERAGE and NaN in that driver's
+    input force alone (the other drivers' are defined there); a step whose kinematics failed
+    gets NaN in every driver's. ``size``: the mechanism's length scale, float or (S,) (default
+    ``model.size``).
     Returns (status, unit of the input force)."""
+    failed = status != OK  # the kinematics' own failures: every driver NaN there
     status = status.copy()
     for j, driver in enumerate(model.scene.drivers):
         if driver.input is None:
@@ -64,8 +67,8 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
         safe = np.where(flat, np.nan, leverage)
         for force in forces:
             force[:, j] = force[:, j] / safe
-    for force in forces:
-        force[status != OK] = np.nan
+    for force in forces:  # no leverage: that driver's push alone is NaN (the others' hold)
+        force[failed] = np.nan
     return status, common_unit(input_force_units(model.scene.drivers, units))
 
 
