@@ -182,7 +182,8 @@ class Stage1:
         if sweep is None:
             return None
         X = sweep.position
-        link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry)
+        link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry,
+                                                                 s=self.s[rows])
         self._add("positions", t0)
         self.tell("jacobian")
         t0 = _time.perf_counter()

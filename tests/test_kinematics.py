@@ -221,6 +221,28 @@ def test_link_angles_unwrap_across_gaps_as_each_link_alone():
     check()
 
 
+def test_a_driven_link_takes_its_turns_from_the_driver():
+    """The crank-rocker swept 0 .. 905.9 deg in 5 steps (226.475 deg a step, more than half a
+    turn): the crank's link angle is the driver's value in radians (2.5 turns at the end, 1e-12
+    rad: the position's rounding), not the smallest jumps (which ran backwards to -9.32 rad).
+    Through a gap of failed steps (configs/hard/triple_rocker_limits.toml: the crank turns on
+    through steps where the rocker cannot assemble) it likewise follows the driver."""
+    root = pathlib.Path(__file__).resolve().parents[1]
+    text = (root / "configs" / "fourbar_crank_rocker.toml").read_text()
+    text = text.replace("to = 360.0", "to = 905.9").replace("steps = 361", "steps = 5")
+    r = linkpipe.solve(linkpipe.parse_scene(text, "coarse.toml"))
+    assert r.message == "all 5 steps ok"
+    crank = [ln.name for ln in r.scene.links].index("crank")
+    np.testing.assert_allclose(r.link_angle[:, crank], np.radians(r.driver_value[:, 0]),
+                               rtol=0, atol=1e-12)
+    r = linkpipe.solve(str(root / "configs" / "hard" / "triple_rocker_limits.toml"))
+    failed = r.status != OK
+    assert failed[18:36].all() and (~failed[37:54]).all()  # solved again after a gap
+    crank = [ln.name for ln in r.scene.links].index("crank")
+    np.testing.assert_allclose(r.link_angle[~failed, crank],
+                               np.radians(r.driver_value[~failed, 0]), rtol=0, atol=1e-12)
+
+
 def test_running_sums_of_sparse_corrections_are_cumsums_bit_for_bit():
     """The unwrap's running sum over its few non-zero corrections equals np.cumsum over every
     step, to the last bit, with few turns, many turns, none, and a carried start."""

@@ -263,7 +263,7 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
 
 
 def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
-                          carry: "AngleCarry | None" = None):
+                          carry: "AngleCarry | None" = None, s: np.ndarray | None = None):
     """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
 
     One vectorised pass: each gap is filled with the link's last angle before it (the first
@@ -274,7 +274,13 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     ``carry``: a sweep solved in segments of steps (:mod:`linkpipe.segments`): the
     :class:`AngleCarry` of the segments before (None for the first); then the return is
     ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
-    to the last bit (``tests/test_segments.py``)."""
+    to the last bit (``tests/test_segments.py``).
+
+    ``s`` (S, n_drivers), the drivers' values in radians: a link that an absolute angle driver
+    turns (its first two points the driver's pair, either way round) takes its whole turns
+    from the driver's value, which the scene gives unwrapped (905.9 deg is legal), so a sweep
+    of more than half a turn per step keeps them; the other links are unwrapped by the
+    smallest jump between neighbouring steps."""
     ang = np.empty((X.shape[0], len(model.link_a)))
 
     def work(lo: int, hi: int) -> None:
@@ -282,10 +288,30 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
 
     for_chunks(work, X.shape[0], CHUNK)
     if carry is not None:
-        return unwrap_runs(ang, carry)
-    if period:
-        return unwrap_runs(ang.reshape(-1, period, ang.shape[-1]))[0].reshape(ang.shape)
-    return unwrap_runs(ang)[0]
+        out, after = unwrap_runs(ang, carry)
+    elif period:
+        out, after = unwrap_runs(ang.reshape(-1, period, ang.shape[-1]))[0].reshape(ang.shape), None
+    else:
+        out, after = unwrap_runs(ang)[0], None
+    if s is not None:
+        for li, j, offset in driven_links(model):
+            turns = np.round((s[:, j] + offset - ang[:, li]) / (2 * np.pi))
+            out[:, li] = ang[:, li] + 2 * np.pi * turns
+    return (out, after) if carry is not None else out
+
+
+def driven_links(model: Model) -> list[tuple[int, int, float]]:
+    """``(link, driver, offset)`` of each link whose direction an absolute angle driver sets:
+    the link's first two points are the driver's pair (offset 0) or the pair reversed (pi)."""
+    out = []
+    for j, driver in enumerate(model.scene.drivers):
+        if driver.kind != "angle" or driver.relative_to is not None:
+            continue
+        a, b = (model.point_names.index(p) for p in driver.points)
+        for li, (la, lb) in enumerate(zip(model.link_a, model.link_b)):
+            if (la, lb) in ((a, b), (b, a)):
+                out.append((li, j, 0.0 if (la, lb) == (a, b) else np.pi))
+    return out
 
 
 @dataclass(frozen=True)
