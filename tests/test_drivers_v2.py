@@ -402,20 +402,50 @@ def test_a_logged_first_value_out_of_reach_names_the_log_column(tmp_path):
     assert "`from`" not in msg
 
 
-def test_no_leverage_at_one_driver_leaves_the_others_input_force():
-    """The shoulder pushed at B along O->B as it lies at the first step has no leverage there:
-    that step is no_leverage and the shoulder's input force NaN, but the elbow's torque is
-    what statics gives (the payload's moment about A), as at every other step (1e-8 N m, as
-    the test above)."""
+def _cross2(r, f):
+    return r[..., 0] * f[..., 1] - r[..., 1] * f[..., 0]
+
+
+def test_a_push_does_work_on_the_other_drivers_too():
+    """The shoulder pushed at B along O->B as it lies at the first step, the elbow a motor:
+    the push P balances the payload W about O (the elbow's motor is internal to the arm),
+    P = -(B x W) / (B x n); the elbow's torque is then what holds the forearm against W and P
+    together, -(B - A) x (W + P n), not W's moment alone (1e-8 N m, as above). At the first
+    step the push has no leverage: no_leverage, and both the push and the elbow's torque,
+    which the push's work enters, are NaN."""
     base = two_link_arm(load=(20.0, -50.0))
     first = linkpipe.solve(base).position[0, base.point_names.index("B")]
-    d = first / np.hypot(*first)
+    n = first / np.hypot(*first)
     text = base.text.replace("rate = 10.0", f'rate = 10.0\ninput = {{ point = "B", direction = '
-                                            f"[{float(d[0])!r}, {float(d[1])!r}] }}")
+                                            f"[{float(n[0])!r}, {float(n[1])!r}] }}")
     r = linkpipe.solve(parse_scene(text, "arm.toml"))
     assert r.status[0] == NO_LEVERAGE and (r.status[1:] == OK).all()
-    torque = r.forces["input_force"][1]
-    assert np.isnan(torque[0, 0]) and np.isfinite(torque[1:, 0]).all()
+    force = r.forces["input_force"][1]
+    assert np.isnan(force[0]).all() and np.isfinite(force[1:]).all()
+    A, B = (r.position[1:, r.point_names.index(p)] for p in ("A", "B"))
+    W = np.array([20.0, -50.0])
+    push = -_cross2(B, W) / _cross2(B, n)
+    assert np.abs(force[1:, 0] - push).max() < 1e-8 * np.abs(push).max()
+    elbow = -_cross2(B - A, W + push[:, None] * n)
+    assert np.abs(force[1:, 1] - elbow).max() < 1e-8 * np.abs(elbow).max()
+    np.testing.assert_allclose(r.forces["input_force_lagrange"][1][1:], force[1:], rtol=1e-9)
+
+
+def test_two_pushes_balance_the_arm():
+    """Both drivers pushed (shoulder at A upwards, elbow at B to the right): the pushes solve
+    the two drivers' virtual work together, and the arm is in equilibrium, force and moment
+    about O, with the ground reaction at O (1e-9 of the ~50 N load)."""
+    text = two_link_arm(load=(20.0, -50.0)).text
+    text = text.replace("rate = 10.0", 'rate = 10.0\ninput = { point = "A", direction = [0.0, 1.0] }')
+    text = text.replace("rate = -9.0", 'rate = -9.0\ninput = { point = "B", direction = [1.0, 0.0] }')
+    r = linkpipe.solve(parse_scene(text, "arm2.toml"))
+    ok = r.status == OK
+    assert ok.sum() > 80
     A, B = (r.position[:, r.point_names.index(p)] for p in ("A", "B"))
-    elbow = -((B - A)[:, 0] * -50.0 - (B - A)[:, 1] * 20.0)
-    assert np.abs(torque[:, 1] - elbow).max() < 1e-8
+    F = r.forces["input_force"][1]
+    W = np.array([20.0, -50.0])
+    pa, pb = F[:, 0, None] * np.array([0.0, 1.0]), F[:, 1, None] * np.array([1.0, 0.0])
+    R = r.forces["ground_reaction"][1][:, 0]  # at O
+    assert np.abs((R + pa + pb + W)[ok]).max() < 1e-9 * 50
+    assert np.abs((_cross2(A, pa) + _cross2(B, pb + W))[ok]).max() < 1e-9 * 50
+    np.testing.assert_allclose(r.forces["input_force_lagrange"][1][ok], F[ok], rtol=1e-9)

@@ -46,28 +46,58 @@ class Influence:
 
 def along_input_directions(model: Model, influence: Influence, forces: list, status, units: dict,
                            X: np.ndarray, size=None):
-    """Divide each driver's generalized forces by its input point's leverage ``n . dr_H/ds``
+    """Turn the drivers' generalized forces (``forces``: arrays (S, n_drivers), changed in
+    place) into what each actuator gives: a push along ``input.direction`` at ``input.point``
     where the scene gives ``input`` (``n`` global, or turning with ``input.link``: positions X
-    (S, P, 2)); a step where that leverage vanishes gets NO_LEVERAGE and NaN in that driver's
-    input force alone (the other drivers' are defined there); a step whose kinematics failed
-    gets NaN in every driver's. ``size``: the mechanism's length scale, float or (S,) (default
-    ``model.size``).
-    Returns (status, unit of the input force)."""
+    (S, P, 2)), a torque or axial force along the driver's own value elsewhere.
+
+    A push ``P_k`` at its point ``H_k`` does work along every driver's value:
+    ``L_jk = n_k . dr_Hk/ds_j``. The generalized forces ``G`` are what the actuators together
+    supply, ``G_j = sum_k L_jk P_k + tau_j`` (``tau_j`` zero for a pushed driver), so the
+    pushes solve ``L_II P = G_I`` over the pushed drivers I and every other driver keeps
+    ``tau_j = G_j - L_jI P`` (one pushed driver: ``P = G / L``, its leverage). A step where
+    ``L_II`` is singular (a push that cannot move its own driver: ``|L_jj|`` or the system's
+    condition) gets NO_LEVERAGE and NaN in every push and in each other driver its pushes do
+    work on (a driver no push moves keeps its force); a step whose kinematics failed gets
+    NaN in every driver's. ``size``: the mechanism's length scale, float or (S,) (default
+    ``model.size``). Returns (status, unit of the input force)."""
     failed = status != OK  # the kinematics' own failures: every driver NaN there
     status = status.copy()
-    for j, driver in enumerate(model.scene.drivers):
-        if driver.input is None:
-            continue
-        n = input_direction(model, driver.input, X)  # (S, 2)
-        ip = model.point_names.index(driver.input.point)
-        leverage = influence.points[:, ip, 0, j] * n[:, 0] + influence.points[:, ip, 1, j] * n[:, 1]
-        scale = (model.size if size is None else size) if driver.kind == "angle" else 1.0  # length/rad, or length/length
-        flat = np.abs(leverage) < LEVERAGE_RTOL * scale
+    drivers = model.scene.drivers
+    pushed = [j for j, d in enumerate(drivers) if d.input is not None]
+    if pushed:
+        size = model.size if size is None else size
+        scale = np.stack([np.broadcast_to(np.asarray(size, float), (X.shape[0],))
+                          if d.kind == "angle" else np.ones(X.shape[0]) for d in drivers],
+                         axis=1)  # (S, nd): length per rad, or length per length
+        L = np.empty((X.shape[0], len(drivers), len(pushed)))  # (S, j, k)
+        for c, k in enumerate(pushed):
+            n = input_direction(model, drivers[k].input, X)  # (S, 2)
+            ip = model.point_names.index(drivers[k].input.point)
+            L[:, :, c] = np.einsum("sx,sxj->sj", n, influence.points[:, ip])
+        own = L[:, pushed, :]  # (S, I, I)
+        diag = np.abs(np.diagonal(own, axis1=1, axis2=2))  # (S, I)
+        flat = (diag < LEVERAGE_RTOL * scale[:, pushed]).any(axis=1)
+        if len(pushed) > 1:
+            with np.errstate(all="ignore"):
+                cond = np.linalg.cond(np.where(np.isfinite(own), own, 0.0))
+            flat |= ~(cond < 1.0 / LEVERAGE_RTOL)
         status[flat & (status == OK)] = NO_LEVERAGE
-        safe = np.where(flat, np.nan, leverage)
+        solvable = ~flat & np.isfinite(own).all(axis=(1, 2))
+        others = [j for j in range(len(drivers)) if j not in pushed]
+        moved = np.abs(L[:, others, :]) >= LEVERAGE_RTOL * scale[:, others, None]  # (S, o, I)
         for force in forces:
-            force[:, j] = force[:, j] / safe
-    for force in forces:  # no leverage: that driver's push alone is NaN (the others' hold)
+            G = force.copy()
+            P = np.full((X.shape[0], len(pushed)), np.nan)
+            if solvable.any():
+                P[solvable] = np.linalg.solve(own[solvable], G[solvable][:, pushed, None])[..., 0]
+            force[:, pushed] = P
+            if others:
+                tau = G[:, others] - np.einsum("sok,sk->so", L[:, others, :],
+                                               np.where(np.isnan(P), 0.0, P))
+                undefined = flat[:, None] & moved.any(axis=2)
+                force[:, others] = np.where(undefined, np.nan, tau)
+    for force in forces:
         force[failed] = np.nan
     return status, common_unit(input_force_units(model.scene.drivers, units))
 
