@@ -404,6 +404,11 @@ def _fit(args) -> int:
     outcome = _Outcome()
     with _reporting(args.scene, outcome):
         scene = load_scene(args.scene)
+        from .fit import fit_parameters
+        from .stores import output_folder
+
+        fit_parameters(scene)  # the scene's own mistakes first: nothing made for them
+        out = output_folder(args.out)  # then, before the fit, a wrong --out
         bar = tqdm(desc=f"fit {scene.name}", unit=" evaluations", disable=None, leave=False)
 
         def progress(n, cost):
@@ -414,9 +419,6 @@ def _fit(args) -> int:
             result = fit(scene, progress=progress)
         finally:
             bar.close()
-        from .stores import output_folder
-
-        out = output_folder(args.out)
         paths = [out / f"{scene.name}_fit.toml", out / f"{scene.name}_fit.h5"]
         fit_store.write_toml(result, paths[0])
         fit_store.write_h5(result, paths[1])
@@ -438,6 +440,9 @@ def _fleet(kind: str, args, scenes: list) -> int:
         return 2
     with _reporting(scenes[0], outcome):
         scene = fleet_scene(scenes[0], args.logs, args.log_name)
+        from .stores import output_folder
+
+        output_folder(args.out)  # before the fleet: a wrong --out is said at once
         bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
         try:
             paths, rows = run_fleet(kind, scene, args.logs, args.log_name,

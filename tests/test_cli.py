@@ -1,5 +1,6 @@
 """The command line, called as `main(argv)`: exit codes, messages, and the model-level errors."""
 import pathlib
+import time
 
 import pytest
 
@@ -91,11 +92,16 @@ def test_out_that_is_a_file(tmp_path, capsys):
     # a folder below a file cannot be made either: every command says so, exit 2
     below = target / "sub"
     study = CONFIGS / "studies" / "basketball_goal.toml"
-    for command in (["run", str(CONFIGS / "shear_press.toml")], ["study", str(study)]):
+    fit_scene = CONFIGS / "logged" / "dump_truck_logged.toml"
+    for command in (["run", str(CONFIGS / "shear_press.toml")], ["study", str(study)],
+                    ["fit", str(fit_scene)], ["accuracy", str(CONFIGS / "shear_press.toml")],
+                    ["run", str(fit_scene), "--logs", str(fit_scene.parent / "logs" / "*.csv")]):
+        t0 = time.monotonic()
         assert main([*command, "--out", str(below)]) == 2
         err = capsys.readouterr().err.strip()
         assert err == (f"error: --out {below}: cannot be the output folder: {target} is a file, "
                        "not a folder — give --out a folder (made if missing)"), err
+        assert time.monotonic() - t0 < 5, command  # said before the work (a fit, a ladder)
 
 
 def test_bad_scene_does_not_stop_the_others(tmp_path, capsys):

@@ -156,7 +156,10 @@ def header(ladder: Ladder, markdown: bool = False) -> str:
 def run_accuracy(path, out: pathlib.Path = pathlib.Path("outputs"), quick: bool = False,
                  repeats: int = 5) -> int:
     """Measure ``path``'s ladder, print the table, write the .h5 and .rrd; return exit status."""
+    from ..stores import accuracy as store, output_folder
+
     scene = load_scene(path)
+    out = output_folder(out)  # before the ladder: a wrong --out is said at once
     if quick:
         repeats = min(repeats, 3)
     ladder = measure(scene, quick=quick, repeats=repeats,
@@ -170,9 +173,6 @@ def run_accuracy(path, out: pathlib.Path = pathlib.Path("outputs"), quick: bool 
         if front:
             print(f"  {name}: " + ", ".join(
                 r.label for r in sorted(front, key=lambda r: r.seconds_solve)))
-    from ..stores import accuracy as store, output_folder
-
-    out = output_folder(out)
 
     h5 = out / f"{scene.name}_accuracy.h5"
     rrd = out / f"{scene.name}_accuracy.rrd"
