@@ -449,3 +449,55 @@ def test_two_pushes_balance_the_arm():
     assert np.abs((R + pa + pb + W)[ok]).max() < 1e-9 * 50
     assert np.abs((_cross2(A, pa) + _cross2(B, pb + W))[ok]).max() < 1e-9 * 50
     np.testing.assert_allclose(r.forces["input_force_lagrange"][1][ok], F[ok], rtol=1e-9)
+
+
+def test_two_pushes_of_different_units_do_not_depend_on_the_length_unit():
+    """A crank (angle, pushed at A across it) and a slider (coordinate C.x, pushed along x):
+    their pushes solve a system whose rows carry length per radian and length per length, so
+    its condition is taken in the drivers' own scales. The same mechanism in a unit 2e9 times
+    smaller gives the same forces (N: only lengths scale; 1e-9 relative), not no_leverage."""
+    def scene(k):
+        return parse_scene(f"""
+[points]
+O = {{ x = 0.0, y = 0.0, fixed = true }}
+A = {{ x = {k}, y = 0.0 }}
+B = {{ x = {1.5 * k}, y = {1.0 * k} }}
+C = {{ x = {3 * k}, y = 0.0 }}
+[[links]]
+name = "crank"
+points = ["O", "A"]
+[[links]]
+name = "l1"
+points = ["A", "B"]
+[[links]]
+name = "l2"
+points = ["B", "C"]
+[[sliders]]
+name = "g"
+point = "C"
+along = {{ through = [0.0, 0.0], direction = [1.0, 0.0] }}
+[[drivers]]
+name = "th"
+angle = ["O", "A"]
+from = 10.0
+to = 20.0
+steps = 3
+input = {{ point = "A", direction = [0.0, 1.0], link = "crank" }}
+[[drivers]]
+name = "cx"
+coordinate = "C.x"
+from = {3 * k}
+to = {3.1 * k}
+steps = 3
+input = {{ point = "C", direction = [1.0, 0.0] }}
+[analysis]
+effects = ["loads"]
+[[loads]]
+name = "w"
+point = "B"
+force = [1.0, -2.0]
+""", f"scaled_{k:g}.toml")
+    one, big = (linkpipe.solve(scene(k)) for k in (1.0, 2e9))
+    assert (one.status == OK).all() and (big.status == OK).all()
+    np.testing.assert_allclose(big.forces["input_force"][1], one.forces["input_force"][1],
+                               rtol=1e-9)

@@ -235,16 +235,6 @@ def test_a_driven_link_takes_its_turns_from_the_driver():
     crank = [ln.name for ln in r.scene.links].index("crank")
     np.testing.assert_allclose(r.link_angle[:, crank], np.radians(r.driver_value[:, 0]),
                                rtol=0, atol=1e-12)
-    # a link that carries the driver's pair but is drawn from other points: its direction is
-    # the driver's value plus the body's fixed 90 deg (O->A against O->E), turns included
-    plate = linkpipe.parse_scene(
-        '[points]\nO = { x = 0.0, y = 0.0, fixed = true }\nA = { x = 1.0, y = 0.0 }\n'
-        'E = { x = 0.0, y = 1.0 }\n[[links]]\nname = "plate"\npoints = ["O", "A", "E"]\n'
-        '[[drivers]]\nname = "d"\nangle = ["O", "E"]\nfrom = 90.0\nto = 995.9\nsteps = 5\n',
-        "plate.toml")
-    r = linkpipe.solve(plate)
-    np.testing.assert_allclose(r.link_angle[:, 0], np.radians(r.driver_value[:, 0] - 90.0),
-                               rtol=0, atol=1e-12)
     r = linkpipe.solve(str(root / "configs" / "hard" / "triple_rocker_limits.toml"))
     failed = r.status != OK
     assert failed[18:36].all() and (~failed[37:54]).all()  # solved again after a gap

@@ -78,9 +78,10 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
         own = L[:, pushed, :]  # (S, I, I)
         diag = np.abs(np.diagonal(own, axis1=1, axis2=2))  # (S, I)
         flat = (diag < LEVERAGE_RTOL * scale[:, pushed]).any(axis=1)
-        if len(pushed) > 1:
+        if len(pushed) > 1:  # rows in their drivers' scales: a condition free of units
+            scaled = own / scale[:, pushed, None]
             with np.errstate(all="ignore"):
-                cond = np.linalg.cond(np.where(np.isfinite(own), own, 0.0))
+                cond = np.linalg.cond(np.where(np.isfinite(scaled), scaled, 0.0))
             flat |= ~(cond < 1.0 / LEVERAGE_RTOL)
         status[flat & (status == OK)] = NO_LEVERAGE
         solvable = ~flat & np.isfinite(own).all(axis=(1, 2))

@@ -301,13 +301,11 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
 
 
 def driven_links(model: Model) -> list[tuple[int, int, float]]:
-    """``(link, driver, offset)`` of each link an absolute angle driver turns: a link carrying
-    both of the driver's points, whose direction (first to second point) is the driver's value
-    plus a constant ``offset`` (the link is rigid): 0 or pi where its first two points are the
-    driver's pair, else the drawing's own offset, within half a turn (it only picks the whole
-    turns, so a drawing that is a guess does)."""
+    """``(link, driver, offset)`` of each link whose direction an absolute angle driver sets:
+    the link's first two points are the driver's pair (offset 0) or the pair reversed (pi).
+    (A link that carries the pair among other points is unwrapped by its steps: its fixed
+    offset would have to come from the solved body, not from a drawing that may be a guess.)"""
     out = []
-    X0 = model.start_position
     for j, driver in enumerate(model.scene.drivers):
         if driver.kind != "angle" or driver.relative_to is not None:
             continue
@@ -315,10 +313,6 @@ def driven_links(model: Model) -> list[tuple[int, int, float]]:
         for li, (la, lb) in enumerate(zip(model.link_a, model.link_b)):
             if (la, lb) in ((a, b), (b, a)):
                 out.append((li, j, 0.0 if (la, lb) == (a, b) else np.pi))
-            elif set(driver.points) <= set(model.scene.links[li].points):
-                d_link, d_pair = X0[lb] - X0[la], X0[b] - X0[a]
-                offset = np.arctan2(d_link[1], d_link[0]) - np.arctan2(d_pair[1], d_pair[0])
-                out.append((li, j, float(np.angle(np.exp(1j * offset)))))
     return out
 
 
