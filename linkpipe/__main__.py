@@ -362,24 +362,11 @@ def _check(args) -> int:
             # memory (as run's defaults need it), degrees of freedom, the start assembles
             model, mob = preflight(scene, steps_per_segment(scene),
                                    min(scene.n_steps, RRD_MAX_STEPS))
-            from .kinematics.start import drawing_warnings
+            from .fit import declared_fit_parameters
+            from .kinematics.start import scene_warnings
 
-            params = _fit_checked(scene)
-            print(describe(scene, mob, tuple(scene.warnings) + drawing_warnings(model), params))
+            print(describe(scene, mob, scene_warnings(model), declared_fit_parameters(scene)))
     return outcome.code
-
-
-def _fit_checked(scene) -> list:
-    """A scene's [fit] parameters checked as ``fit`` checks them before its first trial
-    (addresses, bounds, measurements and their sigmas); [] without [fit]."""
-    import tomllib
-
-    data = tomllib.loads(scene.text)
-    if "fit" not in data:
-        return []
-    from .fit import fit_parameters
-
-    return fit_parameters(scene, data)
 
 
 def _accuracy(args) -> int:

@@ -213,6 +213,13 @@ def fit_parameters(scene: Scene, data: dict | None = None) -> list[Parameter]:
     return params
 
 
+def declared_fit_parameters(scene: Scene) -> list[Parameter]:
+    """:func:`fit_parameters` of a scene that has ``[fit]`` (what ``check`` describes); []
+    without one."""
+    data = tomllib.loads(scene.text)
+    return fit_parameters(scene, data) if "fit" in data else []
+
+
 def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
     """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
     ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""

@@ -20,6 +20,7 @@ from .status import assign, code_counts
 from .status import message as status_message
 from .errors import MemoryRefused, SceneError
 from .scene import Scene, load_scene
+from .scene.timing import MEASURED_NEEDS
 
 
 @dataclass(frozen=True)
@@ -35,11 +36,11 @@ class Stages:
         eff = set(scene.effects)
         out = scene.outputs
         vectors = bool(out.vectors)
-        measured = {m.of[0] for m in scene.measurements}  # a measurement calls for its rate
+        measured = {MEASURED_NEEDS.get(m.of[0]) for m in scene.measurements}  # their rates
         acc = ("inertia" in eff or "acceleration" in out.kinematics or vectors
-               or bool(measured & {"acceleration", "link_angular_acceleration"}))
+               or "acceleration" in measured)
         vel = (acc or "damping" in eff or "velocity" in out.kinematics or vectors
-               or bool(measured & {"velocity", "link_angular_velocity"}))
+               or "velocity" in measured)
         return cls(velocity=vel, acceleration=acc, forces=bool(eff))
 
     @property

@@ -300,9 +300,9 @@ class Result:
     def warnings(self) -> tuple[str, ...]:
         """What is legal but probably not meant: the scene's (parsing) and the drawing's (a
         drawn pose far from an assembled one: :func:`linkpipe.kinematics.start.drawing_warnings`)."""
-        from .kinematics.start import drawing_warnings
+        from .kinematics.start import scene_warnings
 
-        return tuple(self.scene.warnings) + drawing_warnings(self.model)
+        return scene_warnings(self.model)
 
     def units(self) -> dict[str, str]:
         """Unit strings from the scene (free text), with neutral defaults."""

@@ -6,7 +6,6 @@ import sys
 
 import numpy as np
 
-from ..output_units import input_force_units, units_of
 from ..scene import load_scene
 from .rows import ERROR_FLOOR, Ladder, Row
 from .timing import measure
@@ -115,7 +114,7 @@ def _scale_text(ladder: Ladder, q: str) -> str:
     units differ (each driver's error is divided by its own unit's scale)."""
     if q != "input_force" or np.isfinite(ladder.scales[q]):
         return f"{q} {ladder.scales[q]:.4g} {ladder.units[q]}"
-    units = input_force_units(ladder.scene.drivers, units_of(ladder.scene))
+    units = ladder.force_units
     per = ladder.scales.get("input_force_per_driver")
     by_unit = {u: per[j] for j, u in enumerate(units)} if per is not None else {}
     return ("input_force by unit " + " and ".join(f"{v:.4g} {u}" for u, v in by_unit.items())

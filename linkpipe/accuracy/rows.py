@@ -94,6 +94,11 @@ class Ladder:
     created: str
     machine: str
 
+    @property
+    def force_units(self) -> list[str]:
+        """Each driver's input-force unit (the per-unit scales' units)."""
+        return driver_force_units(self.scene)
+
     def front(self, quantity: str | None = None, path: str | None = None) -> list[Row]:
         """Return the rows on the Pareto front of whole-solve time against error.
 
@@ -166,7 +171,7 @@ class Ladder:
             attrs[f"units_{q}"] = u
         if "input_force_per_driver" in self.scales:  # beside scale_input_force_per_driver
             attrs["units_input_force_per_driver"] = ",".join(
-                input_force_units(self.scene.drivers, units_of(self.scene)))
+                self.force_units)
         for k, v in self.checks.items():
             attrs[f"check_{k}"] = v
         return attrs
@@ -245,10 +250,15 @@ class Ladder:
         return coords, data
 
 
+def driver_force_units(scene: Scene) -> list[str]:
+    """Each driver's input-force unit in ``scene``'s units."""
+    return input_force_units(scene.drivers, units_of(scene))
+
+
 def _units(scene: Scene) -> dict[str, str]:
     """The unit of each quantity the ladder measures (the input force's: the drivers' shared
     unit, else "mixed", as the run's own file)."""
     u = units_of(scene)
     L, T = u["length"], u["time"]
     return {"position": L, "velocity": f"{L}/{T}", "acceleration": f"{L}/{T}^2",
-            "input_force": common_unit(input_force_units(scene.drivers, u))}
+            "input_force": common_unit(driver_force_units(scene))}

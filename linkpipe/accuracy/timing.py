@@ -17,8 +17,7 @@ from ..errors import LinkpipeError
 from ..scene import Scene, load_scene
 from .knobs import KNOBS, settings
 from .references import References, _measure_errors, _scales
-from .rows import Ladder, Row, _units
-from ..output_units import input_force_units, units_of
+from .rows import Ladder, Row, _units, driver_force_units
 
 
 def _timed(fn, repeats: int):
@@ -105,7 +104,7 @@ def measure(scene: Scene | str, quick: bool = False, repeats: int = 5, echo=None
 def _measure(scene: Scene, quick: bool, repeats: int, tell, knobs) -> Ladder:
     refs = References(scene)
     scales = _scales(refs.at(scene.n_steps),
-                     input_force_units(scene.drivers, units_of(scene)))
+                     driver_force_units(scene))
     quantities = ("position", "velocity", "acceleration") + (
         ("input_force",) if refs.has_forces else ())
     base_solver = dc.asdict(scene.solver)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Model
-from ..result import Forces, Motion, combine_flags  # combine_flags: also this package's API
+from ..result import Forces, Motion, combine_flags
 from ..status import NO_ASSEMBLY, NO_INPUT, NOT_CONVERGED, OK, SINGULAR
 from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
 from .constants import ForceConstants

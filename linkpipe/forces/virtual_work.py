@@ -71,9 +71,7 @@ def along_input_directions(model: Model, influence: Influence, forces: list, sta
                           if d.kind == "angle" else np.ones(X.shape[0]) for d in drivers],
                          axis=1)  # (S, nd): length per rad, or length per length
         L = np.empty((X.shape[0], len(drivers), len(pushed)))  # (S, j, k)
-        for c, k in enumerate(pushed):
-            n = input_direction(model, drivers[k].input, X)  # (S, 2)
-            ip = model.point_names.index(drivers[k].input.point)
+        for c, (_, ip, n) in enumerate(pushes(model, X)):
             L[:, :, c] = np.einsum("sx,sxj->sj", n, influence.points[:, ip])
         own = L[:, pushed, :]  # (S, I, I)
         diag = np.abs(np.diagonal(own, axis1=1, axis2=2))  # (S, I)
@@ -117,6 +115,12 @@ def input_direction(model: Model, driver_input, X: np.ndarray) -> np.ndarray:
     return np.stack([n[0] * e[:, 0] - n[1] * e[:, 1], n[0] * e[:, 1] + n[1] * e[:, 0]], axis=1)
 
 
+def pushes(model: Model, X: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """``(driver, point, direction (S, 2))`` of each driver with ``input``, in driver order."""
+    return [(j, model.point_names.index(d.input.point), input_direction(model, d.input, X))
+            for j, d in enumerate(model.scene.drivers) if d.input is not None]
+
+
 def actuator_forces(model: Model, input_force: np.ndarray, X: np.ndarray):
     """The actuators the scene's ``input`` tables describe, as forces: ``(point_forces (S, P, 2),
     {link: {point: force (S, 2)}})``, each driver's input force (S, n_drivers, along its
@@ -128,16 +132,15 @@ def actuator_forces(model: Model, input_force: np.ndarray, X: np.ndarray):
     tie. The reactions and internal forces take these forces as applied loads (the driver's
     own multiplier then vanishes): they are those of the actuator the input force describes,
     not of a torque at the driver's pivot."""
-    drivers = [(j, d) for j, d in enumerate(model.scene.drivers) if d.input is not None]
-    if not drivers:
+    each = pushes(model, X)
+    if not each:
         return None
     points = np.zeros(X.shape[:2] + (2,))
     bodies: dict = {}
-    for j, driver in drivers:
-        p = model.point_names.index(driver.input.point)
-        force = input_force[:, j, None] * input_direction(model, driver.input, X)  # (S, 2)
+    for j, p, n in each:
+        force = input_force[:, j, None] * n  # (S, 2)
         points[:, p] += force
-        li = _pushed_link(model.scene, driver)
+        li = _pushed_link(model.scene, model.scene.drivers[j])
         if li is not None:
             body = bodies.setdefault(li, {})
             body[p] = body[p] + force if p in body else force

@@ -189,6 +189,11 @@ def drawing_warnings(model: Model) -> tuple[str, ...]:
     return derived(model, "drawing_warnings", _drawing_warnings)
 
 
+def scene_warnings(model: Model) -> tuple[str, ...]:
+    """Everything legal but probably not meant: the scene's own (parsing) and its drawing's."""
+    return tuple(model.scene.warnings) + drawing_warnings(model)
+
+
 def _drawing_warnings(model: Model) -> tuple[str, ...]:
     found = drawing_offset(model)
     if found is None or not found[1] > DRAWING_MOVED_FRACTION * model.size:

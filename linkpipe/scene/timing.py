@@ -203,12 +203,18 @@ MEASURABLE = {
 }
 
 
-#: the measurable variables the force stage gives: a scene measuring one needs effects (and,
-#: for a spring's or torsion spring's own variables, the springs effect)
-FORCE_STAGE = {"input_force", "input_force_lagrange", "link_force", "slider_force",
-               "joint_force", "ground_reaction", "spring_force", "spring_length",
-               "spring_extension", "spring_energy", "torsion_spring_angle",
-               "torsion_spring_torque", "torsion_spring_energy"}
+#: what computes a measurable variable beyond the positions: "velocity" / "acceleration" (a
+#: measurement calls for them: :meth:`linkpipe.pipeline.Stages.of`), "forces" (the force
+#: stage, which runs only with effects), "springs" (that effect); absent: always computed
+MEASURED_NEEDS = {
+    "velocity": "velocity", "link_angular_velocity": "velocity",
+    "acceleration": "acceleration", "link_angular_acceleration": "acceleration",
+    **dict.fromkeys(("input_force", "input_force_lagrange", "link_force", "slider_force",
+                     "joint_force", "ground_reaction"), "forces"),
+    **dict.fromkeys(("spring_force", "spring_length", "spring_extension", "spring_energy",
+                     "torsion_spring_angle", "torsion_spring_torque",
+                     "torsion_spring_energy"), "springs"),
+}
 
 
 class MeasurementTables:
@@ -244,9 +250,8 @@ class MeasurementTables:
                 raise table.error("sigma", f"must be positive, got {sigma:g}",
                                   "the measurement's standard deviation, in its scaled unit")
             of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
-            need = ("springs" if of[0].startswith(("spring_", "torsion_spring_")) else
-                    "effects" if of[0] in FORCE_STAGE else "")
-            if need == "effects" and not effects or need == "springs" and "springs" not in effects:
+            need = MEASURED_NEEDS.get(of[0])
+            if need == "forces" and not effects or need == "springs" and "springs" not in effects:
                 what = ('"springs" in [analysis] effects' if need == "springs" else
                         "the force stage, which runs only with [analysis] effects")
                 raise table.error("of", f'"{of[0]}" is computed by {what}; this scene has '
