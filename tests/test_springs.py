@@ -563,3 +563,68 @@ def test_the_unbroken_base_of_those_runs(tmp_path):
     assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     written = sorted(p.name for p in (tmp_path / "out").iterdir() if not p.name.startswith("."))
     assert written == ["slide.h5", "slide.rrd"]  # (beside the advisory lock file)
+
+
+# -- a preload holds at the start configuration, not at a guessed drawing ------------------------
+def rocker_with_spring(B: tuple[float, float], body: str) -> str:
+    """The crank-rocker (crank 1, coupler 3.5, rocker 3, ground 4; lengths given, so B may be a
+    guess) at its drawn crank angle 0 deg, a spring from the fixed anchor K to B."""
+    return f"""
+[scene]
+name = "preload_on_guess"
+units = {{ length = "m", mass = "kg", time = "s", force = "N" }}
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+A  = {{ x = 1.0, y = 0.0 }}
+B  = {{ x = {B[0]!r}, y = {B[1]!r} }}
+O4 = {{ x = 4.0, y = 0.0, fixed = true }}
+K  = {{ x = 5.0, y = 4.0, fixed = true }}
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = {{ "O2-A" = 1.0 }}
+[[links]]
+name = "coupler"
+points = ["A", "B"]
+lengths = {{ "A-B" = 3.5 }}
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = {{ "O4-B" = 3.0 }}
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = 0.0
+to = 90.0
+steps = 7
+[[springs]]
+name = "s"
+between = ["K", "B"]
+{body}
+[analysis]
+effects = ["springs"]
+"""
+
+
+#: B assembled at crank angle 0: |B - A| = 3.5 and |B - O4| = 3 (x from the difference of the
+#: two circles, 6 x - 15 = 3.25; y above the ground line, as drawn)
+B_EXACT = (73.0 / 24.0, float(np.sqrt(9.0 - (73.0 / 24.0 - 4.0) ** 2)))
+
+
+@pytest.mark.parametrize("kind, k, preload", [("linear", 2000.0, 50.0), ("linear", 2000.0, 0.0),
+                                              ("tension_only", 500.0, 5.0)])
+def test_preload_holds_at_the_assembled_start_not_at_a_guessed_drawing(kind, k, preload):
+    """A drawing whose B is a guess 0.07 m off (the lengths are given) starts from the pose
+    it assembles to; a spring's preload (or, without one, zero tension) holds there: the first
+    step's tension is the preload, and every step equals the exactly drawn scene's (before:
+    the start length was the guess's, 2000 N/m x ~0.05 m = ~100 N off)."""
+    body = f'kind = "{kind}"\nk = {k!r}\npreload = {preload!r}'
+    guessed = linkpipe.solve(linkpipe.parse_scene(rocker_with_spring((3.0, 2.9), body), "g.toml"))
+    exact = linkpipe.solve(linkpipe.parse_scene(rocker_with_spring(B_EXACT, body), "e.toml"))
+    assert guessed.n_ok == exact.n_ok == 7
+    tension = guessed.forces["spring_force"][1][:, 0]
+    # the assembly and the exact drawing agree to the solver's tolerance (1e-10 of the size,
+    # ~5e-10 m): times k = 2000 N/m, 1e-6 N
+    assert abs(tension[0] - preload) < 1e-6
+    np.testing.assert_allclose(tension, exact.forces["spring_force"][1][:, 0], rtol=0, atol=1e-6)
+    assert abs(tension[-1] - tension[0]) > 10.0  # the spring does work: the test can fail

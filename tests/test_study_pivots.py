@@ -260,3 +260,24 @@ def test_every_shipped_config_pivot_variants_are_their_own_runs_to_the_bit(tmp_p
         assert stored.keys() == arrays.keys()
         for name, want in stored.items():
             np.testing.assert_array_equal(arrays[name][v], want, err_msg=f"variant {v} {name}")
+
+
+def test_a_preload_holds_at_each_variants_own_assembled_start(tmp_path):
+    """The crank-rocker drawn with B a guess and a preloaded spring from the anchor K to B: a
+    study moving the anchor takes the vectorised path, each variant's spring measured from the
+    assembled start (its own run's, to 1e-12); one moving a pivot solves each variant by its own
+    run, the reason said (a spring's start length is each variant's own assembled drawing)."""
+    from test_springs import rocker_with_spring
+
+    text = rocker_with_spring((3.0, 2.9), 'k = 2000.0\npreload = 50.0')
+    base = write(tmp_path, text, "rocker.toml")
+    anchor = study_of(tmp_path, base, '"points.K.x" = { from = 4.0, to = 6.0, steps = 3 }')
+    assert anchor.slots is not None and anchor.path_note.startswith("vectorised")
+    _, arrays = vector.variant_arrays(anchor, anchor.slots, 0, anchor.n_variants)
+    for v, x in enumerate(anchor.values[:, 0]):
+        own = linkpipe.solve(parse_scene(text.replace("x = 5.0", f"x = {float(x)!r}"), str(base)))
+        assert own.forces["spring_force"][1][0, 0] == pytest.approx(50.0, abs=1e-6)
+        np.testing.assert_allclose(arrays["spring_force"][v], own.forces["spring_force"][1],
+                                   rtol=1e-12, atol=1e-12)
+    pivot = study_of(tmp_path, base, '"points.O4.x" = { from = 3.9, to = 4.1, steps = 3 }')
+    assert pivot.slots is None and "assembled drawing" in pivot.path_note

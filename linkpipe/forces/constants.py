@@ -12,6 +12,16 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def start_assembled(model) -> np.ndarray:
+    """The start configuration a spring's start length is measured on (n_points, 2): the
+    drawing assembled at its own driver values where it assembles there (its points may be a
+    guess), else the drawing."""
+    from ..kinematics.start import assembled_drawing
+
+    X = assembled_drawing(model)
+    return model.start_position if X is None else X
+
+
 @dataclass(frozen=True)
 class ForceConstants:
     """``spring_k``, ``spring_free_length`` (NaN where the scene gives none: the start length),
@@ -23,7 +33,10 @@ class ForceConstants:
     NaN for the other kinds; ``torsion_k`` and ``torsion_free_angle`` (degrees)
     (n_torsion_springs,) or (S, n_torsion_springs);
     ``start_position`` (n_points, 2) or
-    (S, n_points, 2), the drawn positions (a spring's start length); ``size`` the
+    (S, n_points, 2), the drawn positions; ``start_assembled`` the same shape, the drawing
+    assembled at its own driver values (:func:`linkpipe.kinematics.start.assembled_drawing`;
+    the drawing itself where it does not assemble there): a spring's start length, at which
+    its ``preload`` holds; ``size`` the
     mechanism's length scale, a float or (S,) (the leverage an input must have); ``pivots``
     True where the mechanism's own fixed points differ row by row (a study's variants that move
     them: the Jacobian is read off the positions, :func:`linkpipe.kinematics.rates.entries_at`);
@@ -46,6 +59,7 @@ class ForceConstants:
     torsion_k: np.ndarray
     torsion_free_angle: np.ndarray
     start_position: np.ndarray
+    start_assembled: np.ndarray
     size: float | np.ndarray
     pivots: bool = False
     model_rows: object = None
@@ -73,14 +87,15 @@ class ForceConstants:
                for key in ("force_extended", "extended_length", "dead_length", "gamma")},
             torsion_k=col(t.k for t in sc.torsion_springs),
             torsion_free_angle=col(t.free_angle for t in sc.torsion_springs),
-            start_position=model.start_position, size=model.size)
+            start_position=model.start_position, start_assembled=start_assembled(model),
+            size=model.size)
 
     #: each field's number of axes without a step axis
     BASE_NDIM = {"spring_k": 1, "spring_free_length": 1, "spring_preload": 1,
                  "spring_damping": 1, "mass": 1, "inertia": 1, "gravity": 1, "load_force": 2,
                  "load_torque": 1, "gas_force_extended": 1, "gas_extended_length": 1,
                  "gas_dead_length": 1, "gas_gamma": 1, "torsion_k": 1, "torsion_free_angle": 1,
-                 "start_position": 2,
+                 "start_position": 2, "start_assembled": 2,
                  "size": 0}
 
     def rows(self, steps: slice) -> "ForceConstants":

@@ -40,7 +40,7 @@ class SpringGeometry:
         ib = np.array([names.index(sp.between[1]) for sp in springs], dtype=np.intp)
         d = ctx.position[:, ib] - ctx.position[:, ia]
         length = np.hypot(d[..., 0], d[..., 1])
-        d0 = c.start_position[..., ib, :] - c.start_position[..., ia, :]
+        d0 = c.start_assembled[..., ib, :] - c.start_assembled[..., ia, :]
         start_len = np.hypot(d0[..., 0], d0[..., 1])
         given = np.array([sp.free_length is not None for sp in springs], dtype=bool)
         free = np.where(given, c.spring_free_length, start_len)

@@ -158,11 +158,18 @@ def carry_steps(model: Model, X0: np.ndarray, s0: np.ndarray, size):
 DRAWING_MOVED_FRACTION = 0.1
 
 
-def drawing_offset(model: Model) -> tuple[str, float] | None:
-    """``(point, distance)``: the moving point that the drawing's own assembly (Newton from
-    the drawn pose at the driver values the drawing itself has) moves farthest, and how far
-    (length units); None without unknowns or drivers, or where the drawing does not assemble
-    at its own driver values (the start is then solved at the sweep's first values directly)."""
+def assembled_drawing(model: Model) -> np.ndarray | None:
+    """The drawing assembled (n_points, 2): Newton from the drawn pose at the driver values the
+    drawing itself has (fixed points as drawn), computed once per model; None without unknowns
+    or drivers, or where the drawing does not assemble at its own driver values (the start is
+    then solved at the sweep's first values directly). The scene's "start configuration" where
+    its points are a guess: a spring's ``preload`` is its tension here."""
+    from ..cache import derived
+
+    return derived(model, "assembled_drawing", _assembled_drawing)
+
+
+def _assembled_drawing(model: Model) -> np.ndarray | None:
     if not model.n_q or not model.n_drivers:
         return None
     X0 = model.start_position[None]
@@ -176,9 +183,22 @@ def drawing_offset(model: Model) -> tuple[str, float] | None:
                      else newton(model, q0, drawn[None], tol_abs, 50))
     if not conv[0]:
         return None
-    moved = np.hypot(*(np.asarray(q).reshape(-1, 2) - q0[0].reshape(-1, 2)).T)  # (n_moving,)
+    X = model.positions(np.asarray(q, dtype=float).reshape(1, -1))[0]
+    X.setflags(write=False)
+    return X
+
+
+def drawing_offset(model: Model) -> tuple[str, float] | None:
+    """``(point, distance)``: the moving point that the drawing's own assembly
+    (:func:`assembled_drawing`) moves farthest, and how far (length units); None where there
+    is no such assembly."""
+    X = assembled_drawing(model)
+    if X is None:
+        return None
+    moving = model.moving
+    moved = np.hypot(*(X[moving] - model.start_position[moving]).T)  # (n_moving,)
     k = int(np.argmax(moved))
-    return model.point_names[model.moving[k]], float(moved[k])
+    return model.point_names[moving[k]], float(moved[k])
 
 
 def drawing_warnings(model: Model) -> tuple[str, ...]:

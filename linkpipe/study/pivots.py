@@ -125,6 +125,9 @@ def path_reason(study) -> str:
         return "pivots move and the base scene does not take the closed-form dyads"
     if any(st.ambiguous for st in base_chain(study).steps):
         return "pivots move and a dyad starts on its singular shape"
+    if any(sp.kind != "gas" and sp.free_length is None for sp in scene.springs):
+        return ("pivots move and a spring's start length (its preload's, or its free length) "
+                "is each variant's own assembled drawing")
     return ""
 
 

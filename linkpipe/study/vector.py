@@ -169,6 +169,8 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
     for j, (field, *index) in enumerate(slots):
         if field in ("length", "side"):  # a constant of the model's rows (:mod:`.pivots`)
             continue
+        if field == "point":  # an anchor: where it is drawn is where it is at the start
+            per_row["start_assembled"][(slice(None),) + tuple(index)] = np.repeat(values[:, j], S)
         if field in ("point", "pivot", "drawn"):
             field = "start_position"
         per_row[field][(slice(None),) + tuple(index)] = np.repeat(values[:, j], S)
