@@ -396,7 +396,7 @@ def _fit(args) -> int:
 
         fit_parameters(scene)  # the scene's own mistakes first: nothing made for them
         out = output_folder(args.out)  # then, before the fit, a wrong --out
-        bar = tqdm(desc=f"fit {scene.name}", unit=" evaluations", disable=None, leave=False)
+        bar = tqdm(desc=f"fit {scene.name}", unit=" solves", disable=None, leave=False)
 
         def progress(n, cost):
             bar.update(1)

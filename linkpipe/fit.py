@@ -1,7 +1,8 @@
 """``linkpipe fit``: adjust named scene values to the measurements by least squares.
 
 ``[fit] parameters`` address any numeric value of the scene file as ``table.entry.key[.index]``
-(entries of ``[[...]]`` tables by their ``name``, ``[[masses]]`` by their ``link``;
+(entries of ``[[...]]`` tables by their ``name``, ``[[masses]]`` by their ``link``, and
+``masses.<link>.<n>.<key>`` the n-th (from 1, in the file's order) of several on one link;
 ``points.P.x``, ``links.coupler.lengths.A-B``, ``loads.tool.force.1``, ``gravity.g.1``).
 Each trial value is written into the scene's TOML data and read back through the scene parser,
 so every check of a scene applies to it. The objective is
@@ -52,10 +53,8 @@ class Parameter:
 
     @property
     def force_only(self) -> bool:
-        """True when the number leaves stage 1 as it is: a force table's. A torsion spring's
-        free angle is one too: the whole turns stage 1 takes off the spring's angle (to bring
-        it within half a turn of its free angle) are taken again for each trial on the reused
-        link angles (``pipeline._turns_for``)."""
+        """True when the number leaves stage 1 as it is: a force table's (a torsion spring's
+        free angle too: its angle is the links' difference, whatever the free angle)."""
         return self.path[0] in FORCE_TABLES
 
 
@@ -74,7 +73,11 @@ class FitResult:
     fitted_data: dict
     stage1_solves: int
     message: str = ""
+    #: the optimiser's evaluations (its ``max_nfev`` counts these; ``cost`` has one entry at the
+    #: start and one per iteration), and every solve of the scene, the finite differences of
+    #: the Jacobian (one per parameter per iteration) included
     n_evaluations: int = 0
+    solves: int = 0
     extra: dict = field(default_factory=dict)
 
     @property
@@ -155,7 +158,21 @@ def locate(scene: Scene, data: dict, address: str, where=None):
         if not matches:
             raise fail(f'no [[{table}]] entry with {field_name} = "{rest[0]}"',
                        _suggest(rest[0], [e.get(field_name) for e in node]))
-        node, path, rest = node[matches[0]], path + [matches[0]], rest[1:]
+        rest = rest[1:]
+        if table == "masses" and rest and rest[0].isdigit():  # masses.<link>.<n>: the n-th on it
+            n = int(rest[0])
+            if not 1 <= n <= len(matches):
+                raise fail(f'link "{parts[1]}" has {len(matches)} [[masses]] entr'
+                           f'{"y" if len(matches) == 1 else "ies"}, not {n}',
+                           f"number them from 1 in the file's order, up to {len(matches)}")
+            matches, rest = [matches[n - 1]], rest[1:]
+        if len(matches) > 1:  # (names are unique elsewhere: only masses share their link)
+            raise fail(f'{len(matches)} [[masses]] entries are on link "{parts[1]}", and the '
+                       "address does not say which",
+                       f'number them from 1 in the file\'s order: "masses.{parts[1]}.1.'
+                       f'{".".join(rest) or "mass"}" .. "masses.{parts[1]}.{len(matches)}.'
+                       f'{".".join(rest) or "mass"}"')
+        node, path = node[matches[0]], path + [matches[0]]
     for part in rest:
         if isinstance(node, dict) and part in node:
             node, path = node[part], path + [part]
@@ -249,9 +266,12 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     # times the start's largest weighted residual where that is larger: never a way down
     start = np.abs(before.measurements["residual"] / sigma)[mask]
     penalty = max(FAILED_STEP_SIGMAS, 10.0 * float(start.max()) if start.size else 0.0)
-    cost: list[float] = []
+    cost: list[float] = []  # the objective at the start, then at each iteration's point
+    solves = 0  # every evaluation, the Jacobian's finite differences' included
 
     def residuals(x):
+        nonlocal solves
+        solves += 1
         try:
             r = solve_at(x, reuse)
         except MemoryRefused:
@@ -260,15 +280,21 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
             return np.full(int(mask.sum()), penalty)
         weighted = r.measurements["residual"] / sigma
         out = np.where(np.isfinite(weighted), weighted, penalty)[mask]
-        cost.append(float(out @ out))  # the objective: sum(((computed - measured) / sigma)^2)
+        objective = float(out @ out)  # sum(((computed - measured) / sigma)^2)
+        if not cost:  # the optimiser's first evaluation is at the start values
+            cost.append(objective)
         if progress is not None:
-            progress(len(cost), cost[-1])
+            progress(solves, objective)
         return out
+
+    def per_iteration(intermediate_result):  # scipy's iterate after each iteration (the name
+        f = intermediate_result.fun           # asks for the OptimizeResult; its f, not 1/2 f.f)
+        cost.append(float(f @ f))
 
     lower, upper = zip(*(p.bounds for p in params))
     sol = least_squares(residuals, x0, bounds=(lower, upper), method="trf", x_scale="jac",
                         diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                        max_nfev=max_evaluations)
+                        max_nfev=max_evaluations, callback=per_iteration)
     se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
                                                              for m in scene.measurements))
     try:
@@ -283,7 +309,7 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     for p, v in zip(params, sol.x):
         _set(fitted_data, p.path, v)
     return FitResult(scene, params, sol.x, se, identifiable, cost, before, after, fitted_data,
-                     stage1, sol.message, sol.nfev)
+                     stage1, sol.message, sol.nfev, solves=solves)
 
 
 def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):

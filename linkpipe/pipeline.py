@@ -3,7 +3,6 @@ itself: :mod:`.stage1`)."""
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import time as _time
 from dataclasses import dataclass
 
@@ -177,24 +176,6 @@ def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREA
         return _solve(scene, progress, kinematics, wanted)
 
 
-def _turns_for(k: Kinematics, model) -> Kinematics:
-    """A reused stage 1 ``k`` with the whole turns its torsion springs' angles drop taken for
-    ``model``'s own free angles (a fit's trial of a free angle: stage 1 sets them at the
-    sweep's first solved step, :func:`linkpipe.forces.springs.torsion_offset`, the same
-    function on the same link angles); ``k`` itself where they are unchanged."""
-    if k.torsion_offset is None:
-        return k
-    from .forces.springs import torsion_offset
-
-    turns = torsion_offset(model, k.link_angle)  # (n_torsion_springs,)
-    if np.array_equal(turns, k.torsion_offset[0], equal_nan=True):
-        return k
-    out = dataclasses.replace(k, torsion_offset=np.broadcast_to(turns, k.torsion_offset.shape))
-    if "finite" in k.__dict__:  # its cached property: the kinematic arrays are the same
-        out.__dict__["finite"] = k.finite
-    return out
-
-
 def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
            wanted: frozenset | None = None) -> Result:
     stages = Stages.of(scene)
@@ -205,8 +186,7 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
         check_memory(scene)
     model = build_model(scene)
     seconds["model"] = _time.perf_counter() - t0
-    k = (whole_stage1(scene, model, stages, tell, seconds) if kinematics is None
-         else _turns_for(kinematics, model))
+    k = whole_stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics
     kinematic_status = k.der["status"]
     forces = None
     if stages.forces:

@@ -119,7 +119,9 @@ def fit_table(result) -> str:
     measurements' RMS residual before and after."""
     lines = [f"{result.scene.name}: fit of {len(result.parameters)} parameter(s) to "
              f"{len(result.scene.measurements)} measurement(s): {result.message}",
-             f"  {result.n_evaluations} evaluations, stage 1 solved {result.stage1_solves} time(s)"]
+             f"  {len(result.cost) - 1} iterations, {result.n_evaluations} evaluations "
+             f"({result.solves} solves with the Jacobian's finite differences), stage 1 solved "
+             f"{result.stage1_solves} time(s)"]
     width = max(len(n) for n in result.names)
     for k, p in enumerate(result.parameters):
         err = (f"± {result.standard_error[k]:.4g}" if result.identifiable[k]

@@ -47,9 +47,7 @@ class Motion:
     kinematic status; ``influence`` (S, n_q, n_drivers) the influence coefficients dq/ds, NaN
     where the step is not ok;
     ``link_angular_acceleration`` (S, n_links) rad/s^2 or None; ``link_angle`` (S, n_links)
-    unwrapped along the whole sweep and ``torsion_offset`` (S, n_torsion_springs) the multiple
-    of 2 pi (rad) each torsion spring's angle drops (:func:`linkpipe.forces.springs.torsion_offset`;
-    a view of one row broadcast is fine), or None where the scene has no torsion springs.
+    unwrapped along the whole sweep (a torsion spring's angle is its links' difference).
     """
 
     s: np.ndarray
@@ -62,14 +60,12 @@ class Motion:
     influence: np.ndarray
     link_angular_acceleration: np.ndarray | None
     link_angle: np.ndarray | None = None
-    torsion_offset: np.ndarray | None = None
 
     def rows(self, steps: slice) -> "Motion":
         """The same motion at a slice of its steps (views, no copies)."""
         return Motion(*(None if a is None else a[steps] for a in (
             self.s, self.s_dot, self.s_ddot, self.position, self.velocity, self.acceleration,
-            self.status, self.influence, self.link_angular_acceleration, self.link_angle,
-            self.torsion_offset)))
+            self.status, self.influence, self.link_angular_acceleration, self.link_angle)))
 
 
 @dataclass(frozen=True)

@@ -47,10 +47,6 @@ class Kinematics:
     velocity: np.ndarray | None
     acceleration: np.ndarray | None
     link_rates: tuple
-    #: (S, n_torsion_springs) the multiple of 2 pi (rad) each torsion spring's angle drops (a
-    #: broadcast view), or None without torsion springs
-    #: (:func:`linkpipe.forces.springs.torsion_offset`)
-    torsion_offset: np.ndarray | None = None
     #: what the force stage may keep between calls on this stage 1 without the Lagrange side
     #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
     force_cache: dict = field(default_factory=dict, compare=False, repr=False)
@@ -61,8 +57,7 @@ class Kinematics:
                       position=self.sweep.position, velocity=self.velocity,
                       acceleration=self.acceleration, status=self.der["status"],
                       influence=self.der["influence"],
-                      link_angular_acceleration=self.link_rates[1], link_angle=self.link_angle,
-                      torsion_offset=self.torsion_offset)
+                      link_angular_acceleration=self.link_rates[1], link_angle=self.link_angle)
 
     @functools.cached_property
     def finite(self) -> np.ndarray:
@@ -126,8 +121,6 @@ class Stage1:
         """Segments from the first step again (what is carried from one segment to the next)."""
         self.chain_carry: dict = {}
         self.angle_carry = kin.AngleCarry.start(len(self.model.link_a))
-        self.turns = (np.full(len(self.scene.torsion_springs), np.nan)
-                      if self.scene.torsion_springs else None)
 
     def use_newton(self) -> None:
         """The general path's positions of the whole sweep (auto left the dyads, or the scene
@@ -207,19 +200,11 @@ class Stage1:
         link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
                       else (None, None))
         self._add("jacobian", t0)  # the links' rates: derivatives too
-        offset = None
-        if self.turns is not None:
-            from .forces.springs import torsion_offset
-
-            unset = np.isnan(self.turns)
-            if unset.any():
-                self.turns = np.where(unset, torsion_offset(model, link_angle), self.turns)
-            offset = np.broadcast_to(self.turns, (hi - lo, len(self.turns)))
         drive = dataclasses.replace(self.drive, **{
             f.name: getattr(self.drive, f.name)[rows] for f in dataclasses.fields(self.drive)
             if isinstance(getattr(self.drive, f.name), np.ndarray)})
         return Kinematics(self.mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der,
-                          velocity, acceleration, link_rates, offset)
+                          velocity, acceleration, link_rates)
 
 
 def _scattered(model, sub: kin.Sweep, idx: np.ndarray, S: int) -> kin.Sweep:

@@ -397,7 +397,10 @@ def test_a_logged_first_value_out_of_reach_names_the_log_column(tmp_path):
     with pytest.raises(linkpipe.SceneError) as err:
         linkpipe.solve(linkpipe.load_scene(str(path)))
     msg = str(err.value)
-    assert '[drivers "cylinder"] log is still off' in msg, msg
+    assert (err.value.table, err.value.key) == ('drivers "cylinder"', "log"), msg
+    assert "the first driver value 3 length units is out of reach" in msg  # no [scene].units
+    said = float(msg.split("as far as ")[1].split(" ")[0])  # the rocker's reach: 1 + |C|
+    assert said == pytest.approx(1.0 + np.hypot(0.5, 0.8), abs=1e-5), msg
     assert 'the first value of log column "run.len_mm" (times scale = 0.001)' in msg
     assert "`from`" not in msg
 

@@ -150,6 +150,15 @@ def test_the_command_writes_the_fitted_scene_and_the_h5(tmp_path, capsys):
         before = f["measured_residual_before"][:, 0] / SIGMA
         assert f["cost"][0] == pytest.approx(float(before @ before), rel=1e-12)
         assert f["measured_residual_after"].attrs["rms"][0] < 1e-9
+        # one entry per iteration: the trust region never accepts a rise, the last entry is
+        # the objective at the fitted values, and the one-parameter fit's solves are its
+        # evaluations plus one finite difference per iteration (the start's Jacobian included)
+        cost = f["cost"][:]
+        assert (np.diff(cost) <= 0).all()
+        after = f["measured_residual_after"][:, 0] / SIGMA
+        assert cost[-1] == pytest.approx(float(after @ after), rel=1e-6, abs=1e-20)
+        iterations = len(cost) - 1
+        assert f.attrs["solves"] == f.attrs["evaluations"] + iterations + 1
         for name in ("measured_residual_before", "measured_residual_after"):  # a crank's torque
             assert f[name].attrs["units"] == f[name].attrs["measurement_units"] == "N*m"
         for name in ("initial", "fitted", "standard_error"):  # a spring rate
@@ -201,13 +210,12 @@ def torsion_text(free: float, fit_params='["springs.lift.k"]') -> str:
         f"free_angle = {free}\n"))
 
 
-def test_a_torsion_springs_free_angle_reuses_stage_1_with_its_own_turns(tmp_path):
-    """Stage 1 takes whole turns off a torsion spring's angle to bring it within half a turn of
-    its free angle: from the crank's 0 deg start, free angles of 150 and 170 deg take none and
-    190 deg a whole turn (the angle then reads 360 deg more). A reused stage 1 takes them again
-    for the trial's free angle, so a force run on the stage 1 of 150 deg gives, for 170 and
-    190 deg, the very arrays of the scene's own run (bit for bit); a fit of the free angle
-    solves stage 1 once and finds the true value from noise-free torques."""
+def test_a_torsion_springs_free_angle_reuses_stage_1(tmp_path):
+    """A torsion spring's angle is its links' difference whatever its free angle (150, 170 or
+    190 deg from the crank's 0 deg start: the same angle, no whole turn taken off past half a
+    turn), so a force run on the stage 1 of 150 deg gives, for 170 and 190 deg, the very arrays
+    of the scene's own run (bit for bit); a fit of the free angle solves stage 1 once and finds
+    the true value from noise-free torques."""
     from linkpipe.fit import Parameter
 
     assert Parameter("torsion_springs.h.free_angle", ("torsion_springs", 0, "free_angle"),
@@ -220,8 +228,9 @@ def test_a_torsion_springs_free_angle_reuses_stage_1_with_its_own_turns(tmp_path
         path.write_text(torsion_text(free))
         runs[free] = linkpipe.solve(load_scene(str(path)))
     reused = runs[150.0].kinematics
-    assert runs[190.0].kinematics.torsion_offset[0, 0] == -2 * np.pi  # a whole turn, 150: none
-    assert runs[150.0].kinematics.torsion_offset[0, 0] == 0.0
+    for free in (170.0, 190.0):
+        np.testing.assert_array_equal(runs[free].forces["torsion_spring_angle"][1],
+                                      runs[150.0].forces["torsion_spring_angle"][1])
     for free in (170.0, 190.0):
         path.write_text(torsion_text(free))
         again = linkpipe.solve(load_scene(str(path)), kinematics=reused)
@@ -321,3 +330,29 @@ def test_check_checks_the_fit_as_fit_does_before_its_first_trial(tmp_path, capsy
         assert err.startswith(f"error: {bad}: {words}") and len(err.splitlines()) == 1, err
         assert main(["fit", str(bad), "--out", str(tmp_path / "out")]) == 2
         assert capsys.readouterr().err.strip() == err  # the very message fit gives
+
+
+def test_several_masses_on_one_link_are_numbered_not_picked_silently(tmp_path):
+    """Two [[masses]] on the crank: "masses.crank.mass" does not say which (a scene error
+    naming both addresses); "masses.crank.2.mass" is the second in the file's order, the one a
+    fit or study then varies (its value, not the first's)."""
+    import tomllib
+
+    from linkpipe.fit import locate
+
+    text = scene_text() + ('\n[[masses]]\nlink = "crank"\nmass = 2.0\ncenter = "A"\n'
+                           '\n[[masses]]\nlink = "crank"\nmass = 5.0\ncenter = "O"\n')
+    t = np.linspace(0.0, 2.0, 5)
+    write_log(tmp_path, np.zeros_like(t), t, 45.0 * t)
+    scene = linkpipe.parse_scene(text, str(tmp_path / "two.toml"))
+    data = tomllib.loads(text)
+    with pytest.raises(linkpipe.SceneError) as err:
+        locate(scene, data, "masses.crank.mass")
+    assert (err.value.table, err.value.key) == ("fit", "parameters")
+    assert "2 [[masses]] entries" in err.value.message
+    assert '"masses.crank.1.mass"' in err.value.hint and '"masses.crank.2.mass"' in err.value.hint
+    path, value = locate(scene, data, "masses.crank.2.mass")
+    assert value == 5.0 and data["masses"][path[1]]["mass"] == 5.0
+    assert locate(scene, data, "masses.crank.1.mass")[1] == 2.0
+    with pytest.raises(linkpipe.SceneError, match=r"has 2 \[\[masses\]\] entries, not 3"):
+        locate(scene, data, "masses.crank.3.mass")

@@ -481,7 +481,7 @@ def test_per_step_constants_are_cut_into_the_same_chunks(tmp_path):
     motion = Motion(s=k.s, s_dot=k.s_dot, s_ddot=k.s_ddot, position=r.position,
                     velocity=k.velocity, acceleration=k.acceleration, status=k.der["status"],
                     influence=k.der["influence"], link_angular_acceleration=k.link_rates[1],
-                    link_angle=k.link_angle, torsion_offset=k.torsion_offset)
+                    link_angle=k.link_angle)
     units = dict(force="N", length="m", time="s", mass="kg")
     whole = compute_forces(r.model, motion, units, per_step)
     chunked = compute_forces(r.model, motion, units, per_step, chunk=7)

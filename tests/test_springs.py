@@ -4,7 +4,6 @@ potential energy, Lagrange multipliers, each body's balance, the HDF5 file read 
 recording, and the shipped tailgate (configs/hatch_gas_spring.toml)."""
 from __future__ import annotations
 
-import dataclasses
 import pathlib
 
 import h5py
@@ -281,11 +280,12 @@ def test_torsion_spring_between_two_moving_links_closed_form():
 
 @settings(max_examples=30, deadline=None)
 @given(k=st.floats(0.0, 100.0), start=st.floats(-720.0, 720.0), span=st.floats(1.0, 800.0), backwards=st.booleans(),
-       offset=st.floats(-179.0, 179.0))
-def test_torsion_spring_on_a_crank_against_ground_is_exact(k, start, span, backwards, offset):
-    """Crank against ground: the angle is the crank's (winding on past a full turn), the input
-    torque k (theta - free_angle) exactly, by virtual work and by the multipliers."""
-    free = start + offset  # the first step lies within half a turn of the free angle
+       free=st.floats(-1080.0, 1080.0))
+def test_torsion_spring_on_a_crank_against_ground_is_exact(k, start, span, backwards, free):
+    """Crank against ground: the angle is the crank's, the driver's value as written (winding
+    on past a full turn, whole turns included), the input torque k (theta - free_angle) exactly
+    for any free angle (no turns taken off: the contract's angle), by virtual work and by the
+    multipliers."""
     text = CRANK.format(start=start, stop=start - span if backwards else start + span, k=k,
                         free=free)
     r = linkpipe.solve(linkpipe.parse_scene(text, "crank.toml"))
@@ -325,14 +325,24 @@ free_angle = {free!r}
 """
 
 
-def test_torsion_spring_winds_over_turns_from_the_branch_nearest_its_free_angle():
-    """A crank drawn at 0 deg and turned from 300 deg through two turns against a spring free at
-    -90 deg: the first angle is taken as -60 deg (within half a turn of -90), then wound on."""
-    text = CRANK.format(start=300.0, stop=1020.0, k=3.0, free=-90.0)
+@pytest.mark.parametrize("start, stop, free, torque_deg", [
+    (300.0, 1020.0, -90.0, (1020.0 + 90.0)),  # two turns wound on from 300 deg
+    (0.0, 10.0, 200.0, 10.0 - 200.0),         # free past half a turn: not taken as -160
+    (0.0, 10.0, -720.0, 10.0 + 720.0),        # a spring wound two turns at the start
+    (360.0, 450.0, 0.0, 450.0),               # the driver's whole turn winds the spring
+])
+def test_torsion_spring_angle_is_the_links_difference_as_written(start, stop, free, torque_deg):
+    """The contract's angle: the first link's direction minus the second's (ground 0), with the
+    crank's link angle the driver's value as the scene writes it (no wrapping), and the torque
+    k (angle - free_angle) for the free angle as written: the torque at the last step."""
+    text = CRANK.format(start=start, stop=stop, k=3.0, free=free)
     r = linkpipe.solve(linkpipe.parse_scene(text, "crank.toml"))
     angle = np.rad2deg(r.forces["torsion_spring_angle"][1][:, 0])
-    np.testing.assert_allclose(angle, r.driver_value[:, 0] - 360.0, atol=1e-11)
-    assert r.forces["torsion_spring_torque"][1][-1, 0] == pytest.approx(3.0 * np.deg2rad(750.0))
+    np.testing.assert_allclose(angle, r.driver_value[:, 0], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(r.link_angle[:, 0], np.deg2rad(r.driver_value[:, 0]), rtol=0,
+                               atol=1e-13)
+    assert r.forces["torsion_spring_torque"][1][-1, 0] == pytest.approx(
+        3.0 * np.deg2rad(torque_deg), rel=1e-13)
 
 
 # -- each body's balance ------------------------------------------------------------------------

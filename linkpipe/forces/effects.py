@@ -94,8 +94,8 @@ def springs(ctx: Context) -> Effect:
             "spring_force": (("step", "spring"), total, F)}
     if not ctx.model.scene.torsion_springs:
         return Effect(applied, variables=variables)
-    tors = TorsionSprings.of(ctx.model, ctx.motion.link_angle, ctx.motion.torsion_offset,
-                             ctx.constants.torsion_k, ctx.constants.torsion_free_angle)
+    tors = TorsionSprings.of(ctx.model, ctx.motion.link_angle, ctx.constants.torsion_k,
+                             ctx.constants.torsion_free_angle)
     couples = tors.couples(len(ctx.model.scene.links))
     dims = ("step", "torsion_spring")
     variables.update({"torsion_spring_angle": (dims, tors.angle, "rad"),

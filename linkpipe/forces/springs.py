@@ -126,18 +126,18 @@ class TorsionSprings:
     energy: np.ndarray
 
     @classmethod
-    def of(cls, model: Model, link_angle: np.ndarray, offset: np.ndarray,
-           k: np.ndarray | None = None, free_angle: np.ndarray | None = None) -> "TorsionSprings":
-        """The angle is first link minus second, continuous over the sweep (a full turn winds
-        the spring): the links' angles ``link_angle`` (S, n_links), unwrapped along the whole
-        sweep by stage 1, less ``offset`` (S, n_torsion_springs), the whole turns
-        :func:`torsion_offset` takes off at the sweep's first solved step (so that the force
-        stage, run in chunks of steps, sees one continuous angle); ``k`` the rates and
-        ``free_angle`` the free angles (degrees), (n_torsion_springs,) or per step
-        (S, n_torsion_springs) (default: the scene's)."""
+    def of(cls, model: Model, link_angle: np.ndarray, k: np.ndarray | None = None,
+           free_angle: np.ndarray | None = None) -> "TorsionSprings":
+        """The angle is the first link's angle minus the second's (ground: 0), as the
+        contract defines it: the links' ``link_angle`` (S, n_links), unwrapped along the whole
+        sweep by stage 1 (a full turn winds the spring; a link an angle driver turns carries
+        the driver's whole turns), no turns taken off, so ``free_angle`` is read as written
+        (-720 is a spring wound two turns); ``k`` the rates and ``free_angle`` the free angles
+        (degrees), (n_torsion_springs,) or per step (S, n_torsion_springs) (default: the
+        scene's)."""
         tsprings = model.scene.torsion_springs
         first, second = torsion_links(model)
-        angle = torsion_raw_angle(model, link_angle) - offset
+        angle = torsion_raw_angle(model, link_angle)
         free = np.deg2rad([t.free_angle for t in tsprings] if free_angle is None else free_angle)
         if k is None:
             k = np.array([t.k for t in tsprings], dtype=float)
@@ -170,20 +170,6 @@ def torsion_raw_angle(model: Model, link_angle: np.ndarray) -> np.ndarray:
     first, second = torsion_links(model)
     ground = np.zeros(link_angle.shape[:-1] + (1,))
     return link_angle[..., first] - np.concatenate([link_angle, ground], axis=-1)[..., second]
-
-
-def torsion_offset(model: Model, link_angle: np.ndarray, free_angle=None) -> np.ndarray:
-    """The multiple of 2 pi (radians, (..., n_torsion_springs)) taken off each torsion
-    spring's angle: at the first step where it is finite, the angle is brought within half a
-    turn of the free angle (NaN where no step is finite: the next segment of a sweep in
-    segments decides). ``free_angle``: degrees, broadcast to (..., n_torsion_springs)
-    (default: the scene's; a study's variants: one row each)."""
-    raw = torsion_raw_angle(model, link_angle)
-    free = np.deg2rad([t.free_angle for t in model.scene.torsion_springs]
-                      if free_angle is None else free_angle)
-    fin = np.isfinite(raw)
-    first = np.take_along_axis(raw, np.argmax(fin, axis=-2)[..., None, :], axis=-2)[..., 0, :]
-    return np.where(fin.any(axis=-2), 2 * np.pi * np.round((first - free) / (2 * np.pi)), np.nan)
 
 
 def couples_on_bodies(model: Model, couples, X) -> dict:

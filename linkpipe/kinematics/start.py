@@ -79,8 +79,21 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
                          f"assembles to {worst:.3g} and no closer",
                          "use tol >= 1e-15 (a solved step's residual is rounded to about 1e-16 "
                          "of the size)")
-    table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
     length = dict(model.scene.units).get("length", "length units")
+    reach = reach_from_drawing(model, s0, tol_abs, max_iter) if model.n_drivers == 1 else None
+    if reach is not None:  # one driver, whose first value the drawing's assembly cannot reach
+        drawn, last = reach
+        driver = model.scene.drivers[0]
+        scale = np.pi / 180.0 if driver.kind == "angle" else 1.0
+        unit = "deg" if driver.kind == "angle" else length
+        first, drawn, last = (float(v) / scale for v in (s0[0], drawn[0], last[0]))
+        raise SceneError(path, f'drivers "{driver.name}"', "log" if driver.timed == "log" else "from",
+                         f"the first driver value {first:.6g} {unit} is out of reach: from the "
+                         f"drawing's {drawn:.6g} {unit} towards it the mechanism assembles as "
+                         f"far as {last:.6g} {unit} and no further",
+                         "start the sweep within reach (" + _first_values(model.scene.drivers)
+                         + "), or check the link lengths and `local` coordinates")
+    table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
     where = f"[{table}]" + (f" {key}" if key else "")
     raise SceneError(path, "points", None,
                      f"the start configuration cannot be assembled at the first driver value: "
@@ -89,6 +102,42 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
                      "check the link lengths, the `local` coordinates and "
                      + _first_values(model.scene.drivers)
                      + "; the points' x, y must be close to an assembled position")
+
+
+def reach_from_drawing(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
+    """``(drawn (nd,), last (nd,))``: the drivers' values at the drawing and the last ones
+    assembled on the straight way from them to ``s0`` (angles the shorter way round), in steps
+    of at most a quarter of a carry step (at most 4,000), the last step's limit bisected to
+    2^-40 of a step; None where the drawing does not
+    assemble at its own values or the whole way assembles (the limit is then not the reach)."""
+    from .continuation import solve_positions  # the continuation starts here: a cycle
+
+    X = assembled_drawing(model)
+    if X is None:
+        return None
+    delta, n_needed = carry_steps(model, model.start_position[None], s0, model.size)
+    delta, n_needed = delta[0], float(n_needed[0])
+    if not np.isfinite(n_needed) or n_needed == 0:
+        return None
+    n = int(min(4000, max(8, 4 * np.ceil(n_needed))))
+    path = (s0 - delta) + np.linspace(0.0, 1.0, n + 1)[:, None] * delta
+    q, residual, _, _ = solve_positions(model, path, tol=model.scene.solver.tol,
+                                        max_iter=max(max_iter, 50), predictor="first",
+                                        jacobian="analytic", q_start=model.q_of(X[None])[0],
+                                        stop_on_failure=True)
+    ok = np.isfinite(q).all(axis=1) & (residual <= tol_abs)
+    if ok.all() or not ok[0]:
+        return None
+    k = int(np.argmin(ok)) - 1
+    good, bad, q_good = path[k], path[k + 1], q[k]
+    for _ in range(40):  # the limit between the last step that assembles and the first that
+        mid = 0.5 * (good + bad)  # does not, by bisection (Newton from the last that does)
+        qm, _, _, conv = newton(model, q_good[None], mid[None], tol_abs, max(max_iter, 50))
+        if conv[0] and np.isfinite(qm).all():
+            good, q_good = mid, qm[0]
+        else:
+            bad = mid
+    return path[0], good
 
 
 def _first_values(drivers) -> str:

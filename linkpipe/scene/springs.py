@@ -21,6 +21,7 @@ class SpringTables:
                                   f"{len(between)}", f"write e.g. {table.example('between')}")
             for name in between:
                 self.point(table, "between", name)
+            self._spring_spans_two_bodies(table, between)
             kind = table.string("kind", SPRING_KINDS[0])
             if kind not in SPRING_KINDS:
                 raise table.error("kind", f"unknown spring kind {_show(kind)}",
@@ -32,6 +33,23 @@ class SpringTables:
             law = _gas_law(table) if kind == "gas" else _elastic_law(table, kind)
             springs.append(Spring(table.data["name"], between, damping=damping, kind=kind, **law))
         return tuple(springs)
+
+    def _spring_spans_two_bodies(self, table: _Table, between: list) -> None:
+        """A spring's ends must be on different bodies (or one on ground): between two ground
+        points, or two points of one link, its length never changes and it does no work (a
+        mistyped point name, most likely)."""
+        a, b = between
+        fix = "name the point on the other body (or ground) it pulls or pushes"
+        if a == b:
+            raise table.error("between", f'both ends are point "{a}"', fix)
+        if self.points[a].fixed and self.points[b].fixed:
+            raise table.error("between", f'"{a}" and "{b}" are both fixed (ground): the '
+                              "spring's length never changes, so it does no work", fix)
+        for link in self.links.values():
+            if a in link.points and b in link.points:
+                raise table.error("between", f'"{a}" and "{b}" are both points of link '
+                                  f'"{link.name}": the spring\'s length never changes, so it does '
+                                  "no work", fix)
 
     def torsion_spring_tables(self) -> tuple[TorsionSpring, ...]:
         out = []

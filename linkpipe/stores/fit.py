@@ -4,7 +4,7 @@ The TOML is the scene's own text edited with tomlkit (comments and layout kept),
 values put in place and the ``[[logs]]`` file paths rewritten so that the file works from the
 output folder. The HDF5 (netCDF-4 layout like ``<name>.h5``) holds ``initial``, ``fitted``,
 ``standard_error`` and ``identifiable`` on dimension ``parameter`` (the addresses), ``cost`` on
-``iteration`` (one per evaluation of the objective), and the measurements' residuals before and
+``iteration`` (the objective at the start values, then at each iteration's point), and the measurements' residuals before and
 after (``measured_residual_before``, ``measured_residual_after``: step, measurement).
 """
 from __future__ import annotations
@@ -54,12 +54,14 @@ def write_h5(fit, path: str | os.PathLike) -> None:
                  {**p_per, "long_name": "one standard error; NaN where the data cannot identify it"}),
         Variable("identifiable", ("parameter",), fit.identifiable.astype(np.int8), "1"),
         Variable("cost", ("iteration",), np.asarray(fit.cost, float), "1",
-                 {"long_name": "sum(((computed - measured) / sigma)^2) per evaluation: the objective"}),
+                 {"long_name": "sum(((computed - measured) / sigma)^2), the objective: at the start "
+                  "values (iteration 0), then at each iteration's point"}),
         Variable("measured_residual_before", ("step", "measurement"), before["residual"], units,
                  {**per, "rms": before["rms"], "max_abs": before["max_abs"]}),
         Variable("measured_residual_after", ("step", "measurement"), after["residual"], units,
                  {**per, "rms": after["rms"], "max_abs": after["max_abs"]}),
     ]
     attrs = {"scene_name": fit.scene.name, "optimizer_message": str(fit.message),
-             "evaluations": int(fit.n_evaluations), "stage1_solves": int(fit.stage1_solves)}
+             "evaluations": int(fit.n_evaluations), "solves": int(fit.solves),
+             "stage1_solves": int(fit.stage1_solves)}
     hdf5.write_layout(path, attrs, coords, variables)

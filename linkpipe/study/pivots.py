@@ -37,7 +37,6 @@ from .. import kinematics as kin
 from ..forces import compute_forces
 from ..forces.applied import center_frame
 from ..forces.constants import ForceConstants
-from ..forces.springs import torsion_offset
 from ..kinematics.decompose import bodies_of, chain_at
 from ..model.build import build_model
 from ..model.rows import variant_rows
@@ -157,18 +156,12 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
                                          k.s, k.s_dot, k.s_ddot, order, stages.forces, rows)
     usable &= alike
     der = a["der"]
-    turns = None
-    if scene.torsion_springs:  # each variant's own turns, at its own first solved step
-        free = per_row["torsion_free_angle"][::S]  # (V, n_torsion_springs)
-        turns = np.repeat(torsion_offset(model, a["link_angle"].reshape(V, S, -1), free), S,
-                          axis=0)
     forces = None
     if stages.forces:
         motion = Motion(s=a["s"], s_dot=a["s_dot"], s_ddot=a["s_ddot"], position=a["position"],
                         velocity=a["velocity"], acceleration=a["acceleration"],
                         status=der["status"], influence=der["influence"],
-                        link_angular_acceleration=a["link_rates"][1], link_angle=a["link_angle"],
-                        torsion_offset=turns)
+                        link_angular_acceleration=a["link_rates"][1], link_angle=a["link_angle"])
         forces = compute_forces(model, motion, units_of(scene),
                                 ForceConstants(**per_row, pivots=True, model_rows=a["rows"]))
     stored = [a["position"], a["link_angle"], a["velocity"], a["acceleration"], *a["link_rates"]]
@@ -179,7 +172,7 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     sweep = kin.Sweep(a["position"], a["residual"], np.zeros(V * S, dtype=np.int32), a["status"],
                       "dyads", k.sweep.note, a["velocity"], a["acceleration"])
     rows = Kinematics(k.mobility, drive, a["s"], a["s_dot"], a["s_ddot"], sweep, a["link_angle"],
-                      der, a["velocity"], a["acceleration"], a["link_rates"], turns)
+                      der, a["velocity"], a["acceleration"], a["link_rates"])
     result = result_of(scene, model, rows, forces, status, {})
     out = {v.name: v.data.reshape((V, S) + v.data.shape[1:]) for v in result.variables()
            if v.dims[:1] == ("step",)}

@@ -32,7 +32,6 @@ from ..errors import SceneError
 from ..fit import scene_with
 from ..forces import compute_forces
 from ..forces.constants import ForceConstants
-from ..forces.springs import torsion_offset
 from ..model.build import mechanism_size
 from ..pipeline import solve, status_of
 from ..result import Motion
@@ -200,18 +199,13 @@ def _variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
         return None if a is None else np.tile(a, (V,) + (1,) * (a.ndim - 1))
 
     per_row = per_row_constants(study, model, slots, study.values[lo:hi], S)
-    turns = rows(k.torsion_offset)
-    if any(s[0] == "torsion_free_angle" for s in slots):  # each variant's own whole turns
-        free = per_row["torsion_free_angle"][::S]  # (V, n_torsion_springs)
-        turns = np.repeat(torsion_offset(model, k.link_angle[None], free), S, axis=0)
     X = rows(k.sweep.position)
     for field, p, axis in (s for s in slots if s[0] == "point"):
         X[:, p, axis] = per_row["start_position"][:, p, axis]
     motion = Motion(s=rows(k.s), s_dot=rows(k.s_dot), s_ddot=rows(k.s_ddot), position=X,
                     velocity=rows(k.velocity), acceleration=rows(k.acceleration),
                     status=rows(k.der["status"]), influence=rows(k.der["influence"]),
-                    link_angular_acceleration=rows(k.link_rates[1]), link_angle=rows(k.link_angle),
-                    torsion_offset=turns)
+                    link_angular_acceleration=rows(k.link_rates[1]), link_angle=rows(k.link_angle))
     forces = compute_forces(model, motion, units_of(study.scene), ForceConstants(**per_row))
     status = status_of(model, motion.status, rows(k.sweep.residual),
                        [X, rows(k.link_angle), motion.velocity, motion.acceleration,

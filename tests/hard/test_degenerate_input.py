@@ -136,3 +136,40 @@ def test_start_from_a_sloppy_guess_far_from_the_sweep_start(method):
     assert (r.status == OK).all()
     cf = fourbar(1.0, 3.5, 3.0, 4.0, np.deg2rad(r.driver_value[:, 0]), W, 0.0, branch=+1)
     np.testing.assert_allclose(point(r, "B"), cf["B"], rtol=0, atol=1e-10 * 4.0)
+
+
+CYLINDER_ARM = """
+[scene]
+name = "arm"
+units = {{ length = "m", mass = "kg", time = "s", force = "N" }}
+[points]
+O  = {{ x = 0.0, y = 0.0, fixed = true }}
+C0 = {{ x = 0.5, y = -0.8, fixed = true }}
+C  = {{ x = 1.0, y = 0.0 }}
+[[links]]
+name = "arm"
+points = ["O", "C"]
+[[drivers]]
+name = "cyl"
+distance = ["C0", "C"]
+from = {first!r}
+to = 1.0
+steps = 5
+"""
+
+
+@pytest.mark.parametrize("first", [0.01, 3.0])
+def test_a_first_value_out_of_reach_names_the_driver_and_the_reach(first):
+    """An arm of radius 1 about O, a cylinder from C0 (|C0| = sqrt(0.89)) to its end: the
+    cylinder's length lies between 1 - |C0| and 1 + |C0| (the arm along the line through O and
+    C0). A first value beyond that is the driver's `from`, and the message says how far the
+    mechanism goes from the drawing towards it (the limit bisected: to 1e-6 m, the solver's
+    tolerance near a fold, where the length's first order in the arm's angle vanishes)."""
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.solve(linkpipe.parse_scene(CYLINDER_ARM.format(first=first), "arm.toml"))
+    e = err.value
+    assert (e.path, e.table, e.key) == ("arm.toml", 'drivers "cyl"', "from")
+    limit = 1.0 - np.sqrt(0.89) if first < 1 else 1.0 + np.sqrt(0.89)
+    said = float(e.message.split("as far as ")[1].split(" m")[0])
+    assert said == pytest.approx(limit, abs=1e-5)  # printed to 6 significant digits
+    assert "out of reach" in e.message and "start the sweep within reach" in e.hint
