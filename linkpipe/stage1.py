@@ -273,16 +273,18 @@ def _residuals(model, X, s, s_dot, s_ddot, V, A) -> dict:
 
 
 def time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]:
-    """Return (seconds per step, note): the time when every driver has a rate and no
-    acceleration, ``|value - from| / |rate|``, and all drivers agree on it (to 1e-9 of the
-    sweep's duration); else None, with a note saying why when the rates alone would give one."""
+    """Return (seconds per step, note): the time when every driver that moves has a rate and
+    no acceleration, ``|value - from| / |rate|``, and all of them agree on it (to 1e-9 of the
+    sweep's duration); else None, with a note saying why when the rates alone would give one.
+    A driver held (from = to while another moves) gives no time: it is left out."""
     if scene.time is not None:
         return np.asarray(scene.time.instants, dtype=float), ""
-    rates = np.array([d.rate for d in scene.drivers], dtype=float)
-    accs = np.array([d.acceleration for d in scene.drivers], dtype=float)
+    moving = [(j, d) for j, d in enumerate(scene.drivers) if d.from_value != d.to_value]
+    rates = np.array([d.rate for _, d in moving], dtype=float)
+    accs = np.array([d.acceleration for _, d in moving], dtype=float)
     if not len(rates) or np.any(rates == 0) or np.any(accs != 0):
         return None, ""
-    times = [np.abs(value[:, j] - d.from_value) / abs(d.rate) for j, d in enumerate(scene.drivers)]
+    times = [np.abs(value[:, j] - d.from_value) / abs(d.rate) for j, d in moving]
     t = times[0]
     if not all(np.isfinite(tj).all() for tj in times):
         return None, ("no time axis: a rate this small gives times beyond the floating-point "
@@ -290,7 +292,7 @@ def time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]:
     span = float(max(tj.max() for tj in times)) if value.shape[0] else 0.0
     for tj in times[1:]:
         if not np.allclose(tj, t, rtol=0, atol=1e-9 * max(span, 1e-300)):
-            ends = ", ".join(f"{d.name} {tj[-1]:.6g} s" for d, tj in zip(scene.drivers, times))
+            ends = ", ".join(f"{d.name} {tj[-1]:.6g} s" for (_, d), tj in zip(moving, times))
             return None, (f"no time axis: the drivers' rates give different times for the same "
                           f"steps (at the last step: {ends}); make each driver's "
                           f"(to - from) / rate the same")

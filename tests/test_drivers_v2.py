@@ -504,3 +504,33 @@ force = [1.0, -2.0]
     assert (one.status == OK).all() and (big.status == OK).all()
     np.testing.assert_allclose(big.forces["input_force"][1], one.forces["input_force"][1],
                                rtol=1e-9)
+
+
+def test_a_driver_held_while_another_moves_is_a_sweep():
+    """The contract's step rule with from = to: the shoulder held at 0 deg (rate 0: statics)
+    while the elbow turns 120 -> 30 deg relative to the upper arm (A -> O) at 9 deg/s: forward
+    kinematics at every step, the time axis from the elbow alone (|value - from| / |rate|),
+    and the elbow motor's torque the payload's moment about A (statics by hand)."""
+    text = two_link_arm(rates=(0.0, -9.0)).text.replace(
+        "from = 0.0\nto = 90.0", "from = 0.0\nto = 0.0")
+    r = linkpipe.solve(parse_scene(text, "held.toml"))
+    assert r.n_ok == r.n_steps == 91
+    assert (r.driver_value[:, 0] == 0.0).all()
+    elbow = np.deg2rad(r.driver_value[:, 1])  # from A->O (pointing at 180 deg) to A->B
+    fore = np.hypot(0.5, 0.8)  # |AB| as drawn
+    B = np.stack([1.0 + fore * np.cos(np.pi + elbow), fore * np.sin(np.pi + elbow)], axis=1)
+    np.testing.assert_allclose(r.position[:, r.point_names.index("B")], B, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(r.time, (120.0 - r.driver_value[:, 1]) / 9.0, rtol=0,
+                               atol=1e-12)
+    moment = (B[:, 0] - 1.0) * -50.0  # the payload (0, -50) N at B about A
+    np.testing.assert_allclose(r.forces["input_force"][1][:, 1], -moment, rtol=0, atol=1e-9)
+
+
+def test_every_driver_held_over_several_steps_is_no_motion():
+    """All drivers held over 91 steps: no sweep at all, a scene error at the first's steps."""
+    text = two_link_arm().text.replace("from = 0.0\nto = 90.0", "from = 0.0\nto = 0.0").replace(
+        "from = 120.0\nto = 30.0", "from = 120.0\nto = 120.0")
+    with pytest.raises(linkpipe.SceneError) as err:
+        parse_scene(text, "held.toml")
+    assert (err.value.table, err.value.key) == ('drivers "shoulder"', "steps")
+    assert "every other driver is held too" in err.value.message

@@ -6,7 +6,6 @@ for a parameter the measured quantity is affine in (a spring rate: the input tor
 a(t) k + b(t)) the standard error is exactly sigma / sqrt(sum a^2).
 """
 import math
-import pathlib
 
 import h5py
 import numpy as np

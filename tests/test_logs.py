@@ -250,6 +250,45 @@ def test_a_parquet_time_column_of_dates_is_seconds_from_its_first_row(tmp_path, 
     assert (by_dates.status == OK).all()
 
 
+@pytest.mark.parametrize("stamp", ["date", "date_offset", "duration"])
+def test_a_csv_time_column_of_dates_is_seconds_from_its_first_row(tmp_path, stamp):
+    """A rig's CSV whose time column holds ISO 8601 dates ("2026-03-01 08:00:00.123456789",
+    or with a UTC offset that changes mid-log) or "hh:mm:ss.f" durations drives the sweep as
+    the same log in seconds: seconds from the first row (to the nanoseconds written)."""
+    t = stamps()
+    by_seconds = linkpipe.solve(str(write_scene(tmp_path, encoder_frame(t), file="enc_s.csv")))
+    delta = pd.to_timedelta(np.round(t * 1e9).astype(np.int64), unit="ns")
+    frame = encoder_frame(t)
+    if stamp == "duration":  # 00:00:01.234567890
+        frame["t"] = [f"{int(d.total_seconds()) // 3600:02d}:{int(d.total_seconds()) // 60 % 60:02d}:"
+                      f"{d.total_seconds() % 60:012.9f}" for d in delta]
+    else:
+        when = pd.Timestamp("2026-03-01 08:00:00", tz="UTC") + delta
+        if stamp == "date":
+            frame["t"] = [w.strftime("%Y-%m-%d %H:%M:%S.") + f"{w.microsecond * 1000 + w.nanosecond:09d}"
+                          for w in when]
+        else:  # the second half of the log written in +02:00, the same instants
+            frame["t"] = [(w if i < len(when) // 2 else w.tz_convert("+02:00")).isoformat()
+                          for i, w in enumerate(when)]
+    by_stamps = linkpipe.solve(str(write_scene(tmp_path, frame, file="enc_d.csv")))
+    np.testing.assert_allclose(by_stamps.time, by_seconds.time, rtol=0, atol=2e-9)
+    np.testing.assert_allclose(by_stamps.position, by_seconds.position, rtol=0, atol=1e-8)
+    assert (by_stamps.status == OK).all()
+
+
+def test_a_csv_date_column_with_a_stamp_that_is_not_a_date_names_its_row(tmp_path):
+    """Dates in every row but one: that row and the first row's form, not "not a number"."""
+    t = stamps(5)
+    frame = encoder_frame(t)
+    frame["t"] = [f"2026-03-01 08:00:0{i}" for i in range(5)]
+    frame.loc[3, "t"] = "08:00:03"
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.solve(str(write_scene(tmp_path, frame)))
+    assert (err.value.table, err.value.key) == ('logs "enc"', "time")
+    assert 'row 4 (line 5 of the file), column "t": "08:00:03" is not a date' in err.value.message
+    assert "ISO 8601" in err.value.hint
+
+
 def test_a_ragged_csv_row_is_named_in_one_line(tmp_path, capsys):
     """A data row with one field more than the header (line 6 of the file): one line naming
     the line and both counts, not the CSV parser's own two-line text."""

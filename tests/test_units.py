@@ -85,7 +85,7 @@ def test_a_unit_that_does_not_fit_is_one_message_exit_2_nothing_written(tmp_path
 def test_the_words_users_write_for_rate_point_to_rate(word):
     with pytest.raises(linkpipe.SceneError) as err:
         parse_scene(CRANK.replace("rate = ", f"{word} = ", 1), "crank.toml")
-    assert f'did you mean "rate"?' in str(err.value)
+    assert 'did you mean "rate"?' in str(err.value)
 
 
 def test_gravity_in_the_wrong_unit_is_a_warning_in_the_summary_and_the_h5(tmp_path, capsys):

@@ -118,14 +118,51 @@ def _seconds_from_first(raw) -> np.ndarray:
     return np.where(finite, seconds, np.nan).astype(float)
 
 
+def _stamps(raw, column: str, path: Path, table: _Table):
+    """A text time column as dates (ISO 8601, "2024-05-01 10:00:00.250", offsets taken to UTC)
+    or durations ("00:01:02.5") where its first value is one, else as it is (numbers, whose
+    own check names a bad row). A column that starts with dates has dates in every row: the
+    first that is not one is a SceneError naming its row."""
+    import pandas as pd
+
+    text = raw.astype("string").str.strip()
+    filled = text[~(raw.isna() | (text == ""))]
+    if not len(filled) or not pd.isna(pd.to_numeric(filled.iloc[:1], errors="coerce")).all():
+        return raw  # numbers (or nothing): numeric_column reads them
+    for kind, parse in (("date", lambda v: pd.to_datetime(v, format="ISO8601", utc=True,
+                                                          errors="coerce")),
+                        ("duration", lambda v: pd.to_timedelta(v, errors="coerce"))):
+        try:
+            first = parse(filled.iloc[:1])
+        except (ValueError, TypeError):
+            continue
+        if pd.isna(first).all():
+            continue
+        values = parse(text.where(text != ""))
+        bad = np.flatnonzero(pd.isna(values).to_numpy() & ~(raw.isna() | (text == "")).to_numpy())
+        if len(bad):
+            i = int(bad[0])
+            raise table.error("time", f'"{path}" {row_label(path, i)}, column "{column}": '
+                              f"{_show(str(raw.iloc[i]))} is not a {kind} like the first row's "
+                              f"{_show(str(filled.iloc[0]))}",
+                              f"write every time stamp as a {kind} (ISO 8601, e.g. "
+                              + ('"2024-05-01 10:00:00.250"' if kind == "date" else '"00:01:02.5"')
+                              + "), or all of them as seconds")
+        return pd.Series(values, index=raw.index)
+    return raw
+
+
 def time_column(frame, column: str, path: Path, table: _Table) -> np.ndarray:
     """The time column: numbers, finite and strictly increasing (a SceneError names the file
-    and the first bad row otherwise). Dates or durations (a Parquet timestamp column) are
-    seconds from the first row."""
+    and the first bad row otherwise). Dates or durations (a Parquet timestamp column, or a
+    CSV's ISO 8601 dates or "hh:mm:ss.f" durations) are seconds from the first row."""
     if column not in frame.columns:
         raise table.error("time", f'"{path}" has no column "{column}"',
                           nearest_columns(column, frame.columns))
-    t = (_seconds_from_first(frame[column]) if frame[column].dtype.kind in "mM"
+    raw = frame[column]
+    if raw.dtype.kind not in "mMfiu":  # text: numbers, or a CSV's dates or durations
+        raw = _stamps(raw, column, path, table)
+    t = (_seconds_from_first(raw) if raw.dtype.kind in "mM"
          else numeric_column(frame, column, path, table, "time"))
     if len(t) < 2:
         raise table.error("time", f'"{path}" has {len(t)} row(s): a log needs at least two '

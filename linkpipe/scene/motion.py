@@ -40,6 +40,14 @@ class MotionTables:
                                   f'gives {driver.steps} steps but drivers "{first.name}" '
                                   f"gives {first.steps}",
                                   "all drivers advance together: make their step counts equal")
+        if self.time is None and first.steps > 1 and all(d.from_value == d.to_value
+                                                         for d in drivers):
+            # one driver held (from = to) while another moves is a sweep; all held is none
+            raise tables[0].error("steps", f"from = {first.from_value:g}, to = "
+                                  f"{first.to_value:g} with steps = {first.steps} gives no motion"
+                                  + ("" if len(drivers) == 1 else
+                                     ", and every other driver is held too"),
+                                  "use steps = 1 for a single position, or change from/to")
         return tuple(drivers)
 
     def driver(self, table: _Table) -> Driver:
@@ -202,14 +210,16 @@ class MotionTables:
                 raise table.error("steps", f"steps = 1 with {span}: one step is a single "
                                   f"{single}, at from, and never reaches to",
                                   f"use steps >= 2 to sweep, or to = from for a single {single}")
-            if steps > 1 and start == stop:
+            if steps > 1 and start == stop and single != "position":  # [time]: none passes
                 raise table.error("steps", f"{span} with steps = {steps} gives no motion",
                                   f"use steps = 1 for a single {single}, or change from/to")
-            return steps, None
+            return steps, None  # a driver's from = to over steps > 1: held (driver_tables:
+                                # while another moves)
         step = table.number("step")
         if start == stop:
             raise table.error("step", f"{span} gives no motion",
-                              f"use steps = 1 for a single {single}, or change from/to")
+                              f"use steps = 1 for a single {single}, or change from/to (a "
+                              "driver held while others move: steps = their count)")
         if step == 0 or (step > 0) != (stop > start):
             better = abs(step) if step else abs(stop - start) / 10
             raise table.error("step", f"step = {step:g} with {span} gives no steps",
