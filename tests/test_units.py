@@ -99,7 +99,42 @@ def test_gravity_in_the_wrong_unit_is_a_warning_in_the_summary_and_the_h5(tmp_pa
     assert "warning:" in out and "standard gravity in ft/s^2" in out and '"mm"' in out
     with h5py.File(tmp_path / "out" / "basketball_goal.h5") as f:
         warnings = [w.decode() if isinstance(w, bytes) else w for w in f.attrs["warnings"]]
-    assert len(warnings) == 1 and "9806.65" in warnings[0]
+    # and slug*mm/s^2 is not lbf: the second warning, the units' own consistency
+    assert len(warnings) == 2 and "9806.65" in warnings[0] and "slug*mm/s^2" in warnings[1]
+
+
+@pytest.mark.parametrize("units, ratio, fix", [
+    ({"length": "mm", "mass": "kg", "time": "s", "force": "N"}, 1e-3, 'force = "mN" or mass = "t"'),
+    ({"length": "m", "mass": "kg", "time": "s", "force": "kN"}, 1e-3, 'force = "N" or mass = "t"'),
+    # lb in/s^2 = 0.45359237 kg x 0.0254 m/s^2 = 0.0115212 N = 0.00259008 lbf; the snail
+    # (lbf s^2/in) is the mass that makes inch, second and lbf one system
+    ({"length": "in", "mass": "lb", "time": "s", "force": "lbf"},
+     0.45359237 * 0.0254 / 4.4482216152605, 'mass = "lbf*s^2/in"'),
+    ({"length": "mm", "mass": "t", "time": "s", "force": "N"}, None, ""),
+    ({"length": "ft", "mass": "slug", "time": "s", "force": "lbf"}, None, ""),
+    ({"length": "in", "mass": "lbf*s^2/in", "time": "s", "force": "lbf"}, None, ""),
+    ({"length": "m", "mass": "kg", "time": "s", "force": "newton"}, None, ""),  # unknown: silent
+])
+def test_units_that_are_not_one_system_are_a_warning(units, ratio, fix):
+    """force = mass x length / time^2 in the declared units, or a warning with the factor
+    (kg mm/s^2 = 0.001 N: m a in mN, labelled N) and a unit that makes it one system."""
+    from linkpipe.scene.units import consistency_warning
+
+    note = consistency_warning(units)
+    if ratio is None:
+        assert note == ""
+        return
+    assert f"is {ratio:.6g} {units['force']}, not 1" in note, note
+    assert (f"declare {fix} for one consistent system" in note) if fix else "declare" not in note
+
+
+def test_a_scene_with_masses_in_inconsistent_units_warns_at_load():
+    """The excavator in mm, kg, N with gravity in mm/s^2: the weights come out in mN."""
+    text = (CONFIGS / "excavator_arm.toml").read_text()
+    assert 'length = "m"' in text
+    scene = parse_scene(text.replace('length = "m"', 'length = "mm"').replace(
+        "-9.81", "-9806.65"), str(CONFIGS / "excavator_mm.toml"))
+    assert len(scene.warnings) == 1 and "kg*mm/s^2 is 0.001 N" in scene.warnings[0]
 
 
 def test_gravity_in_the_scenes_unit_gives_no_warning():

@@ -143,6 +143,10 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
             note = units.gravity_warning(gravity, self.units.get("length"))
             if note:
                 out.append(f"{self.path}: {note}")
+        if {"gravity", "inertia"} & set(effects):  # masses meet forces: one unit system
+            note = units.consistency_warning(self.units)
+            if note:
+                out.append(f"{self.path}: {note}")
         return tuple(out)
 
     def scene_table(self) -> dict:

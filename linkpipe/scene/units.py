@@ -1,4 +1,5 @@
-"""Driver rates written with a unit, and gravity checked against the scene's length unit.
+"""Driver rates written with a unit, gravity checked against the scene's length unit, and the
+scene's units checked for consistency (force = mass x length / time^2).
 
 linkpipe does no unit conversion of the scene as a whole (``[scene].units`` is metadata); a
 driver's ``rate`` and ``acceleration`` alone may carry a unit, because a speed is so often
@@ -62,6 +63,39 @@ def convert(text: str, kind: str, order: int, length_unit: str | None) -> float:
 
 def _quote(unit) -> str:
     return "not given" if unit is None else f'"{unit}"'
+
+
+#: masses in kilograms, times in seconds and forces in newtons, for the consistency check
+MASS_KG = {"kg": 1.0, "g": 1e-3, "t": 1e3, "tonne": 1e3, "Mg": 1e3, "lb": 0.45359237,
+           "lbm": 0.45359237, "slug": 14.593902937206364, "lbf*s^2/in": 175.12683524647636}
+TIME_S = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
+FORCE_N = {"N": 1.0, "mN": 1e-3, "kN": 1e3, "MN": 1e6, "lbf": 4.4482216152605,
+           "kgf": 9.80665, "kip": 4448.2216152605}
+
+
+def consistency_warning(units: dict) -> str:
+    """A warning when the scene's declared mass, length, time and force units (all known to
+    the tables above) are not one consistent system: linkpipe computes m a and weights in the
+    scene's own numbers, so their forces come out in mass x length / time^2 whatever
+    ``force`` says (kg, mm, s and "N": m a in mN, labelled N). "" when consistent or unknown."""
+    try:
+        mass, length = MASS_KG[units["mass"]], LENGTH_M[units["length"]]
+        time, force = TIME_S[units.get("time", "s")], FORCE_N[units["force"]]
+    except KeyError:
+        return ""
+    implied = mass * length / time ** 2  # newtons per unit of m a in these units
+    if abs(implied / force - 1) <= 1e-3:
+        return ""
+    u = {k: units.get(k, "s") for k in ("mass", "length", "time", "force")}
+    combo = f"{u['mass']}*{u['length']}/{u['time']}^2"
+    fits = [name for name, n in FORCE_N.items() if abs(implied / n - 1) <= 1e-3]
+    masses = [name for name, kg in MASS_KG.items()
+              if abs(kg * length / time ** 2 / force - 1) <= 1e-3]
+    fix = " or ".join([f'force = "{f}"' for f in fits[:1]] + [f'mass = "{m}"' for m in masses[:1]])
+    return (f"[scene].units: {combo} is {implied / force:.6g} {u['force']}, not 1 "
+            f"{u['force']}: masses times accelerations (inertia, weights) come out in {combo} "
+            f"while springs and loads are in the numbers as written, labelled {u['force']}"
+            + (f"; declare {fix} for one consistent system" if fix else ""))
 
 
 def gravity_warning(g: tuple[float, float], length_unit: str | None) -> str:
