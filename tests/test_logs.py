@@ -289,6 +289,70 @@ def test_a_csv_date_column_with_a_stamp_that_is_not_a_date_names_its_row(tmp_pat
     assert "ISO 8601" in err.value.hint
 
 
+def rig_csv(path: pathlib.Path, t_ms: np.ndarray, deg: np.ndarray, units_row: bool = True):
+    """A rig's CSV: time in milliseconds and, under the header, a row of units."""
+    rows = ["t,crank_deg,other"] + (["ms,deg,-"] if units_row else [])
+    rows += [f"{a!r},{b!r},1" for a, b in zip(t_ms.tolist(), deg.tolist())]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_a_time_column_in_milliseconds_under_a_units_row(tmp_path):
+    """time_scale = 0.001 and skip_rows = 1 read a rig's log (ms, a units row) as the same
+    log written in seconds without one: the same instants and positions, bit for bit."""
+    t = stamps()
+    by_seconds = linkpipe.solve(str(write_scene(tmp_path, encoder_frame(t), file="enc_s.csv")))
+    rig_csv(tmp_path / "rig.csv", t * 1000.0, angle(t))
+    path = tmp_path / "rig.toml"
+    path.write_text(scene_text(file="rig.csv").replace(
+        'time = "t"', 'time = "t"\ntime_scale = 0.001\nskip_rows = 1'))
+    by_ms = linkpipe.solve(str(path))
+    # t * 1000 * 0.001 is t to a rounding or two: 1e-15 s
+    np.testing.assert_allclose(by_ms.time, by_seconds.time, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(by_ms.position, by_seconds.position, rtol=0, atol=1e-12)
+    assert (by_ms.status == OK).all()
+
+
+@pytest.mark.parametrize("units_row, extra, key, words", [
+    (True, "", "time", ['row 1 (line 2 of the file), column "t": "ms" is not a number',
+                        "skip_rows = 1"]),
+    (True, "skip_rows = 1\ntime_scale = -1.0", "time_scale", ["must be positive"]),
+    (False, "skip_rows = 2", "time", ["row 3 (line 6 of the file)", "does not increase"]),
+])
+def test_rig_log_mistakes_name_the_line_and_the_key(tmp_path, units_row, extra, key, words):
+    """A units row without skip_rows points to it; lines are the file's own, skipped rows
+    counted (line 6: header, 2 skipped, rows 1..3)."""
+    t = np.arange(8) * 0.01
+    ms = t * 1000.0
+    if not units_row:  # skip_rows = 2 drops the first two samples: row 3 repeats a time
+        ms[4] = ms[3]
+    rig_csv(tmp_path / "rig.csv", ms, angle(t), units_row)
+    path = tmp_path / "rig.toml"
+    path.write_text(scene_text(file="rig.csv").replace('time = "t"', f'time = "t"\n{extra}'))
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.load_scene(str(path))
+    assert (err.value.table, err.value.key) == ('logs "enc"', key), str(err.value)
+    for w in words:
+        assert w in str(err.value), str(err.value)
+
+
+def test_skip_rows_is_for_csv_and_time_scale_for_numbers(tmp_path):
+    """A Parquet log has no rows under its header to skip; a column of dates is seconds
+    already: each a scene error naming its key."""
+    write_log(tmp_path / "enc.parquet", encoder_frame())
+    path = tmp_path / "p.toml"
+    path.write_text(scene_text(file="enc.parquet").replace('time = "t"', 'time = "t"\nskip_rows = 1'))
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.load_scene(str(path))
+    assert err.value.key == "skip_rows" and "Parquet" in err.value.message
+    frame = encoder_frame(np.arange(5) * 0.5)
+    frame["t"] = [f"2026-03-01 08:00:0{i}" for i in range(5)]
+    write_log(tmp_path / "d.csv", frame)
+    path.write_text(scene_text(file="d.csv").replace('time = "t"', 'time = "t"\ntime_scale = 0.001'))
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.load_scene(str(path))
+    assert err.value.key == "time_scale" and "dates or durations" in err.value.message
+
+
 def test_a_ragged_csv_row_is_named_in_one_line(tmp_path, capsys):
     """A data row with one field more than the header (line 6 of the file): one line naming
     the line and both counts, not the CSV parser's own two-line text."""

@@ -23,9 +23,10 @@ def resolve(scene_path: str, file: str) -> Path:
     return (base / file) if not Path(file).is_absolute() else Path(file)
 
 
-def read_frame(table: _Table, path: Path):
+def read_frame(table: _Table, path: Path, skip_rows: int = 0):
     """The log's table (a pandas DataFrame): one SceneError when the file is missing, of
-    another kind, or unreadable."""
+    another kind, or unreadable. ``skip_rows``: a CSV's rows right after its header that are
+    not samples (a units row), left out (the frame's ``attrs["skipped_rows"]``)."""
     import pandas as pd
 
     if path.suffix.lower() not in LOG_SUFFIXES:
@@ -35,13 +36,17 @@ def read_frame(table: _Table, path: Path):
     if not path.is_file():
         raise table.error("file", f'no such log file "{path}" (relative to the scene file)',
                           "check the path: it is relative to the folder of the scene file")
+    if skip_rows and path.suffix.lower() != ".csv":
+        raise table.error("skip_rows", f"skip_rows = {skip_rows} is for a CSV's rows under its "
+                          f'header; "{path}" is Parquet, whose rows are all samples',
+                          "remove skip_rows")
     stat = path.stat()
-    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size, skip_rows)
     if key in _FRAMES:  # the same file, unchanged: a fit reads its scene again at every trial
         return _FRAMES[key]
     try:
         if path.suffix.lower() == ".csv":
-            frame = pd.read_csv(path, skipinitialspace=True)
+            frame = pd.read_csv(path, skipinitialspace=True, skiprows=range(1, 1 + skip_rows))
         else:
             frame = pd.read_parquet(path)
     except Exception as exc:  # pandas raises many kinds (parser, arrow, empty, encoding)
@@ -54,6 +59,7 @@ def read_frame(table: _Table, path: Path):
                               "(a comma inside a value needs quotes)") from None
         raise table.error("file", f'cannot read "{path}": {type(exc).__name__}: {text}',
                           "write the log as CSV with a header row, or as Parquet") from None
+    frame.attrs["skipped_rows"] = skip_rows
     _FRAMES.clear()  # keep one file's table: bounded memory
     _FRAMES[key] = frame
     return frame
@@ -63,11 +69,17 @@ def read_frame(table: _Table, path: Path):
 _FRAMES: dict = {}
 
 
-def row_label(path: Path, i: int) -> str:
-    """Data row ``i`` (0-based) as a user finds it: 1-based, and the CSV line (header = 1)."""
+def row_label(path: Path, i: int, skipped: int = 0) -> str:
+    """Data row ``i`` (0-based) as a user finds it: 1-based, and the CSV line (header = 1,
+    then ``skipped`` rows that are not samples)."""
     if path.suffix.lower() == ".csv":
-        return f"row {i + 1} (line {i + 2} of the file)"
+        return f"row {i + 1} (line {i + 2 + skipped} of the file)"
     return f"row {i + 1}"
+
+
+def skipped_rows(frame) -> int:
+    """The rows under a CSV's header that :func:`read_frame` left out (0: none)."""
+    return int(frame.attrs.get("skipped_rows", 0))
 
 
 def nearest_columns(name: str, names) -> str:
@@ -96,13 +108,16 @@ def numeric_column(frame, column: str, path: Path, table: _Table, key: str) -> n
         bad = np.flatnonzero(~blank.to_numpy() & np.isnan(values))
         if len(bad):
             i = int(bad[0])
-            raise table.error(key, f'"{path}" {row_label(path, i)}, column "{column}": '
+            units_row = i == 0 and path.suffix.lower() == ".csv" and not skipped_rows(frame)
+            raise table.error(key, f'"{path}" {row_label(path, i, skipped_rows(frame))}, column "{column}": '
                               f"{_show(str(raw.iloc[i]))} is not a number",
-                              "fix that value (leave the cell empty where a sample is missing)")
+                              "fix that value (leave the cell empty where a sample is missing)"
+                              + ("; a row of units under the header is left out with "
+                                 "skip_rows = 1 in its [[logs]] entry" if units_row else ""))
     bad = np.flatnonzero(np.isinf(values))
     if len(bad):
         i = int(bad[0])
-        raise table.error(key, f'"{path}" {row_label(path, i)}, column "{column}": '
+        raise table.error(key, f'"{path}" {row_label(path, i, skipped_rows(frame))}, column "{column}": '
                           f"{values[i]} is not a finite number",
                           "fix that value (leave the cell empty where a sample is missing)")
     return values
@@ -118,7 +133,7 @@ def _seconds_from_first(raw) -> np.ndarray:
     return np.where(finite, seconds, np.nan).astype(float)
 
 
-def _stamps(raw, column: str, path: Path, table: _Table):
+def _stamps(raw, column: str, path: Path, table: _Table, skipped: int = 0):
     """A text time column as dates (ISO 8601, "2024-05-01 10:00:00.250", offsets taken to UTC)
     or durations ("00:01:02.5") where its first value is one, else as it is (numbers, whose
     own check names a bad row). A column that starts with dates has dates in every row: the
@@ -142,7 +157,7 @@ def _stamps(raw, column: str, path: Path, table: _Table):
         bad = np.flatnonzero(pd.isna(values).to_numpy() & ~(raw.isna() | (text == "")).to_numpy())
         if len(bad):
             i = int(bad[0])
-            raise table.error("time", f'"{path}" {row_label(path, i)}, column "{column}": '
+            raise table.error("time", f'"{path}" {row_label(path, i, skipped)}, column "{column}": '
                               f"{_show(str(raw.iloc[i]))} is not a {kind} like the first row's "
                               f"{_show(str(filled.iloc[0]))}",
                               f"write every time stamp as a {kind} (ISO 8601, e.g. "
@@ -152,31 +167,36 @@ def _stamps(raw, column: str, path: Path, table: _Table):
     return raw
 
 
-def time_column(frame, column: str, path: Path, table: _Table) -> np.ndarray:
+def time_column(frame, column: str, path: Path, table: _Table, scale: float = 1.0) -> np.ndarray:
     """The time column: numbers, finite and strictly increasing (a SceneError names the file
     and the first bad row otherwise). Dates or durations (a Parquet timestamp column, or a
-    CSV's ISO 8601 dates or "hh:mm:ss.f" durations) are seconds from the first row."""
+    CSV's ISO 8601 dates or "hh:mm:ss.f" durations) are seconds from the first row; numbers
+    are times ``scale`` seconds (the ``[[logs]]`` entry's ``time_scale``: 0.001 for ms)."""
     if column not in frame.columns:
         raise table.error("time", f'"{path}" has no column "{column}"',
                           nearest_columns(column, frame.columns))
     raw = frame[column]
     if raw.dtype.kind not in "mMfiu":  # text: numbers, or a CSV's dates or durations
-        raw = _stamps(raw, column, path, table)
+        raw = _stamps(raw, column, path, table, skipped_rows(frame))
+    if raw.dtype.kind in "mM" and scale != 1.0:
+        raise table.error("time_scale", f'time_scale = {scale:g}, but the time column "{column}" '
+                          "holds dates or durations, which are read as seconds",
+                          "remove time_scale (it scales a column of numbers)")
     t = (_seconds_from_first(raw) if raw.dtype.kind in "mM"
-         else numeric_column(frame, column, path, table, "time"))
+         else numeric_column(frame, column, path, table, "time") * scale)
     if len(t) < 2:
         raise table.error("time", f'"{path}" has {len(t)} row(s): a log needs at least two '
                           "samples", "give the log its samples, one row each")
     missing = np.flatnonzero(np.isnan(t))
     if len(missing):
-        raise table.error("time", f'"{path}" {row_label(path, int(missing[0]))}: the time '
+        raise table.error("time", f'"{path}" {row_label(path, int(missing[0]), skipped_rows(frame))}: the time '
                           f'column "{column}" is empty there', "give every row its time stamp "
                           "(a missing sample is an empty value in its data column)")
     step = np.diff(t)
     bad = np.flatnonzero(~(step > 0))
     if len(bad):
         i = int(bad[0]) + 1
-        raise table.error("time", f'"{path}" {row_label(path, i)}: time {float(t[i])!r} does '
+        raise table.error("time", f'"{path}" {row_label(path, i, skipped_rows(frame))}: time {float(t[i])!r} does '
                           f"not increase (the row before has {float(t[i - 1])!r}); the time "
                           "column must be strictly increasing", "sort the log by time and remove repeated "
                           "time stamps")

@@ -31,9 +31,18 @@ class TimeTables:
             name = table.data["name"]
             file = table.string("file")
             path = logfiles.resolve(self.path, file)
-            frame = logfiles.read_frame(table, path)
+            skip = table.integer("skip_rows", 0)
+            if skip < 0:
+                raise table.error("skip_rows", f"must be >= 0, got {skip}",
+                                  "the rows right under the header that are not samples, e.g. "
+                                  "skip_rows = 1 for a units row")
+            frame = logfiles.read_frame(table, path, skip)
             column = table.string("time")
-            t = logfiles.time_column(frame, column, path, table)
+            time_scale = table.number("time_scale", 1.0)
+            if not (time_scale > 0 and np.isfinite(time_scale)):
+                raise table.error("time_scale", f"must be positive, got {time_scale:g}",
+                                  "seconds per unit of the time column: 0.001 for ms, 60 for min")
+            t = logfiles.time_column(frame, column, path, table, time_scale)
             self.frames[name] = frame
             logs[name] = LogData(name, file, str(path), column, t, {},
                                  tuple(str(c) for c in frame.columns))
@@ -170,7 +179,7 @@ class TimeTables:
         low, high = logfiles.finite_values(values * scale)
         if kind == "distance" and not low > 0:
             i = int(np.flatnonzero(np.isfinite(values) & ~(values * scale > 0))[0])
-            raise table.error("log", f'"{log.path}" {logfiles.row_label(path, i)}, column '
+            raise table.error("log", f'"{log.path}" {logfiles.row_label(path, i, logfiles.skipped_rows(frame))}, column '
                               f'"{column}": a cylinder length of {values[i] * scale:g}',
                               "a cylinder's length must be positive: check the column and scale")
         return dict(log=(log.name, column), scale=scale, smoothing=smoothing,
