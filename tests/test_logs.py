@@ -314,7 +314,7 @@ def test_a_time_column_in_milliseconds_under_a_units_row(tmp_path):
 
 @pytest.mark.parametrize("units_row, extra, key, words", [
     (True, "", "time", ['row 1 (line 2 of the file), column "t": "ms" is not a number',
-                        "skip_rows = 1"]),
+                        "if it is a row of units under the header, skip_rows = 1"]),
     (True, "skip_rows = 1\ntime_scale = -1.0", "time_scale", ["must be positive"]),
     (False, "skip_rows = 2", "time", ["row 3 (line 6 of the file)", "does not increase"]),
 ])
@@ -333,6 +333,18 @@ def test_rig_log_mistakes_name_the_line_and_the_key(tmp_path, units_row, extra, 
     assert (err.value.table, err.value.key) == ('logs "enc"', key), str(err.value)
     for w in words:
         assert w in str(err.value), str(err.value)
+
+
+def test_csv_dates_with_and_without_an_offset_are_named(tmp_path):
+    """Naive stamps would be read as UTC beside +02:00 ones, two hours apart: a scene error
+    naming the first stamp unlike the first row's."""
+    frame = encoder_frame(np.arange(5) * 0.5)
+    frame["t"] = [f"2026-03-01T08:00:0{i}+02:00" for i in range(5)]
+    frame.loc[2, "t"] = "2026-03-01T08:00:02"
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.load_scene(str(write_scene(tmp_path, frame)))
+    assert err.value.key == "time"
+    assert 'row 3 (line 4 of the file), column "t": "2026-03-01T08:00:02" has no UTC offset' in str(err.value)
 
 
 def test_skip_rows_is_for_csv_and_time_scale_for_numbers(tmp_path):

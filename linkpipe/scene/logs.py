@@ -112,8 +112,8 @@ def numeric_column(frame, column: str, path: Path, table: _Table, key: str) -> n
             raise table.error(key, f'"{path}" {row_label(path, i, skipped_rows(frame))}, column "{column}": '
                               f"{_show(str(raw.iloc[i]))} is not a number",
                               "fix that value (leave the cell empty where a sample is missing)"
-                              + ("; a row of units under the header is left out with "
-                                 "skip_rows = 1 in its [[logs]] entry" if units_row else ""))
+                              + ("; if it is a row of units under the header, skip_rows = 1 "
+                                 "in its [[logs]] entry leaves it out" if units_row else ""))
     bad = np.flatnonzero(np.isinf(values))
     if len(bad):
         i = int(bad[0])
@@ -153,6 +153,17 @@ def _stamps(raw, column: str, path: Path, table: _Table, skipped: int = 0):
             continue
         if pd.isna(first).all():
             continue
+        if kind == "date":  # an offset on some stamps and not on others: which zone is meant?
+            zoned = filled.str.contains(r"(?:Z|[+-]\d\d:?\d\d)$", regex=True).to_numpy()
+            if zoned.any() and not zoned.all():
+                i = int(np.flatnonzero(zoned != zoned[0])[0])  # among the filled rows
+                row = int(np.flatnonzero(raw.index == filled.index[i])[0])
+                raise table.error("time", f'"{path}" {row_label(path, row, skipped)}, column '
+                                  f'"{column}": {_show(str(filled.iloc[i]))} '
+                                  + ("has no UTC offset" if zoned[0] else "has a UTC offset")
+                                  + f" and the first row's {_show(str(filled.iloc[0]))} "
+                                  + ("has one" if zoned[0] else "has none"),
+                                  "give every stamp an offset (e.g. +02:00, or Z for UTC), or none")
         values = parse(text.where(text != ""))
         bad = np.flatnonzero(pd.isna(values).to_numpy() & ~(raw.isna() | (text == "")).to_numpy())
         if len(bad):
