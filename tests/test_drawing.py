@@ -58,3 +58,70 @@ def test_a_guess_near_its_assembly_is_not_warned_about():
         found = drawing_offset(model)
         assert found is None or found[1] < DRAWING_MOVED_FRACTION * model.size / 10, (p, found)
         assert drawing_warnings(model) == ()
+
+
+NON_GRASHOF = """
+[scene]
+name = "nong"
+units = {{ length = "m", mass = "kg", time = "s", force = "N" }}
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+A  = {{ x = {ax!r}, y = {ay!r} }}
+B  = {{ x = 3.0, y = 2.5 }}
+O4 = {{ x = 4.0, y = 0.0, fixed = true }}
+K  = {{ x = 5.0, y = 4.0, fixed = true }}
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = {{ "O2-A" = 2.5 }}
+[[links]]
+name = "coupler"
+points = ["A", "B"]
+lengths = {{ "A-B" = 2.0 }}
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = {{ "O4-B" = 3.0 }}
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = 60.0
+to = 70.0
+steps = 3
+[[springs]]
+name = "s"
+between = ["K", "B"]
+k = 100.0
+preload = 5.0
+[analysis]
+effects = ["springs"]
+"""
+
+
+def test_a_drawing_that_does_not_assemble_warns_that_springs_measure_on_it():
+    """Crank 2.5, coupler 2, rocker 3, ground 4 reaches crank angles within +-97.9 deg: drawn at
+    120 deg the drawing has no assembly at its own driver value (the sweep from 60 deg starts
+    there directly), so the spring's start length, where its preload holds, comes from the
+    drawing as written: a warning names the spring. Drawn at 60 deg: no warning."""
+    far = linkpipe.parse_scene(NON_GRASHOF.format(ax=float(2.5 * np.cos(np.radians(120.0))),
+                                                  ay=float(2.5 * np.sin(np.radians(120.0)))),
+                               "far.toml")
+    near = linkpipe.parse_scene(NON_GRASHOF.format(ax=1.25, ay=float(2.5 * np.sin(np.radians(60.0)))),
+                                "near.toml")
+    (warning,) = drawing_warnings(build_model(far))
+    assert 'springs "s" measure their start length' in warning and "free_length" in warning
+    assert drawing_warnings(build_model(near)) == ()
+    assert linkpipe.solve(far).n_ok == 3  # the sweep itself runs
+
+
+def test_a_held_driver_with_a_rate_is_a_warning():
+    """from = to over 61 steps while the other crank moves, and a rate of 30 deg/s: the value
+    stays while the velocity is 30 deg/s at every step (the contract's instantaneous state):
+    legal, probably not meant. With rate = 0 (statics) no warning."""
+    text = (ROOT / "configs" / "five_bar.toml").read_text()
+    assert "from = 60.0\nto = 120.0" in text and "rate = 30.0 " in text
+    held = text.replace("from = 60.0\nto = 120.0", "from = 60.0\nto = 60.0")
+    scene = linkpipe.parse_scene(held, "held.toml")
+    assert any('[drivers "theta1"] is held' in w and "give rate = 0" in w for w in scene.warnings)
+    statics = held.replace("rate = 30.0 ", "rate = 0.0 ")
+    assert not any("is held" in w for w in linkpipe.parse_scene(statics, "s.toml").warnings)

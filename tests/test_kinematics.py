@@ -196,9 +196,8 @@ def test_link_angles_unwrap_across_gaps_as_each_link_alone():
     """The vectorised unwrap equals unwrapping each link's finite angles on their own, to the
     last bit, with NaN gaps anywhere (leading, inner, trailing, a link never assembled)."""
     from hypothesis import given, settings, strategies as st
-    from types import SimpleNamespace
 
-    from linkpipe.kinematics.rates import link_angles_unwrapped
+    from linkpipe.kinematics.rates import unwrap_runs
 
     @settings(max_examples=60, deadline=None)
     @given(seed=st.integers(0, 10_000), S=st.integers(1, 60), L=st.integers(1, 4),
@@ -208,9 +207,7 @@ def test_link_angles_unwrap_across_gaps_as_each_link_alone():
         turns = np.cumsum(rng.normal(scale=1.5, size=(S, L)), axis=0)  # jumps of any size
         ang = np.angle(np.exp(1j * turns))
         ang[rng.uniform(size=(S, L)) < gap] = np.nan
-        # X: the step numbers, so each chunk of steps gets its own rows of angles
-        model = SimpleNamespace(link_a=[0] * L, link_angles=lambda X: ang[X])
-        got = link_angles_unwrapped(model, np.arange(S))
+        got = unwrap_runs(ang.copy())[0]
         for j in range(L):
             fin = np.isfinite(ang[:, j])
             expected = np.full(S, np.nan)

@@ -638,3 +638,100 @@ def test_preload_holds_at_the_assembled_start_not_at_a_guessed_drawing(kind, k, 
     assert abs(tension[0] - preload) < 1e-6
     np.testing.assert_allclose(tension, exact.forces["spring_force"][1][:, 0], rtol=0, atol=1e-6)
     assert abs(tension[-1] - tension[0]) > 10.0  # the spring does work: the test can fail
+
+
+ROCKER_NEAR_HALF_TURN = """
+[scene]
+name = "rocker_half_turn"
+units = {{ length = "m", mass = "kg", time = "s", force = "N" }}
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+A  = {{ x = 0.0, y = 1.0 }}
+B  = {{ x = 1.0, y = 0.0 }}
+O4 = {{ x = 4.0, y = 0.0, fixed = true }}
+[[links]]
+name = "crank"
+points = ["O2", "A"]
+lengths = {{ "O2-A" = 1.0 }}
+[[links]]
+name = "coupler"
+points = ["A", "B"]
+lengths = {{ "A-B" = 1.4142135623730951 }}
+[[links]]
+name = "rocker"
+points = ["O4", "B"]
+lengths = {{ "O4-B" = 3.0 }}
+[[drivers]]
+name = "crank"
+angle = ["O2", "A"]
+from = {start!r}
+to = {stop!r}
+steps = 3
+rate = 1.0
+[analysis]
+effects = ["springs"]
+[[torsion_springs]]
+name = "hinge"
+links = ["rocker", "ground"]
+k = 1.0
+free_angle = 180.0
+"""
+
+
+def test_the_same_pose_reads_the_same_angle_whichever_way_the_sweep_runs():
+    """A rocker drawn pointing along -x (180 deg) reads -179.7 or +179.7 deg as the principal
+    direction just either side of it. Its whole turns come from the drawing, so the crank at
+    90 deg (the middle step, swept 89 -> 91 or 91 -> 89) gives the rocker the same angle
+    and the torsion spring free at 180 deg the same (small) torque both ways; before, the
+    sweep up read -180.3 deg and a torque of -2 pi k."""
+    up = linkpipe.solve(linkpipe.parse_scene(ROCKER_NEAR_HALF_TURN.format(start=89.0, stop=91.0), "u.toml"))
+    down = linkpipe.solve(linkpipe.parse_scene(ROCKER_NEAR_HALF_TURN.format(start=91.0, stop=89.0), "d.toml"))
+    assert up.n_ok == down.n_ok == 3
+    rocker = up.link_names.index("rocker")
+    np.testing.assert_allclose(up.link_angle[1, rocker], down.link_angle[1, rocker], rtol=0, atol=1e-12)
+    assert abs(up.link_angle[1, rocker] - np.pi) < 0.01  # the drawing's 180 deg, not -180
+    torque_up, torque_down = (r.forces["torsion_spring_torque"][1][1, 0] for r in (up, down))
+    assert torque_up == pytest.approx(torque_down, abs=1e-12) and abs(torque_up) < 0.01
+
+
+@pytest.mark.parametrize("order", [["O2", "A", "C"], ["O2", "C", "A"], ["C", "A", "O2"]])
+def test_a_plate_an_angle_driver_turns_takes_the_drivers_turns_whatever_its_point_order(order):
+    """A crank plate O2, A, C (C at 45 deg from A about O2, |O2C| = |O2A|) driven 360 -> 370
+    deg against a torsion spring free at 0: the plate's link angle is the driver's value plus
+    the plate's own offset to its first two points' direction (0, 45 or 135 + 180 deg: C A O2
+    points from C to A), whatever the order the points are listed in, and the spring winds a
+    whole turn with it (before, only a plate listing the driver's pair first kept the turn)."""
+    points = ", ".join(f'"{p}"' for p in order)
+    text = f"""
+[scene]
+name = "plate"
+[points]
+O2 = {{ x = 0.0, y = 0.0, fixed = true }}
+A  = {{ x = 1.0, y = 0.0 }}
+C  = {{ x = {float(np.sqrt(0.5))!r}, y = {float(np.sqrt(0.5))!r} }}
+[[links]]
+name = "crank"
+points = [{points}]
+[[drivers]]
+name = "theta"
+angle = ["O2", "A"]
+from = 360.0
+to = 370.0
+steps = 3
+[analysis]
+effects = ["springs"]
+[[torsion_springs]]
+name = "hinge"
+links = ["crank", "ground"]
+k = 2.0
+free_angle = 0.0
+"""
+    r = linkpipe.solve(linkpipe.parse_scene(text, "plate.toml"))
+    C = np.array([np.sqrt(0.5), np.sqrt(0.5)])
+    first = {"O2": np.zeros(2), "A": np.array([1.0, 0.0]), "C": C}
+    d = first[order[1]] - first[order[0]]
+    offset = np.degrees(np.arctan2(d[1], d[0]))  # the plate's direction at theta = 0
+    want = r.driver_value[:, 0] + offset
+    np.testing.assert_allclose(np.degrees(r.link_angle[:, 0]), want, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(r.forces["torsion_spring_torque"][1][:, 0], 2.0 * np.radians(want),
+                               rtol=1e-12)

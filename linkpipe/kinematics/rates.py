@@ -3,6 +3,7 @@
 link angles and their rates; the drivers' motion."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -271,28 +272,37 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     the filled steps add zero corrections; the gaps are NaN again afterwards. ``period``: the
     rows are runs of this many steps (a study's variants), each unwrapped on its own.
 
+    Whole turns: a link's first finite angle is taken within half a turn of its direction in
+    the drawing (:func:`drawn_link_angles`), not of (-pi, pi] at that step, so the same pose
+    reads the same angle whichever way a sweep runs through it. ``s`` (S, n_drivers), the
+    drivers' values in radians: a link that an absolute angle driver turns (it carries both
+    of the driver's points) takes its whole turns from the driver's value, which the scene
+    gives unwrapped (905.9 deg is legal), plus its fixed offset from the driver's direction
+    (:func:`driven_links`), so a sweep of more than half a turn per step keeps them.
+
     ``carry``: a sweep solved in segments of steps (:mod:`linkpipe.segments`): the
     :class:`AngleCarry` of the segments before (None for the first); then the return is
     ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
-    to the last bit (``tests/test_segments.py``).
-
-    ``s`` (S, n_drivers), the drivers' values in radians: a link that an absolute angle driver
-    turns (its first two points the driver's pair, either way round) takes its whole turns
-    from the driver's value, which the scene gives unwrapped (905.9 deg is legal), so a sweep
-    of more than half a turn per step keeps them; the other links are unwrapped by the
-    smallest jump between neighbouring steps."""
+    to the last bit (``tests/test_segments.py``)."""
     ang = np.empty((X.shape[0], len(model.link_a)))
 
     def work(lo: int, hi: int) -> None:
         ang[lo:hi] = model.link_angles(X[lo:hi])
 
     for_chunks(work, X.shape[0], CHUNK)
+    drawn = drawn_link_angles(model)
     if carry is not None:
         out, after = unwrap_runs(ang, carry)
+        shift = np.where(np.isnan(carry.shift), _turns_towards(drawn, out), carry.shift)
+        after = dataclasses.replace(after, shift=np.where(np.isnan(after.last), np.nan, shift))
+        out += np.nan_to_num(shift)
     elif period:
-        out, after = unwrap_runs(ang.reshape(-1, period, ang.shape[-1]))[0].reshape(ang.shape), None
+        runs = unwrap_runs(ang.reshape(-1, period, ang.shape[-1]))[0]  # (V, period, L)
+        out = (runs + np.nan_to_num(_turns_towards(drawn, runs))[:, None, :]).reshape(ang.shape)
+        after = None
     else:
         out, after = unwrap_runs(ang)[0], None
+        out += np.nan_to_num(_turns_towards(drawn, out))
     if s is not None:
         for li, j, offset in driven_links(model):
             turns = np.round((s[:, j] + offset - ang[:, li]) / (2 * np.pi))
@@ -300,11 +310,46 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     return (out, after) if carry is not None else out
 
 
+def _turns_towards(drawn: np.ndarray, unwrapped: np.ndarray) -> np.ndarray:
+    """The whole turns (radians, (..., n_links)) that bring each link's first finite angle of
+    ``unwrapped`` (..., S, n_links) within half a turn of its ``drawn`` angle (NaN: no finite
+    angle yet)."""
+    fin = np.isfinite(unwrapped)
+    first = np.take_along_axis(unwrapped, np.argmax(fin, axis=-2)[..., None, :], axis=-2)[..., 0, :]
+    turns = 2 * np.pi * np.round((drawn - first) / (2 * np.pi))
+    return np.where(fin.any(axis=-2), turns, np.nan)
+
+
+def drawn_link_angles(model: Model) -> np.ndarray:
+    """Each link's direction (first to second point) in the drawing, in (-pi, pi] (n_links,):
+    the drawing assembled at its own driver values where it assembles there (its points may
+    be a guess), else as drawn. The reference a link's whole turns are taken from."""
+    from ..cache import derived
+
+    return derived(model, "drawn_link_angles", _drawn_link_angles)
+
+
+def _drawn_link_angles(model: Model) -> np.ndarray:
+    from .start import assembled_drawing
+
+    X = assembled_drawing(model)
+    X = model.start_position if X is None else X
+    return model.link_angles(X[None])[0]
+
+
+#: an offset within this of half a turn is half a turn (+pi): the drawing's rounding must not
+#: decide between +pi and -pi, a whole turn apart in the link's angle
+HALF_TURN_WITHIN = 1e-9
+
+
 def driven_links(model: Model) -> list[tuple[int, int, float]]:
     """``(link, driver, offset)`` of each link whose direction an absolute angle driver sets:
-    the link's first two points are the driver's pair (offset 0) or the pair reversed (pi).
-    (A link that carries the pair among other points is unwrapped by its steps: its fixed
-    offset would have to come from the solved body, not from a drawing that may be a guess.)"""
+    a link that carries both of the driver's points. Its first two points the driver's pair:
+    offset 0 (or pi, the pair reversed); else the body's fixed angle from the driver's
+    direction to the link's, in the drawing as assembled (:func:`drawn_link_angles`), in
+    (-pi, pi] with half a turn always +pi."""
+    from .start import assembled_drawing
+
     out = []
     for j, driver in enumerate(model.scene.drivers):
         if driver.kind != "angle" or driver.relative_to is not None:
@@ -313,6 +358,15 @@ def driven_links(model: Model) -> list[tuple[int, int, float]]:
         for li, (la, lb) in enumerate(zip(model.link_a, model.link_b)):
             if (la, lb) in ((a, b), (b, a)):
                 out.append((li, j, 0.0 if (la, lb) == (a, b) else np.pi))
+            elif set(driver.points) <= set(model.scene.links[li].points):
+                X = assembled_drawing(model)
+                X = model.start_position if X is None else X
+                d = X[b] - X[a]
+                offset = drawn_link_angles(model)[li] - np.arctan2(d[1], d[0])
+                offset = (offset + np.pi) % (2 * np.pi) - np.pi  # [-pi, pi)
+                if abs(abs(offset) - np.pi) < HALF_TURN_WITHIN:
+                    offset = np.pi
+                out.append((li, j, float(offset)))
     return out
 
 
@@ -323,10 +377,13 @@ class AngleCarry:
 
     last: np.ndarray
     correction: np.ndarray
+    #: the whole turns (radians) added to each link's unwrapped angle, set at its first finite
+    #: angle (:func:`link_angles_unwrapped`; NaN: not yet)
+    shift: np.ndarray | None = None
 
     @classmethod
     def start(cls, n_links: int) -> "AngleCarry":
-        return cls(np.full(n_links, np.nan), np.zeros(n_links))
+        return cls(np.full(n_links, np.nan), np.zeros(n_links), np.full(n_links, np.nan))
 
 
 def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):

@@ -82,15 +82,18 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
     length = dict(model.scene.units).get("length", "length units")
     reach = reach_from_drawing(model, s0, tol_abs, max_iter) if model.n_drivers == 1 else None
     if reach is not None:  # one driver, whose first value the drawing's assembly cannot reach
-        drawn, last = reach
+        along, last = reach
         driver = model.scene.drivers[0]
         scale = np.pi / 180.0 if driver.kind == "angle" else 1.0
         unit = "deg" if driver.kind == "angle" else length
-        first, drawn, last = (float(v) / scale for v in (s0[0], drawn[0], last[0]))
+        drawn = model.driver_values_at(model.start_position[None])[0]  # (angles in (-pi, pi])
+        first, drawn, along, last = (float(v) / scale for v in (s0[0], drawn[0], along[0], last[0]))
+        turn = (f" ({along:.6g} {unit} on the sweep's turn)" if abs(along - drawn) > 1e-9 * max(
+            1.0, abs(drawn)) else "")
         raise SceneError(path, f'drivers "{driver.name}"', "log" if driver.timed == "log" else "from",
                          f"the first driver value {first:.6g} {unit} is out of reach: from the "
-                         f"drawing's {drawn:.6g} {unit} towards it the mechanism assembles as "
-                         f"far as {last:.6g} {unit} and no further",
+                         f"drawing's {drawn:.6g} {unit}{turn} towards it the mechanism "
+                         f"assembles as far as {last:.6g} {unit} and no further",
                          "start the sweep within reach (" + _first_values(model.scene.drivers)
                          + "), or check the link lengths and `local` coordinates")
     table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
@@ -264,6 +267,13 @@ def scene_warnings(model: Model) -> tuple[str, ...]:
 
 
 def _drawing_warnings(model: Model) -> tuple[str, ...]:
+    loose = [sp.name for sp in model.scene.springs if sp.kind != "gas" and sp.free_length is None]
+    if loose and model.n_q and model.n_drivers and assembled_drawing(model) is None:
+        names = ", ".join(f'"{n}"' for n in loose)
+        return (f"{model.scene.path}: [points]: the drawing does not assemble at the driver "
+                "values it itself has, so springs " + names + " measure their start length "
+                "(where their preload holds) on the drawing as written, which may be a guess; "
+                "draw the points nearer an assembled pose, or give free_length",)
     found = drawing_offset(model)
     if found is None or not found[1] > DRAWING_MOVED_FRACTION * model.size:
         return ()

@@ -131,14 +131,23 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
                      outputs=outputs, torsion_springs=torsion_springs, time=self.time,
-                     logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects),
+                     logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects, drivers),
                      measurements=self.measurement_tables(drivers, springs, torsion_springs,
                                                           sliders, effects))
 
 
-    def warnings(self, gravity, effects) -> tuple[str, ...]:
+    def warnings(self, gravity, effects, drivers=()) -> tuple[str, ...]:
         """What is legal but probably not meant (printed in the summary, stored in the .h5)."""
         out = []
+        for d in drivers:  # held while others move, yet with a velocity: statics meant?
+            if (self.time is None and d.steps > 1 and d.from_value == d.to_value
+                    and (d.rate != 0 or d.acceleration != 0)):
+                unit = "deg" if d.kind == "angle" else self.units.get("length", "length units")
+                out.append(f'{self.path}: [drivers "{d.name}"] is held (from = to = '
+                           f"{d.from_value:g} {unit}) with rate = {d.rate:g}, acceleration = "
+                           f"{d.acceleration:g}: its value stays while its velocity and "
+                           "acceleration are those at every step (the contract's instantaneous "
+                           "state); give rate = 0 for a driver that does not move")
         if gravity is not None and "gravity" in effects:
             note = units.gravity_warning(gravity, self.units.get("length"))
             if note:

@@ -173,3 +173,21 @@ def test_a_first_value_out_of_reach_names_the_driver_and_the_reach(first):
     said = float(e.message.split("as far as ")[1].split(" m")[0])
     assert said == pytest.approx(limit, abs=1e-5)  # printed to 6 significant digits
     assert "out of reach" in e.message and "start the sweep within reach" in e.hint
+
+
+def test_an_angle_out_of_reach_a_turn_on_says_the_drawings_angle_and_the_limit():
+    """Crank 2.5, coupler 2, rocker 3, ground 4: the crank reaches up to the angle where
+    |O4 A| = coupler + rocker = 5, cos t = (2.5^2 + 4^2 - 5^2) / (2 * 2.5 * 4) = -0.1375
+    (97.903 deg). Drawn at 60 deg, swept from 480 deg (a turn on, 120 deg): the message gives
+    the drawing's own 60 deg, the 420 deg it is on the sweep's turn, and 360 + 97.903 deg."""
+    from test_drawing import NON_GRASHOF
+
+    text = NON_GRASHOF.format(ax=1.25, ay=float(2.5 * np.sin(np.radians(60.0)))).replace(
+        "from = 60.0\nto = 70.0", "from = 480.0\nto = 490.0")
+    with pytest.raises(linkpipe.SceneError) as err:
+        linkpipe.solve(linkpipe.parse_scene(text, "nong.toml"))
+    e = err.value
+    assert (e.table, e.key) == ('drivers "crank"', "from")
+    assert "from the drawing's 60 deg (420 deg on the sweep's turn)" in e.message, e.message
+    said = float(e.message.split("as far as ")[1].split(" deg")[0])
+    assert said == pytest.approx(360.0 + np.degrees(np.arccos(-0.1375)), abs=1e-3)  # 6 digits
