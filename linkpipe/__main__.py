@@ -18,6 +18,8 @@ from .workers import using
 
 #: --rrd-max-steps's default (stores/rrd's MAX_STEPS, without importing rerun to read it)
 RRD_MAX_STEPS = 100_000
+#: --rrd-max-mb's default where --rrd-max-steps is not given either (stores/rrd's MAX_BYTES)
+RRD_MAX_MB = 50.0
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
@@ -33,13 +35,13 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="print only errors")
     run.add_argument("-v", "--verbose", action="store_true",
                      help="also print a table of where the time went, stage by stage")
-    run.add_argument("--rrd-max-steps", type=_threads, default=RRD_MAX_STEPS, metavar="N",
+    run.add_argument("--rrd-max-steps", type=_threads, default=None, metavar="N",
                      help="the most steps a recording keeps; past it a uniform stride (the "
                           ".h5 keeps every step; 0: no limit; default 100,000)")
-    run.add_argument("--rrd-max-mb", type=_megabytes, default=50.0, metavar="MB",
+    run.add_argument("--rrd-max-mb", type=_megabytes, default=None, metavar="MB",
                      help="the largest recording in MB (10^6 bytes); a sweep whose recording "
                           "would be larger keeps a uniform stride of steps (0: no limit; "
-                          "default 50)")
+                          "default 50, or no limit when --rrd-max-steps is given alone)")
     run.add_argument("--threads", type=_threads, default=1, metavar="N",
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
@@ -116,11 +118,22 @@ def _positive(text: str) -> int:
     return _number(text, int, 1, "a whole number >= 1")
 
 
+def recording_caps(max_steps: int | None, max_mb: float | None) -> tuple[int, float]:
+    """``run``'s recording caps from ``--rrd-max-steps`` and ``--rrd-max-mb`` (None: not
+    given): each as given; neither given, 100,000 steps and 50 MB; a step cap given alone is
+    the only cap (the contract's option: past N steps a stride, and not before)."""
+    if max_mb is None:
+        max_mb = 0.0 if max_steps is not None else RRD_MAX_MB
+    return (RRD_MAX_STEPS if max_steps is None else max_steps), max_mb
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:
     """Run the command line and return the exit status: 0 ok, 1 a scene failed inside linkpipe
     or its output could not be written, 2 bad input (scene, option), 130 stopped by Ctrl-C or
     SIGTERM. Temporary output files are removed on every one of these paths."""
     args = _parser(prog).parse_args(argv)
+    if args.command == "run":
+        args.rrd_max_steps, args.rrd_max_mb = recording_caps(args.rrd_max_steps, args.rrd_max_mb)
     command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
                "study": _study}[args.command]
     previous = _signals_as_interrupts()

@@ -716,3 +716,35 @@ def test_a_recording_past_its_size_cap_keeps_a_stride_and_stays_within_it(tmp_pa
     assert "0.5 MB at most" in str(info)
     with h5py.File(tmp_path / "fourbar_crank_rocker.h5") as f:
         assert f["position"].shape[0] == 10000
+
+
+def test_a_step_cap_given_alone_is_the_recordings_only_cap(tmp_path, capsys):
+    """--rrd-max-steps given alone is the contract's option as written: past N steps a stride,
+    and not before (no size cap unless --rrd-max-mb is given too). The 10,000-step crank-rocker
+    with every effect (~9 MB) keeps every step under --rrd-max-steps 20000 alone, and a
+    stride under --rrd-max-steps 20000 --rrd-max-mb 0.5; the defaults are 100,000 steps and
+    50 MB, the recording store's own constants."""
+    import re
+
+    from linkpipe import __main__ as cli
+    from linkpipe.stores import rrd
+    from conftest import CONFIG_DIR
+
+    assert cli.recording_caps(None, None) == (rrd.MAX_STEPS, rrd.MAX_BYTES / 1e6)
+    assert cli.recording_caps(20000, None) == (20000, 0.0)
+    assert cli.recording_caps(None, 5.0) == (rrd.MAX_STEPS, 5.0)
+    assert cli.recording_caps(0, 7.0) == (0, 7.0)
+    sys.path.insert(0, str(CONFIG_DIR.parent / "benchmarks"))
+    from bench_sweep import EFFECTS
+
+    text = (CONFIG_DIR / "fourbar_crank_rocker.toml").read_text()
+    scene = tmp_path / "capped.toml"
+    scene.write_text(re.sub(r"steps = \d+", "steps = 10000", text) + EFFECTS)
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "a"), "--no-h5",
+                     "--rrd-max-steps", "20000"]) == 0
+    assert "recording:" not in capsys.readouterr().out
+    rec = Recording(tmp_path / "a" / "fourbar_crank_rocker.rrd")
+    assert len(rec.steps("/mechanism/points")["step"]) == 10000
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "b"), "--no-h5",
+                     "--rrd-max-steps", "20000", "--rrd-max-mb", "0.5"]) == 0
+    assert "0.5 MB at most" in capsys.readouterr().out
