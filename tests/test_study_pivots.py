@@ -281,3 +281,25 @@ def test_a_preload_holds_at_each_variants_own_assembled_start(tmp_path):
                                    rtol=1e-12, atol=1e-12)
     pivot = study_of(tmp_path, base, '"points.O4.x" = { from = 3.9, to = 4.1, steps = 3 }')
     assert pivot.slots is None and "assembled drawing" in pivot.path_note
+
+
+def test_each_variant_takes_its_link_turns_from_its_own_drawing(tmp_path):
+    """The rocker drawn along -x (180 deg) with O4 moved 0.01 m up or down: the variants'
+    drawn rocker directions fall either side of +-180 deg, and each variant's link angles (and
+    the torsion spring on the rocker) take their whole turns from its own drawing, as its own
+    run does (the vectorised path took them all from the base's: a turn apart, 2 pi k)."""
+    from test_springs import ROCKER_NEAR_HALF_TURN
+
+    text = ROCKER_NEAR_HALF_TURN.format(start=89.0, stop=91.0)
+    base = write(tmp_path, text, "rocker.toml")
+    study = study_of(tmp_path, base, '"points.O4.y" = { from = -0.01, to = 0.01, steps = 3 }')
+    assert study.slots is not None
+    _, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    for v, y in enumerate(study.values[:, 0]):
+        own = linkpipe.solve(parse_scene(text.replace("O4 = { x = 4.0, y = 0.0",
+                                                      f"O4 = {{ x = 4.0, y = {float(y)!r}"), str(base)))
+        np.testing.assert_array_equal(arrays["link_angle"][v], own.link_angle)
+        np.testing.assert_allclose(arrays["torsion_spring_torque"][v],
+                                   own.forces["torsion_spring_torque"][1], rtol=1e-12, atol=1e-12)
+    first = arrays["link_angle"][:, 0, 2]  # the rocker at the first step, per variant
+    assert first[0] > 0 > first[2]  # the two sides of the half turn: the test can fail

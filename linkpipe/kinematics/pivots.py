@@ -98,7 +98,8 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     acceleration = der["acceleration"] if order >= 2 else None
     rates = link_rates(model, X, velocity, acceleration) if order >= 1 else (None, None)
     return usable, dict(s=sR, s_dot=sdR, s_ddot=sddR, position=X, residual=sw.residual,
-                        status=status, link_angle=link_angles_unwrapped(model, X, period=S, s=sR),
+                        status=status, link_angle=link_angles_unwrapped(model, X, period=S, s=sR,
+                                                                    drawings=pivots),
                         der=der, velocity=velocity, acceleration=acceleration, link_rates=rates,
                         rows=rows_R)
 

@@ -264,7 +264,8 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
 
 
 def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
-                          carry: "AngleCarry | None" = None, s: np.ndarray | None = None):
+                          carry: "AngleCarry | None" = None, s: np.ndarray | None = None,
+                          drawings: np.ndarray | None = None):
     """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
 
     One vectorised pass: each gap is filled with the link's last angle before it (the first
@@ -280,6 +281,10 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     gives unwrapped (905.9 deg is legal), plus its fixed offset from the driver's direction
     (:func:`driven_links`), so a sweep of more than half a turn per step keeps them.
 
+    ``drawings`` (V, n_points, 2), with ``period``: each run's own drawing (a study's
+    variants that move pivots or drawn points), the reference of its whole turns and its
+    plates' offsets (default: the model's drawing for every run).
+
     ``carry``: a sweep solved in segments of steps (:mod:`linkpipe.segments`): the
     :class:`AngleCarry` of the segments before (None for the first); then the return is
     ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
@@ -290,7 +295,7 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
         ang[lo:hi] = model.link_angles(X[lo:hi])
 
     for_chunks(work, X.shape[0], CHUNK)
-    drawn = drawn_link_angles(model)
+    drawn = drawn_link_angles(model) if drawings is None else model.link_angles(drawings)
     if carry is not None:
         out, after = unwrap_runs(ang, carry)
         shift = np.where(np.isnan(carry.shift), _turns_towards(drawn, out), carry.shift)
@@ -304,7 +309,9 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
         out, after = unwrap_runs(ang)[0], None
         out += np.nan_to_num(_turns_towards(drawn, out))
     if s is not None:
-        for li, j, offset in driven_links(model):
+        for li, j, offset in driven_links(model, drawings):
+            if np.ndim(offset):  # one per run (drawings)
+                offset = np.repeat(offset, period)
             turns = np.round((s[:, j] + offset - ang[:, li]) / (2 * np.pi))
             out[:, li] = ang[:, li] + 2 * np.pi * turns
     return (out, after) if carry is not None else out
@@ -342,12 +349,14 @@ def _drawn_link_angles(model: Model) -> np.ndarray:
 HALF_TURN_WITHIN = 1e-9
 
 
-def driven_links(model: Model) -> list[tuple[int, int, float]]:
+def driven_links(model: Model, drawings: np.ndarray | None = None) -> list[tuple]:
     """``(link, driver, offset)`` of each link whose direction an absolute angle driver sets:
     a link that carries both of the driver's points. Its first two points the driver's pair:
     offset 0 (or pi, the pair reversed); else the body's fixed angle from the driver's
     direction to the link's, in the drawing as assembled (:func:`drawn_link_angles`), in
-    (-pi, pi] with half a turn always +pi."""
+    (-pi, pi] with half a turn always +pi: the cut where a plate point drawn a little either
+    side of exactly opposite the driver's direction reads a turn apart. ``drawings``
+    (V, n_points, 2): the offset (V,) in each of these drawings instead."""
     from .start import assembled_drawing
 
     out = []
@@ -359,14 +368,16 @@ def driven_links(model: Model) -> list[tuple[int, int, float]]:
             if (la, lb) in ((a, b), (b, a)):
                 out.append((li, j, 0.0 if (la, lb) == (a, b) else np.pi))
             elif set(driver.points) <= set(model.scene.links[li].points):
-                X = assembled_drawing(model)
-                X = model.start_position if X is None else X
-                d = X[b] - X[a]
-                offset = drawn_link_angles(model)[li] - np.arctan2(d[1], d[0])
+                if drawings is None:
+                    X = assembled_drawing(model)
+                    X = (model.start_position if X is None else X)[None]
+                else:
+                    X = drawings
+                d = X[:, b] - X[:, a]
+                offset = model.link_angles(X)[:, li] - np.arctan2(d[:, 1], d[:, 0])
                 offset = (offset + np.pi) % (2 * np.pi) - np.pi  # [-pi, pi)
-                if abs(abs(offset) - np.pi) < HALF_TURN_WITHIN:
-                    offset = np.pi
-                out.append((li, j, float(offset)))
+                offset = np.where(np.abs(np.abs(offset) - np.pi) < HALF_TURN_WITHIN, np.pi, offset)
+                out.append((li, j, float(offset[0]) if drawings is None else offset))
     return out
 
 

@@ -267,7 +267,8 @@ def scene_warnings(model: Model) -> tuple[str, ...]:
 
 
 def _drawing_warnings(model: Model) -> tuple[str, ...]:
-    loose = [sp.name for sp in model.scene.springs if sp.kind != "gas" and sp.free_length is None]
+    loose = ([sp.name for sp in model.scene.springs if sp.kind != "gas" and sp.free_length is None]
+             if "springs" in model.scene.effects else [])
     if loose and model.n_q and model.n_drivers and assembled_drawing(model) is None:
         names = ", ".join(f'"{n}"' for n in loose)
         return (f"{model.scene.path}: [points]: the drawing does not assemble at the driver "

@@ -144,8 +144,9 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                     and (d.rate != 0 or d.acceleration != 0)):
                 unit = "deg" if d.kind == "angle" else self.units.get("length", "length units")
                 out.append(f'{self.path}: [drivers "{d.name}"] is held (from = to = '
-                           f"{d.from_value:g} {unit}) with rate = {d.rate:g}, acceleration = "
-                           f"{d.acceleration:g}: its value stays while its velocity and "
+                           f"{d.from_value:g} {unit}) with rate = {d.rate:g} {unit}/s, "
+                           f"acceleration = {d.acceleration:g} {unit}/s^2: its value stays while "
+                           "its velocity and "
                            "acceleration are those at every step (the contract's instantaneous "
                            "state); give rate = 0 for a driver that does not move")
         if gravity is not None and "gravity" in effects:
