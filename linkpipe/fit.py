@@ -79,6 +79,10 @@ class FitResult:
     n_evaluations: int = 0
     solves: int = 0
     extra: dict = field(default_factory=dict)
+    #: the final objective over its degrees of freedom, cost / (N - p) (NaN when N <= p), and
+    #: what the fit warns of (:func:`sigma_warnings`)
+    reduced_chi_square: float = math.nan
+    warnings: tuple = ()
 
     @property
     def names(self) -> list[str]:
@@ -237,6 +241,25 @@ def declared_fit_parameters(scene: Scene) -> list[Parameter]:
     return fit_parameters(scene, data) if "fit" in data else []
 
 
+def _nothing_to_fit(scene: Scene, before, k: int, m) -> SceneError:
+    """The error for measurement ``k`` (``m``) with no step where both its measured and its
+    computed value are finite at the start values (``before``, their Result): it names the
+    side that is missing, and for failed steps what the run's summary says of them."""
+    measured = np.isfinite(before.measurements["measured"][:, k])
+    if not measured.any():
+        return SceneError(scene.path, f'measurements "{m.name}"', "log",
+                          f'the log column "{m.log}.{m.column}" has no number at any step',
+                          "check that the column holds numbers over the sweep's time span")
+    totals = before.totals
+    why = "; ".join(totals.non_finite_causes)
+    return SceneError(scene.path, "fit", "parameters",
+                      f'with the start values, no step where "{m.log}.{m.column}" has a value '
+                      f'computes "{m.address}" ({totals.message}'
+                      + (f"; {why}" if why else "") + ")",
+                      "start the fit from values at which the scene solves: run the scene "
+                      "(python -m linkpipe run) to see its steps' statuses")
+
+
 def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
     """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
     ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
@@ -257,17 +280,15 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     mask = np.isfinite(before.measurements["residual"])
     for k, m in enumerate(scene.measurements):
         if not mask[:, k].any():  # nothing to fit to: not a success with the start values
-            raise SceneError(scene.path, f'measurements "{m.name}"', "log",
-                             f'no step has both a measured value ("{m.log}.{m.column}") and '
-                             f'a computed one ("{m.address}")',
-                             "check that the log column holds numbers at the steps that solve")
+            raise _nothing_to_fit(scene, before, k, m)
     sigma = np.array([m.sigma if m.sigma is not None else 1.0 for m in scene.measurements])
     # a failed step, or a trial the scene cannot take, counts as FAILED_STEP_SIGMAS, or as ten
     # times the start's largest weighted residual where that is larger: never a way down
     start = np.abs(before.measurements["residual"] / sigma)[mask]
     penalty = max(FAILED_STEP_SIGMAS, 10.0 * float(start.max()) if start.size else 0.0)
     cost: list[float] = []  # the objective at the start, then at each iteration's point
-    solves = 0  # every evaluation, the Jacobian's finite differences' included
+    solves = 1  # every solve of the scene: at the start values (above), each evaluation, the
+    #             Jacobian's finite differences' included, and at the fitted values (below)
 
     def residuals(x):
         nonlocal solves
@@ -297,7 +318,12 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
                         max_nfev=max_evaluations, callback=per_iteration)
     se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
                                                              for m in scene.measurements))
+    sigma_given = all(m.sigma is not None for m in scene.measurements)
+    dof = sol.fun.size - len(params)
+    chi2 = float(sol.fun @ sol.fun) / dof if dof > 0 else math.nan
+    warnings = sigma_warnings(float(sol.fun @ sol.fun), dof, se) if sigma_given else ()
     try:
+        solves += 1
         after = solve_at(sol.x, reuse)
     except SceneError as exc:  # the optimiser stopped where the scene cannot go
         values = ", ".join(f"{p.address} = {v:.6g}" for p, v in zip(params, sol.x))
@@ -309,7 +335,37 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     for p, v in zip(params, sol.x):
         _set(fitted_data, p.path, v)
     return FitResult(scene, params, sol.x, se, identifiable, cost, before, after, fitted_data,
-                     stage1, sol.message, sol.nfev, solves=solves)
+                     stage1, sol.message, sol.nfev, solves=solves, reduced_chi_square=chi2,
+                     warnings=warnings)
+
+
+#: a fit whose final cost is this improbable under the sigmas (either tail of chi-square with
+#: N - p degrees of freedom) says so: the sigmas, a measurement's scale or the model is off
+SIGMA_TAIL = 1e-6
+
+
+def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
+    """What a fit with every ``sigma`` given warns of: a final ``cost`` (the sum of squared
+    sigma-weighted residuals) that chi-square with ``dof`` degrees of freedom puts beyond
+    :data:`SIGMA_TAIL` on either side. The standard errors ``se`` take the sigmas as true; the
+    warning gives them scaled by the residuals, as a fit without sigma would."""
+    if dof <= 0:
+        return ()
+    from scipy.stats import chi2
+
+    ratio = cost / dof
+    if chi2.sf(cost, dof) < SIGMA_TAIL:
+        scaled = ", ".join(f"{v:.4g}" for v in se * math.sqrt(ratio))
+        return (f"the residuals are {math.sqrt(ratio):.3g} times what the sigmas allow (cost / "
+                f"(N - p) = {ratio:.4g} over {dof} degrees of freedom, where about 1 is "
+                "expected): a sigma, a measurement's scale or the model is off, and the standard "
+                "errors, which take the sigmas as true, are too small; scaled by the residuals "
+                f"they would be {scaled}",)
+    if chi2.cdf(cost, dof) < SIGMA_TAIL:
+        return (f"the residuals are {math.sqrt(ratio):.3g} times the sigmas (cost / (N - p) = "
+                f"{ratio:.4g} over {dof} degrees of freedom, where about 1 is expected): the "
+                "sigmas overstate the noise, and the standard errors with them",)
+    return ()
 
 
 def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):

@@ -14,6 +14,12 @@ def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
              f"{totals.n_steps - totals.n_ok} failed)"]
     lines += [f"  warning: {w}" for w in result.warnings]
+    if totals.first_non_finite >= 0:
+        causes, names = totals.non_finite_causes, totals.non_finite_there
+        shown = ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else "")
+        lines.append(f"  non_finite: first at step {totals.first_non_finite}"
+                     + (f"; {'; '.join(causes)}" if causes else "")
+                     + (f"; not finite there: {shown}" if shown else ""))
     if np.isfinite(totals.max_residual_solved):
         how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else
                f"Newton iterations mean {totals.iterations_sum / totals.n_steps:.2f} max "
@@ -120,8 +126,9 @@ def fit_table(result) -> str:
     lines = [f"{result.scene.name}: fit of {len(result.parameters)} parameter(s) to "
              f"{len(result.scene.measurements)} measurement(s): {result.message}",
              f"  {len(result.cost) - 1} iterations, {result.n_evaluations} evaluations "
-             f"({result.solves} solves with the Jacobian's finite differences), stage 1 solved "
-             f"{result.stage1_solves} time(s)"]
+             f"({result.solves} solves of the scene with the start, the Jacobian's finite "
+             f"differences and the fitted values), stage 1 solved {result.stage1_solves} time(s)"]
+    lines += [f"  warning: {w}" for w in result.warnings]
     width = max(len(n) for n in result.names)
     for k, p in enumerate(result.parameters):
         err = (f"± {result.standard_error[k]:.4g}" if result.identifiable[k]

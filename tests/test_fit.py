@@ -94,6 +94,31 @@ def test_noise_free_data_give_back_the_true_rate_and_stage_1_runs_once(tmp_path)
     assert res.after.measurements["rms"][0] < 1e-9
 
 
+def test_residuals_far_beyond_the_sigmas_are_a_warning_with_the_scaled_errors(tmp_path):
+    """Noise 10x the stated sigma: the final cost is ~100 (N - p), which chi-square puts far
+    beyond 1e-6; the fit warns, and gives the standard error scaled by the residuals, which is
+    exactly the one a fit without sigma reports (the weights cancel: inv(J_w^T J_w) r_w.r_w is
+    sigma-free). Noise at the stated sigma: no warning; noise-free data: the sigmas overstate
+    the noise."""
+    path, _ = make(tmp_path, noise=10 * SIGMA)
+    res = fit(load_scene(str(path)))
+    assert 50 < res.reduced_chi_square < 200
+    [warning] = res.warnings
+    assert "times what the sigmas allow" in warning
+    scaled = float(warning.rsplit("they would be ", 1)[1])
+    path.write_text(path.read_text().replace(f"sigma = {SIGMA}\n", ""))
+    unweighted = fit(load_scene(str(path)))
+    assert unweighted.warnings == ()
+    assert scaled == pytest.approx(unweighted.standard_error[0], rel=1e-3)  # 4 digits printed
+    assert scaled == pytest.approx(res.standard_error[0] * math.sqrt(res.reduced_chi_square),
+                                   rel=1e-3)
+    path, _ = make(tmp_path, noise=SIGMA)
+    assert fit(load_scene(str(path))).warnings == ()
+    path, _ = make(tmp_path)
+    [warning] = fit(load_scene(str(path))).warnings
+    assert "the sigmas overstate the noise" in warning
+
+
 def test_noisy_data_within_the_stated_standard_error(tmp_path):
     path, _ = make(tmp_path, noise=SIGMA)
     res = fit(load_scene(str(path)))
@@ -151,13 +176,17 @@ def test_the_command_writes_the_fitted_scene_and_the_h5(tmp_path, capsys):
         assert f["measured_residual_after"].attrs["rms"][0] < 1e-9
         # one entry per iteration: the trust region never accepts a rise, the last entry is
         # the objective at the fitted values, and the one-parameter fit's solves are its
-        # evaluations plus one finite difference per iteration (the start's Jacobian included)
+        # evaluations plus one finite difference per iteration (the start's Jacobian included),
+        # plus the solves at the start values and at the fitted values the fit reports on
         cost = f["cost"][:]
         assert (np.diff(cost) <= 0).all()
         after = f["measured_residual_after"][:, 0] / SIGMA
         assert cost[-1] == pytest.approx(float(after @ after), rel=1e-6, abs=1e-20)
         iterations = len(cost) - 1
-        assert f.attrs["solves"] == f.attrs["evaluations"] + iterations + 1
+        assert f.attrs["solves"] == f.attrs["evaluations"] + iterations + 1 + 2
+        # noise-free data against sigma = 0.05 N m: far below the sigmas, said in the file
+        assert f.attrs["reduced_chi_square"] < 1e-12
+        assert "the sigmas overstate the noise" in f.attrs["warnings"]
         for name in ("measured_residual_before", "measured_residual_after"):  # a crank's torque
             assert f[name].attrs["units"] == f[name].attrs["measurement_units"] == "N*m"
         for name in ("initial", "fitted", "standard_error"):  # a spring rate
@@ -199,7 +228,23 @@ def test_a_measured_column_with_no_value_is_an_error_not_a_fit(tmp_path):
     path.write_text(scene_text())
     with pytest.raises(linkpipe.errors.SceneError) as err:
         fit(load_scene(str(path)))
-    assert 'measurements "torque"' in str(err.value) and "no step has both" in str(err.value)
+    assert 'measurements "torque"' in str(err.value) and "has no number at any step" in str(err.value)
+
+
+def test_a_start_at_which_no_step_solves_names_the_cause_not_the_log(tmp_path):
+    """A gas spring whose dead length (2.4 m) is above every length it takes (1 .. 2.24 m): no
+    step solves at the start values, so there is nothing to fit; the message says that of the
+    start values, with the run's statuses and the spring's length against its dead length (it
+    had said the log column held no numbers at the steps that solve)."""
+    gas = ('\n[[springs]]\nname = "strut"\nbetween = ["A", "S"]\nkind = "gas"\n'
+           "force_extended = 100.0\nextended_length = 3.0\ndead_length = 2.4\ngamma = 1.0\n")
+    path, _ = make(tmp_path, extra=gas)
+    with pytest.raises(linkpipe.errors.SceneError) as err:
+        fit(load_scene(str(path)))
+    text = str(err.value)
+    assert "[fit] parameters" in text and "with the start values" in text
+    assert "0/81 steps ok; 81 non_finite" in text
+    assert f"gas spring strut: length {math.sqrt(5):.4g} m at or below its dead_length 2.4 m" in text
 
 
 def torsion_text(free: float, fit_params='["springs.lift.k"]') -> str:

@@ -323,3 +323,23 @@ def test_the_writer_takes_consecutive_steps_only_and_every_one(tmp_path):
             writer.add(first)
             writer.finish(r)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_totals_keep_the_first_non_finite_step_counted_over_the_whole_sweep():
+    """Segments merged in step order: the first non_finite step is the earliest segment's,
+    numbered from the sweep's first step (a later segment's own index + the steps before it),
+    with what that segment found there."""
+    from linkpipe.result import Totals
+
+    def part(n, first=-1, causes=(), there=()):
+        return Totals(n, (n, 0, 0, 0, 0, 0, 0), 0.0, 0.0, 0, 0, first_non_finite=first,
+                      non_finite_causes=causes, non_finite_there=there)
+
+    clean, late = part(100), part(50, 7, ("cause b",), ("spring_force[b]",))
+    early = part(80, 3, ("cause a",), ("spring_force[a]",))
+    merged = clean.merged(late)
+    assert (merged.first_non_finite, merged.non_finite_causes, merged.non_finite_there) == (
+        107, ("cause b",), ("spring_force[b]",))
+    merged = clean.merged(early).merged(late)
+    assert (merged.first_non_finite, merged.non_finite_there) == (103, ("spring_force[a]",))
+    assert clean.merged(clean).first_non_finite == -1

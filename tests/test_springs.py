@@ -399,14 +399,21 @@ def test_joint_forces_balance_each_body_with_every_kind():
 # -- a gas strut pushed to its dead length ------------------------------------------------------
 
 
-def test_gas_spring_at_its_dead_length_is_non_finite_never_ok(tmp_path):
+def test_gas_spring_at_its_dead_length_is_non_finite_never_ok(tmp_path, capsys):
     """Lengths 0.10 ... 0.90 m against a dead length of 0.2 m: at 0.1 and 0.2 the gas volume is
-    gone, the force infinite: those steps are non_finite (the file says so); the others ok."""
+    gone, the force infinite: those steps are non_finite (the file says so); the others ok. The
+    summary says why, at the first such step: the spring's length against its dead length, and
+    what is not finite there."""
     path = tmp_path / "dead.toml"
     path.write_text(SLIDE.format(x0=0.1, x1=0.2, x_end=0.9, steps=9)
                     + spring("g", GAS_BODY.format(gamma=1.0)))
     out = tmp_path / "out"
-    assert main(["run", str(path), "--out", str(out), "--no-rrd", "--quiet"]) == 0
+    assert main(["run", str(path), "--out", str(out), "--no-rrd"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if "non_finite:" in ln)
+    assert line == ("  non_finite: first at step 0; gas spring g: length 0.1 m at or below its "
+                    "dead_length 0.2 m; not finite there: spring_energy[g], spring_force[g], "
+                    "power[springs], input_force[x], input_force_lagrange[x], "
+                    "slider_force[guide_p], ground_reaction[O]")
     with h5py.File(out / "slide.h5", "r") as f:
         status = f["status"][:]
         force = f["spring_force"][:, 0]

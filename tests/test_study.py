@@ -823,3 +823,17 @@ def test_a_metric_has_the_unit_of_what_it_reduces(tmp_path, text, unit):
     path = tmp_path / "m.toml"
     path.write_text(study_path.split("[study.metrics]")[0] + f'[study.metrics]\nm = "{text}"\n')
     assert load_study(path).metric_units() == {"m": unit}
+
+
+def test_a_scene_without_study_is_told_how_to_add_its_own_and_the_advice_works(tmp_path, capsys):
+    """``study`` on a plain scene: the message's advice, taken as written (a [study.parameters]
+    table in the scene, no base), gives a study that runs."""
+    from linkpipe.__main__ import main
+    path = tmp_path / "rocker.toml"
+    path.write_text((ROOT / "configs" / "fourbar_crank_rocker.toml").read_text())
+    assert main(["study", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "add [study.parameters] to this scene (its own [study] has no base)" in err
+    path.write_text(path.read_text() + '\n[study.parameters]\n"points.O4.x" = { from = 2.0, to = 2.2, steps = 2 }\n')
+    assert main(["study", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    assert (tmp_path / "out" / "fourbar_crank_rocker_study.h5").is_file()

@@ -125,13 +125,13 @@ def _effect_terms(ctx: Context, influence: Influence, cache: dict | None, chunk_
     return out
 
 
-#: the force stage's variables that the positions alone determine: a singular step (positions
-#: solved; derivatives and what the constraint Jacobian gives undetermined) keeps them, every
-#: other variable is NaN there. A spring's force is its law at its length (with a damper it
-#: holds the damper's force too, NaN there with the velocities).
-POSITION_ONLY = frozenset({"spring_length", "spring_extension", "spring_energy", "spring_force",
-                           "torsion_spring_angle", "torsion_spring_energy", "torsion_spring_torque",
-                           "gravity_energy"})
+#: the force stage's variables that are not forces and that the positions alone determine
+#: (lengths, angles, energies): a singular step (positions solved; derivatives and what the
+#: constraint Jacobian gives undetermined) keeps them; every force, a spring's and a torsion
+#: spring's included, is NaN there, as the contract has it ("singular steps keep their
+#: positions, with NaN derivatives and forces").
+POSITION_ONLY = frozenset({"spring_length", "spring_extension", "spring_energy",
+                           "torsion_spring_angle", "torsion_spring_energy", "gravity_energy"})
 
 #: kinematic statuses whose steps hold no solved positions: every force-stage variable is NaN
 UNSOLVED = (NO_ASSEMBLY, NOT_CONVERGED, NO_INPUT)

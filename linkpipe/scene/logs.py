@@ -34,8 +34,8 @@ def read_frame(table: _Table, path: Path, skip_rows: int = 0):
                           "convert the log to CSV (a header row, then one row per sample) "
                           "or Parquet")
     if not path.is_file():
-        raise table.error("file", f'no such log file "{path}" (relative to the scene file)',
-                          "check the path: it is relative to the folder of the scene file")
+        raise table.error("file", f'no such log file "{path}"',
+                          "check the path (a relative path is read from the scene file's folder)")
     if skip_rows and path.suffix.lower() != ".csv":
         raise table.error("skip_rows", f"skip_rows = {skip_rows} is for a CSV's rows under its "
                           f'header; "{path}" is Parquet, whose rows are all samples',

@@ -63,5 +63,7 @@ def write_h5(fit, path: str | os.PathLike) -> None:
     ]
     attrs = {"scene_name": fit.scene.name, "optimizer_message": str(fit.message),
              "evaluations": int(fit.n_evaluations), "solves": int(fit.solves),
-             "stage1_solves": int(fit.stage1_solves)}
+             "stage1_solves": int(fit.stage1_solves),
+             "reduced_chi_square": float(fit.reduced_chi_square),
+             "warnings": "\n".join(fit.warnings)}
     hdf5.write_layout(path, attrs, coords, variables)

@@ -163,8 +163,12 @@ def load_study(path, catalog_of=None) -> Study:
     text, data = _read(path)
     raw = data.get("study")
     if not isinstance(raw, dict):
+        scene = "points" in data or "links" in data  # a scene's own [study] takes no base
         raise SceneError(path, "study", None, "no [study] table" if raw is None else
-                         "expected a table [study]", "add [study] with base and [study.parameters]")
+                         "expected a table [study]",
+                         "add [study.parameters] to this scene (its own [study] has no base), "
+                         "or write a study file whose [study] base names it" if scene else
+                         "add [study] with base and [study.parameters]")
     unknown = sorted(set(raw) - set(KEYS["study"]))
     if unknown:
         raise SceneError(path, "study", unknown[0], "unknown key", _suggest(unknown[0], KEYS["study"]))
