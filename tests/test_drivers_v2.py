@@ -526,11 +526,16 @@ def test_a_driver_held_while_another_moves_is_a_sweep():
     np.testing.assert_allclose(r.forces["input_force"][1][:, 1], -moment, rtol=0, atol=1e-9)
 
 
-def test_every_driver_held_over_several_steps_is_no_motion():
-    """All drivers held over 91 steps: no sweep at all, a scene error at the first's steps."""
+def test_every_driver_held_over_several_steps_is_that_many_identical_steps():
+    """All drivers held over 91 steps: the contract's formula gives 91 identical steps (legal:
+    its only error is a sweep with no steps), with a warning that says so and how to sweep."""
     text = two_link_arm().text.replace("from = 0.0\nto = 90.0", "from = 0.0\nto = 0.0").replace(
         "from = 120.0\nto = 30.0", "from = 120.0\nto = 120.0")
-    with pytest.raises(linkpipe.SceneError) as err:
-        parse_scene(text, "held.toml")
-    assert (err.value.table, err.value.key) == ('drivers "shoulder"', "steps")
-    assert "every other driver is held too" in err.value.message
+    scene = parse_scene(text, "held.toml")
+    assert scene.n_steps == 91
+    assert any("every driver is held (from = to): the sweep is 91 identical steps" in w
+               for w in scene.warnings)
+    result = linkpipe.solve(scene)
+    assert (result.status == 0).all()
+    np.testing.assert_array_equal(result.position, np.broadcast_to(result.position[0],
+                                                                   result.position.shape))

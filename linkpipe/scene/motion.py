@@ -40,14 +40,8 @@ class MotionTables:
                                   f'gives {driver.steps} steps but drivers "{first.name}" '
                                   f"gives {first.steps}",
                                   "all drivers advance together: make their step counts equal")
-        if self.time is None and first.steps > 1 and all(d.from_value == d.to_value
-                                                         for d in drivers):
-            # one driver held (from = to) while another moves is a sweep; all held is none
-            raise tables[0].error("steps", f"from = {first.from_value:g}, to = "
-                                  f"{first.to_value:g} with steps = {first.steps} gives no motion"
-                                  + ("" if len(drivers) == 1 else
-                                     ", and every other driver is held too"),
-                                  "use steps = 1 for a single position, or change from/to")
+        # every driver held (from = to) over steps > 1 is the contract's sweep of identical
+        # steps (from + i (to - from) / (steps - 1)): allowed, with a warning (Parser.warnings)
         return tuple(drivers)
 
     def driver(self, table: _Table) -> Driver:
@@ -216,10 +210,11 @@ class MotionTables:
             return steps, None  # a driver's from = to over steps > 1: held (driver_tables:
                                 # while another moves)
         step = table.number("step")
-        if start == stop:
-            raise table.error("step", f"{span} gives no motion",
-                              f"use steps = 1 for a single {single}, or change from/to (a "
-                              "driver held while others move: steps = their count)")
+        if start == stop:  # from, from + s, ... up to and including to: from alone
+            if step == 0:
+                raise table.error("step", f"step = 0 with {span}", "use a non-zero step, or "
+                                  "steps = 1 for a single " + single)
+            return 1, step
         if step == 0 or (step > 0) != (stop > start):
             better = abs(step) if step else abs(stop - start) / 10
             raise table.error("step", f"step = {step:g} with {span} gives no steps",
@@ -230,11 +225,7 @@ class MotionTables:
         if not count < MAX_STEPS:
             raise table.error("step", f"step = {step:g} with {span} gives {count:.3g} steps, "
                               f"more than {MAX_STEPS:.0e}", "use a larger step")
-        steps = math.floor(count) + 1
-        if steps == 1:
-            raise table.error("step", f"step = {step:g} with {span} gives no steps: it "
-                              "oversteps to, leaving a single " + single,
-                              f"use a step no larger than |to - from| = {abs(stop - start):g}")
+        steps = math.floor(count) + 1  # 1 where the step oversteps to: from alone (a warning)
         return steps, step
 
     def solver_table(self) -> Solver:

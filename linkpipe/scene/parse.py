@@ -149,6 +149,17 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                            "its velocity and "
                            "acceleration are those at every step (the contract's instantaneous "
                            "state); give rate = 0 for a driver that does not move")
+        moving = [d for d in drivers if d.from_value != d.to_value]
+        if self.time is None and drivers and drivers[0].steps > 1 and not moving:
+            out.append(f"{self.path}: every driver is held (from = to): the sweep is "
+                       f"{drivers[0].steps} identical steps; use steps = 1 for a single "
+                       "position, or give a driver from != to to sweep")
+        for d in moving:  # from, from + s, ... never reached to
+            if self.time is None and d.step is not None and d.steps == 1:
+                out.append(f'{self.path}: [drivers "{d.name}"] step = {d.step:g} oversteps '
+                           f"to = {d.to_value:g} from from = {d.from_value:g}: the sweep is the "
+                           "single position at from; use a step no larger than |to - from| = "
+                           f"{abs(d.to_value - d.from_value):g} to sweep")
         if gravity is not None and "gravity" in effects:
             note = units.gravity_warning(gravity, self.units.get("length"))
             if note:
