@@ -18,8 +18,8 @@ from .workers import using
 
 #: --rrd-max-steps's default (stores/rrd's MAX_STEPS, without importing rerun to read it)
 RRD_MAX_STEPS = 100_000
-#: --rrd-max-mb's default where --rrd-max-steps is not given either (stores/rrd's MAX_BYTES)
-RRD_MAX_MB = 50.0
+#: --rrd-max-mb's default (stores/rrd's MAX_BYTES): no size cap, only the contract's step cap
+RRD_MAX_MB = 0.0
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
@@ -40,8 +40,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                           ".h5 keeps every step; 0: no limit; default 100,000)")
     run.add_argument("--rrd-max-mb", type=_megabytes, default=None, metavar="MB",
                      help="the largest recording in MB (10^6 bytes); a sweep whose recording "
-                          "would be larger keeps a uniform stride of steps (0: no limit; "
-                          "default 50, or no limit when --rrd-max-steps is given alone)")
+                          "would be larger keeps a uniform stride of steps (default 0: no "
+                          "limit; 100,000 steps with every effect are ~90 MB)")
     run.add_argument("--threads", type=_threads, default=1, metavar="N",
                      help="BLAS threads while solving (default 1: the solves are many small "
                           "systems, where more threads only add overhead; 0: the BLAS "
@@ -120,11 +120,10 @@ def _positive(text: str) -> int:
 
 def recording_caps(max_steps: int | None, max_mb: float | None) -> tuple[int, float]:
     """``run``'s recording caps from ``--rrd-max-steps`` and ``--rrd-max-mb`` (None: not
-    given): each as given; neither given, 100,000 steps and 50 MB; a step cap given alone is
-    the only cap (the contract's option: past N steps a stride, and not before)."""
-    if max_mb is None:
-        max_mb = 0.0 if max_steps is not None else RRD_MAX_MB
-    return (RRD_MAX_STEPS if max_steps is None else max_steps), max_mb
+    given): each as given; by default 100,000 steps and no size cap (the contract's: past
+    ``--rrd-max-steps`` a uniform stride, and not before)."""
+    return ((RRD_MAX_STEPS if max_steps is None else max_steps),
+            (RRD_MAX_MB if max_mb is None else max_mb))
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int:

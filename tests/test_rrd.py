@@ -719,18 +719,19 @@ def test_a_recording_past_its_size_cap_keeps_a_stride_and_stays_within_it(tmp_pa
 
 
 def test_a_step_cap_given_alone_is_the_recordings_only_cap(tmp_path, capsys):
-    """--rrd-max-steps given alone is the contract's option as written: past N steps a stride,
-    and not before (no size cap unless --rrd-max-mb is given too). The 10,000-step crank-rocker
-    with every effect (~9 MB) keeps every step under --rrd-max-steps 20000 alone, and a
-    stride under --rrd-max-steps 20000 --rrd-max-mb 0.5; the defaults are 100,000 steps and
-    50 MB, the recording store's own constants."""
+    """--rrd-max-steps is the contract's option as written: past N steps a stride, and not
+    before (no size cap unless --rrd-max-mb is given). The 10,000-step crank-rocker with every
+    effect (~9 MB) keeps every step under --rrd-max-steps 20000, and a stride under
+    --rrd-max-steps 20000 --rrd-max-mb 0.5; the defaults are the recording store's own
+    constants, 100,000 steps and no size cap (a 90,000-step sweep of ~80 MB keeps every step:
+    the plan says so without measuring)."""
     import re
 
     from linkpipe import __main__ as cli
     from linkpipe.stores import rrd
     from conftest import CONFIG_DIR
 
-    assert cli.recording_caps(None, None) == (rrd.MAX_STEPS, rrd.MAX_BYTES / 1e6)
+    assert cli.recording_caps(None, None) == (rrd.MAX_STEPS, rrd.MAX_BYTES / 1e6) == (100_000, 0)
     assert cli.recording_caps(20000, None) == (20000, 0.0)
     assert cli.recording_caps(None, 5.0) == (rrd.MAX_STEPS, 5.0)
     assert cli.recording_caps(0, 7.0) == (0, 7.0)
@@ -745,6 +746,9 @@ def test_a_step_cap_given_alone_is_the_recordings_only_cap(tmp_path, capsys):
     assert "recording:" not in capsys.readouterr().out
     rec = Recording(tmp_path / "a" / "fourbar_crank_rocker.rrd")
     assert len(rec.steps("/mechanism/points")["step"]) == 10000
+    result = solve_scene(str(scene))
+    assert rrd.plan(result, rrd.MAX_STEPS, rrd.MAX_BYTES, n_steps=90_000) == (1, "--rrd-max-steps 100,000")
+    assert rrd.plan(result, rrd.MAX_STEPS, rrd.MAX_BYTES, n_steps=250_000) == (3, "--rrd-max-steps 100,000")
     assert cli.main(["run", str(scene), "--out", str(tmp_path / "b"), "--no-h5",
                      "--rrd-max-steps", "20000", "--rrd-max-mb", "0.5"]) == 0
     assert "0.5 MB at most" in capsys.readouterr().out

@@ -42,9 +42,10 @@ APPLICATION_ID = "linkpipe"
 
 #: the most steps a recording keeps; past it a uniform stride (the HDF5 keeps every step)
 MAX_STEPS = 100_000
-#: the largest recording written (issue 16: larger ones load slowly or not at all in the viewer);
-#: a sweep whose recording would be larger keeps a uniform stride of steps
-MAX_BYTES = 50_000_000
+#: the size cap ``--rrd-max-mb`` asks for (none by default: the contract's only default cap is
+#: ``MAX_STEPS``; 100,000 steps of a scene with every effect are ~90 MB, which the viewer
+#: loads): a sweep whose recording would be larger keeps a uniform stride of steps
+MAX_BYTES = 0
 #: a bound of any scene's bytes per recorded step (measured: 0.5 kB for a four-bar's
 #: kinematics, 0.9 kB with every effect, 0.9 kB for the basketball goal): a sweep whose steps
 #: times this fit the cap is recorded whole without measuring its size
