@@ -262,3 +262,12 @@ def test_running_sums_of_sparse_corrections_are_cumsums_bit_for_bit():
                                       np.cumsum(c, axis=0).view(np.uint64))
 
     check()
+
+
+def test_every_solver_method_the_scene_accepts_is_a_registered_sweep_solver():
+    """``[solver] method`` choices (the scene's, no maths there) and ``kinematics.METHODS``
+    (what ``solve_sweep`` looks the name up in) are the same names."""
+    from linkpipe.kinematics import METHODS
+    from linkpipe.scene.tables import SOLVER_CHOICES
+
+    assert set(METHODS) == set(SOLVER_CHOICES["method"])

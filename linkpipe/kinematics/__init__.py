@@ -143,13 +143,23 @@ def solve_sweep(model: Model, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.ndarr
     finds that they follow Newton's branch, else the general path, with a note saying why;
     ``newton`` the general path; ``dyads`` requires the fast path.
     """
-    method = model.scene.solver.method
-    note, start = "", None
-    if method in ("auto", "dyads"):
-        sweep, note, start = solve_with_dyads(model, s, s_dot, s_ddot, order, method == "dyads")
-        if sweep is not None:
-            return sweep
-    return solve_with_newton(model, s, note, start)
+    return METHODS[model.scene.solver.method](model, s, s_dot, s_ddot, order)
+
+
+def _auto(model: Model, s, s_dot, s_ddot, order: int = 0, required: bool = False) -> Sweep:
+    """The closed-form dyads where they follow Newton's branch, else the general path (with
+    the note saying why); ``required``: the dyads or a scene error."""
+    sweep, note, start = solve_with_dyads(model, s, s_dot, s_ddot, order, required)
+    return sweep if sweep is not None else solve_with_newton(model, s, note, start)
+
+
+#: ``[solver] method`` -> the function :func:`solve_sweep` runs (model, s, s_dot, s_ddot,
+#: order) -> Sweep; the scene's choices (``linkpipe.scene.tables``) are these keys
+METHODS = {
+    "auto": _auto,
+    "dyads": lambda model, s, s_dot, s_ddot, order=0: _auto(model, s, s_dot, s_ddot, order, True),
+    "newton": lambda model, s, s_dot, s_ddot, order=0: solve_with_newton(model, s),
+}
 
 from .pivots import solve_pivot_variants  # noqa: E402
 from .rates import (AngleCarry, dense_chunk, dense_derivatives, derivatives, driver_motion, fd_derivatives,  # noqa: E402
@@ -158,7 +168,7 @@ from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "METHODS", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]
