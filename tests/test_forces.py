@@ -186,7 +186,6 @@ def test_shear_press_force_at_P_and_rod_force(tmp_path):
     r = linkpipe.solve(str(CONFIGS / "shear_press.toml"))
     names = r.point_names
     P, B, C = (r.position[:, names.index(n)] for n in ("P", "B", "C"))
-    A = np.zeros_like(P)
     fP = r.forces["input_force"][1][:, 0]
     rod = r.forces["link_force"][1][:, r.link_names.index("rod")]
     # by hand: the blade C is in equilibrium under the load (0, 500), the rod force along BC and
@@ -282,8 +281,7 @@ def test_ground_reactions_balance_the_mechanism(tmp_path):
     """Sum of ground reactions = sum of m a_G - weights - applied loads (springs are internal)."""
     r = linkpipe.solve(scene_from(EVERY_EFFECT, tmp_path))
     R = r.forces["ground_reaction"][1]  # (S, n_fixed, 2)
-    X, A = r.position, r.acceleration
-    names = r.point_names
+    A = r.acceleration
     total = np.zeros((r.n_steps, 2))
     from linkpipe.forces.applied import body_point as _center, center_frame
 

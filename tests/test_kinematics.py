@@ -2,7 +2,6 @@
 import pathlib
 
 import numpy as np
-import pytest
 
 import linkpipe
 from linkpipe.status import NO_ASSEMBLY, OK

@@ -6,7 +6,6 @@ import shutil
 import sys
 
 import numpy as np
-import pytest
 
 import linkpipe
 from linkpipe.fit import fit
