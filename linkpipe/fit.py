@@ -319,9 +319,17 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
                                                              for m in scene.measurements))
     sigma_given = all(m.sigma is not None for m in scene.measurements)
-    dof = sol.fun.size - len(params)
-    chi2 = float(sol.fun @ sol.fun) / dof if dof > 0 else math.nan
-    warnings = sigma_warnings(float(sol.fun @ sol.fun), dof, se) if sigma_given else ()
+    failing = sol.fun == penalty  # steps that fail at the fitted values (counted as penalty)
+    real = sol.fun[~failing]
+    dof = real.size - len(params)
+    chi2 = float(real @ real) / dof if dof > 0 else math.nan
+    warnings = ((f"{int(failing.sum())} of the {failing.size} measured steps fail at the fitted "
+                 f"values (each counted as {penalty:.4g} sigma in the cost; "
+                 "reduced_chi_square leaves them out): the fit ended beside a region the "
+                 "scene cannot reach; give [fit] bounds that keep it out",) if failing.any()
+                else ())
+    if sigma_given:
+        warnings += sigma_warnings(float(real @ real), dof, se)
     try:
         solves += 1
         after = solve_at(sol.x, reuse)
@@ -340,28 +348,33 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
 
 
 #: a fit whose final cost is this improbable under the sigmas (either tail of chi-square with
-#: N - p degrees of freedom) says so: the sigmas, a measurement's scale or the model is off
+#: N - p degrees of freedom) and whose residuals are off the sigmas by more than SIGMA_FACTOR
+#: (the standard errors as far off: a long log makes a few percent improbable, not wrong) says
+#: so: the sigmas, a measurement's scale or the model is off
 SIGMA_TAIL = 1e-6
+SIGMA_FACTOR = 1.5
 
 
 def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
     """What a fit with every ``sigma`` given warns of: a final ``cost`` (the sum of squared
     sigma-weighted residuals) that chi-square with ``dof`` degrees of freedom puts beyond
-    :data:`SIGMA_TAIL` on either side. The standard errors ``se`` take the sigmas as true; the
-    warning gives them scaled by the residuals, as a fit without sigma would."""
+    :data:`SIGMA_TAIL` on either side, where the residuals are off the sigmas by more than
+    :data:`SIGMA_FACTOR`. The standard errors ``se`` (NaN: not identifiable) take the sigmas
+    as true; the warning gives them scaled by the residuals, as a fit without sigma would."""
     if dof <= 0:
         return ()
     from scipy.stats import chi2
 
     ratio = cost / dof
-    if chi2.sf(cost, dof) < SIGMA_TAIL:
-        scaled = ", ".join(f"{v:.4g}" for v in se * math.sqrt(ratio))
+    if chi2.sf(cost, dof) < SIGMA_TAIL and ratio > SIGMA_FACTOR ** 2:
+        scaled = ", ".join(f"{v:.4g}" if np.isfinite(v) else "not identifiable"
+                           for v in se * math.sqrt(ratio))
         return (f"the residuals are {math.sqrt(ratio):.3g} times what the sigmas allow (cost / "
                 f"(N - p) = {ratio:.4g} over {dof} degrees of freedom, where about 1 is "
                 "expected): a sigma, a measurement's scale or the model is off, and the standard "
                 "errors, which take the sigmas as true, are too small; scaled by the residuals "
                 f"they would be {scaled}",)
-    if chi2.cdf(cost, dof) < SIGMA_TAIL:
+    if chi2.cdf(cost, dof) < SIGMA_TAIL and ratio < SIGMA_FACTOR ** -2:
         return (f"the residuals are {math.sqrt(ratio):.3g} times the sigmas (cost / (N - p) = "
                 f"{ratio:.4g} over {dof} degrees of freedom, where about 1 is expected): the "
                 "sigmas overstate the noise, and the standard errors with them",)

@@ -135,7 +135,9 @@ def fit_row(fr) -> dict:
             "standard_error": np.asarray(fr.standard_error, float),
             "rms_before": np.asarray(fr.before.measurements["rms"], float),
             "rms_after": np.asarray(fr.after.measurements["rms"], float),
-            "evaluations": int(fr.n_evaluations)}
+            "evaluations": int(fr.n_evaluations),
+            "reduced_chi_square": float(fr.reduced_chi_square),
+            "warnings": "\n".join(fr.warnings)}
 
 
 def run_fleet(kind: str, scene: Scene, pattern: str, log_name=None, executor="in_process",
@@ -170,7 +172,8 @@ COLUMNS = {
             "standard_error": ("parameter", np.nan, "parameter"),
             "rms_before": ("measurement", np.nan, "measurement"),
             "rms_after": ("measurement", np.nan, "measurement"),
-            "evaluations": (None, -1, "1")},
+            "evaluations": (None, -1, "1"),
+            "reduced_chi_square": (None, np.nan, "1")},
 }
 
 
@@ -193,6 +196,9 @@ def fleet_columns(kind: str, scene: Scene, paths, rows, params=()) -> tuple[dict
         labels["parameter"] = [p.address for p in params]
     columns = {"message": (("log",), np.array([r.get("message", "") for r in rows], dtype=object)),
                "log_failed": (("log",), np.array([len(r) == 1 for r in rows], dtype=np.int8))}
+    if kind == "fit":  # what each log's fit warned of ("" when nothing), one per line
+        columns["warnings"] = (("log",), np.array([r.get("warnings", "") for r in rows],
+                                                  dtype=object))
     for name, (dim, fill, _) in COLUMNS[kind].items():
         shape = (len(rows),) + ((len(labels[dim]),) if dim else ())
         if dim and not shape[1] or not any(name in r for r in rows):
@@ -232,6 +238,9 @@ def fleet_table(kind: str, scene: Scene, labels: dict, columns: dict, entry_unit
         message = columns["message"][1][i]
         failed = columns["log_failed"][1][i]
         lines.append(f"  {name:<{width}}  " + (f"failed: {message}" if failed else ", ".join(cells)))
+        if "warnings" in columns and not failed:
+            lines += [f"  {'':<{width}}  warning: {w}" for w in
+                      str(columns["warnings"][1][i]).splitlines()]
     return "\n".join(lines)
 
 

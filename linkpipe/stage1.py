@@ -276,10 +276,13 @@ def time_axis(scene: Scene, value: np.ndarray) -> tuple[np.ndarray | None, str]:
     """Return (seconds per step, note): the time when every driver that moves has a rate and
     no acceleration, ``|value - from| / |rate|``, and all of them agree on it (to 1e-9 of the
     sweep's duration); else None, with a note saying why when the rates alone would give one.
-    A driver held (from = to while another moves) gives no time: it is left out."""
+    A driver held (from = to while another moves) gives no time: it is left out; every driver
+    held, each with a rate and no acceleration, is the formula's 0 s at every step."""
     if scene.time is not None:
         return np.asarray(scene.time.instants, dtype=float), ""
     moving = [(j, d) for j, d in enumerate(scene.drivers) if d.from_value != d.to_value]
+    if not moving and all(d.rate != 0 and d.acceleration == 0 for d in scene.drivers):
+        return np.zeros(value.shape[0]), ""
     rates = np.array([d.rate for _, d in moving], dtype=float)
     accs = np.array([d.acceleration for _, d in moving], dtype=float)
     if not len(rates) or np.any(rates == 0) or np.any(accs != 0):

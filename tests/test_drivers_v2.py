@@ -539,3 +539,5 @@ def test_every_driver_held_over_several_steps_is_that_many_identical_steps():
     assert (result.status == 0).all()
     np.testing.assert_array_equal(result.position, np.broadcast_to(result.position[0],
                                                                    result.position.shape))
+    # the contract's time, |value - from| / |rate| where every rate is set: 0 s at every step
+    np.testing.assert_array_equal(result.time, np.zeros(91))

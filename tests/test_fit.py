@@ -400,3 +400,20 @@ def test_several_masses_on_one_link_are_numbered_not_picked_silently(tmp_path):
     assert locate(scene, data, "masses.crank.1.mass")[1] == 2.0
     with pytest.raises(linkpipe.SceneError, match=r"has 2 \[\[masses\]\] entries, not 3"):
         locate(scene, data, "masses.crank.3.mass")
+
+
+def test_the_sigma_warning_needs_improbable_and_large():
+    """A long log makes a residual 1 % above its sigma improbable (chi-square's tail at N = 1e6
+    is ~1e-12) but harmless: no warning unless the standard errors are off by more than 1.5x
+    too; a parameter not identifiable is said so in the scaled list, not printed as nan."""
+    from linkpipe.fit import sigma_warnings
+
+    n = 1_000_000
+    assert sigma_warnings(1.01 * n, n, np.array([1.0])) == ()
+    assert sigma_warnings(2.0 * n, n, np.array([1.0])) == ()  # sqrt(2) = 1.41x: within 1.5
+    [big] = sigma_warnings(4.0 * n, n, np.array([1.0, np.nan]))
+    assert big.endswith("they would be 2, not identifiable")
+    assert sigma_warnings(0.5 * n, n, np.array([1.0])) == ()
+    [small] = sigma_warnings(0.3 * n, n, np.array([1.0]))
+    assert "overstate the noise" in small
+    assert sigma_warnings(30.0, 10, np.array([1.0])) == ()  # 3x the variance, but N = 10: likely

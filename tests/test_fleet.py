@@ -74,6 +74,8 @@ def test_fit_over_a_glob_of_logs(logs, tmp_path):
         assert f["fitted"][i, 0] == fr.fitted[0]
         assert f["standard_error"][i, 0] == fr.standard_error[0]
         assert f["rms_after"][i, 0] == fr.after.measurements["rms"][0]
+        assert f["reduced_chi_square"][i] == fr.reduced_chi_square  # as each log's own fit
+        assert f["warnings"][i] == "\n".join(fr.warnings)
     assert f["fitted"][1, 0] > f["fitted"][0, 0] * 1.05  # 10 % more pressure: a heavier load
     with h5py.File(tmp_path / "dump_truck_logged_fleet_fit.h5", "r") as h5:  # the mass, in kg
         for name in ("fitted", "standard_error"):

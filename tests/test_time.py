@@ -241,6 +241,18 @@ def test_time_step_mistakes_point_to_a_fix_that_parses(time, key, hint):
     assert scene_of(crank_rocker("from = 30.0\nrate = 40.0", fixed)).n_steps >= 1
 
 
+@pytest.mark.parametrize("time, warned", [
+    ("from = 1.0\nto = 1.0\nstep = 0.1", False),  # from, from + s, ... up to to: from alone
+    ("from = 0.0\nto = 1.0\nstep = 2.0", True),   # the step passes to: from alone, warned
+])
+def test_a_time_step_that_leaves_a_single_instant(time, warned):
+    """[time] follows the drivers' step formula: one instant at from; a step past to says so."""
+    scene = scene_of(crank_rocker("from = 30.0\nrate = 40.0", time))
+    assert scene.n_steps == 1 and list(scene.time.instants) == [scene.time.from_value]
+    said = [w for w in scene.warnings if "[time] step = 2 oversteps to = 1" in w]
+    assert len(said) == warned
+
+
 def test_a_law_needs_time_to_move_in():
     with pytest.raises(SceneError) as err:
         scene_of(crank_rocker('law = "cycloidal"\nfrom = 30.0\nto = 90.0',

@@ -154,6 +154,11 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
             out.append(f"{self.path}: every driver is held (from = to): the sweep is "
                        f"{drivers[0].steps} identical steps; use steps = 1 for a single "
                        "position, or give a driver from != to to sweep")
+        t = self.time
+        if t is not None and t.step is not None and t.steps == 1 and t.to_value > t.from_value:
+            out.append(f"{self.path}: [time] step = {t.step:g} oversteps to = {t.to_value:g} "
+                       f"from from = {t.from_value:g}: the sweep is the single instant at from; "
+                       f"use a step no larger than to - from = {t.to_value - t.from_value:g}")
         for d in moving:  # from, from + s, ... never reached to
             if self.time is None and d.step is not None and d.steps == 1:
                 out.append(f'{self.path}: [drivers "{d.name}"] step = {d.step:g} oversteps '

@@ -13,8 +13,9 @@ Two kinds of step are held to what rounding can fix there, with the reason:
 
 - at a ``singular`` step (a dead centre, a limit of the assembly range) the constraint
   residual is quadratic in the distance along the singular direction, so a rounding of eps
-  in the residual moves the solution by ~sqrt(eps) = 1.5e-8 of the scale: positions and link
-  angles agree there to ``SINGULAR_RTOL`` (measured: 8.3e-9);
+  in the residual moves the solution by ~sqrt(eps) = 1.5e-8 of the scale: positions, link
+  angles and what the positions alone give (``POSITIONAL``) agree there to ``SINGULAR_RTOL``
+  (measured: 8.3e-9);
 - an array that is rounding noise around zero (the link angular accelerations of links
   turning at a constant rate) is compared on the scale of the terms whose cancellation made
   it: for link angular accelerations the largest squared link rate (the centripetal terms of
@@ -29,6 +30,7 @@ import numpy as np
 import pytest
 
 import linkpipe
+from linkpipe.forces import POSITION_ONLY
 from cases import CASES, DIAGNOSTICS, HERE, arrays
 
 RTOL = 1e-11
@@ -38,8 +40,10 @@ NOISE_FLOOR = 1e-2
 #: positions at singular steps: sqrt(eps) ~ 1.5e-8 of the scale, with a margin of ~7
 SINGULAR_RTOL = 1e-7
 SINGULAR = 2  # status code
-#: variables fixed only to SINGULAR_RTOL at singular steps (the others are NaN there)
-POSITIONAL = {"position", "link_angle"}
+#: variables fixed only to SINGULAR_RTOL at singular steps: the positions and what they alone
+#: give (linkpipe.forces.POSITION_ONLY: spring lengths, extensions and energies, torsion spring
+#: angles and energies, gravity's energy); every other variable is NaN there
+POSITIONAL = {"position", "link_angle"} | POSITION_ONLY
 
 
 def _scale(var: str, want: np.ndarray, ref) -> float:
