@@ -140,9 +140,9 @@ def preflight(scene: Scene, segment: int | None = None, recorded_steps: int = 0)
     mob = mobility_of(model)
     _, s, _, _ = kin.driver_motion(model)  # a scene has at least one step
     present = np.flatnonzero(np.isfinite(s).all(axis=1))  # not every logged value is missing
-    if len(present):
-        kin.start_state(model, s[present[0]], scene.solver.tol * model.size,
-                        scene.solver.max_iter)
+    if len(present):  # (first steps out of the drawing's reach are no_assembly, not an error)
+        kin.steps_out_of_reach(model, s, np.isfinite(s).all(axis=1), model.tolerance(),
+                               scene.solver.max_iter)
     return model, mob
 
 
@@ -218,7 +218,8 @@ def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
     return Result(
         scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
         driver_velocity=drive.rate, driver_acceleration=drive.acceleration,
-        time_note=time_note, position=X, link_angle=k.link_angle, status=status,
+        time_note=time_note, reach_note=k.reach_note, position=X, link_angle=k.link_angle,
+        status=status,
         residual=k.sweep.residual, iterations=k.sweep.iterations, condition=der["condition"],
         velocity=k.velocity, acceleration=k.acceleration,
         link_angular_velocity=k.link_rates[0], link_angular_acceleration=k.link_rates[1],
@@ -242,7 +243,7 @@ def status_of(model, kinematic_status, residual, stored: list, forces, size=None
     if forces:
         stored = stored + forces.defined_arrays()
     return assign([kinematic_status] + ([forces.status] if forces else []), residual,
-                  model.scene.solver.tol * (model.size if size is None else size),
+                  model.tolerance(size=size),
                   [a for a in stored if a is not None], finite=finite)
 
 

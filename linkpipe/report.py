@@ -52,6 +52,8 @@ def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
         lines.append(line)
     if result.time_note:
         lines.append(f"  {result.time_note}")
+    if result.reach_note:
+        lines.append(f"  no_assembly until in reach: {result.reach_note}")
     if sc.effects:
         lines.append(f"  effects: {', '.join(sc.effects)}")
     if sc.present_but_off:

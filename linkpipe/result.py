@@ -266,6 +266,8 @@ class Result:
     solver_note: str = ""  # the dyad chain, or why method = "auto" chose Newton
     linear_algebra_used: str = ""  # general path: the one-step solves' dense or sparse LU, and why
     time_note: str = ""  # why there is no time axis although every driver has a rate
+    #: why the sweep's first steps are no_assembly (its first driver value out of reach), or ""
+    reach_note: str = ""
     measurements: dict | None = None  # linkpipe.measure.compare: measured against computed
     kinematics: Any = field(default=None, repr=False, compare=False)  # stage1.Kinematics
     step_numbers: np.ndarray | None = None  # the sweep's step of each row (None: 0, 1, ...)
@@ -479,6 +481,8 @@ class Result:
                 attrs[key] = value
         if self.time_note:
             attrs["time_note"] = self.time_note
+        if self.reach_note:
+            attrs["reach_note"] = self.reach_note
         attrs["warnings"] = list(self.warnings)  # legal but probably not meant
         for key, val in self.units().items():
             attrs[f"units_{key}"] = val

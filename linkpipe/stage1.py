@@ -17,7 +17,7 @@ from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
 from .result import Motion
 from .scene import Scene
-from .status import NO_INPUT, OK, finite_rows
+from .status import NO_ASSEMBLY, NO_INPUT, OK, finite_rows
 
 
 def mobility_of(model):
@@ -50,6 +50,9 @@ class Kinematics:
     #: what the force stage may keep between calls on this stage 1 without the Lagrange side
     #: (influence coefficients, effects whose scene inputs are unchanged: forces.compute_forces)
     force_cache: dict = field(default_factory=dict, compare=False, repr=False)
+    #: why the sweep's first steps are no_assembly: its first driver value out of the
+    #: drawing's reach (:func:`linkpipe.kinematics.start.steps_out_of_reach`), or ""
+    reach_note: str = ""
 
     def motion(self) -> Motion:
         """The sweep as the force stage takes it."""
@@ -100,18 +103,39 @@ class Stage1:
         self.time_axis = time_axis(scene, self.drive.value)
         self.order = 2 if stages.acceleration else 1 if stages.velocity else 0
         self.present = np.isfinite(self.s).all(axis=1)  # False where a logged value is missing
+        # the steps solved: those present, from the first the drawing reaches (the first
+        # ``unreached`` steps out of its reach are no_assembly: ``reach_note`` says why)
+        self.solvable, self.unreached, self.reach_note = self.present, 0, ""
+        try:
+            self._plan()
+        except kin.OutOfReach:
+            self.unreached, self.reach_note = kin.steps_out_of_reach(
+                model, self.s, self.present, model.tolerance(), scene.solver.max_iter)
+            self.solvable = self.present & (np.arange(self.n_steps) >= self.unreached)
+            self._plan()
+        self.restart()
+
+    def _plan(self) -> None:
+        """The dyads and their branches at the first solvable steps, or the general path."""
+        model, method = self.model, self.scene.solver.method
         self.newton: kin.Sweep | None = None
         self.chain, self.note, self.start = None, "", None
-        method = scene.solver.method
-        first = np.flatnonzero(self.present)[:2]
+        first = np.flatnonzero(self.solvable)[:2]
         if not len(first):
-            self.newton = _sweep_where_present(model, self.s, self.present)
+            self.newton = self._unreached(_sweep_where_present(model, self.s, self.solvable))
         elif method in ("auto", "dyads"):
             self.chain, self.note, self.start = kin.dyad_plan(model, self.s[first],
                                                               method == "dyads")
         if self.chain is None and self.newton is None:
             self.use_newton()
-        self.restart()
+
+    def _unreached(self, sweep: kin.Sweep, lo: int = 0) -> kin.Sweep:
+        """``sweep`` (of steps ``lo`` ..) with the steps out of the drawing's reach that have
+        every driver value no_assembly (they were left out of the solve, as no_input)."""
+        n = min(self.unreached - lo, len(sweep.status))
+        if n > 0:
+            sweep.status[:n] = np.where(self.present[lo:lo + n], NO_ASSEMBLY, sweep.status[:n])
+        return sweep
 
     @property
     def n_steps(self) -> int:
@@ -128,11 +152,11 @@ class Stage1:
         t0 = _time.perf_counter()
         note = self.note or (kin.DYADS_LEFT if self.chain is not None else "")
         self.chain = None
-        if self.present.all():
+        if self.solvable.all():
             self.newton = kin.solve_with_newton(self.model, self.s, note, self.start)
         else:
-            self.newton = _sweep_where_present(self.model, self.s, self.present, note,
-                                               self.start)
+            self.newton = self._unreached(_sweep_where_present(self.model, self.s, self.solvable,
+                                                               note, self.start))
         self._add("positions", t0)
         self.restart()
 
@@ -155,15 +179,19 @@ class Stage1:
                                ("position", "residual", "iterations", "status")),
                              self.newton.method, self.newton.note)
         forced = self.scene.solver.method == "dyads"
-        present = self.present[rows]
+        present = self.solvable[rows]
         s, sd, sdd = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
         if present.all():
             return kin.dyad_sweep(self.model, self.chain, s, sd, sdd, self.order, forced,
                                   self.chain_carry)
         idx = np.flatnonzero(present)
-        sub = kin.dyad_sweep(self.model, self.chain, s[idx], sd[idx], sdd[idx], self.order,
-                             forced, self.chain_carry)
-        return None if sub is None else _scattered(self.model, sub, idx, len(present))
+        sub = (kin.dyad_sweep(self.model, self.chain, s[idx], sd[idx], sdd[idx], self.order,
+                              forced, self.chain_carry) if len(idx) else None)
+        if sub is None and len(idx):
+            return None
+        if sub is None:  # no step of these solved: every one out of reach or without a value
+            return self._unreached(_sweep_where_present(self.model, s, present), rows.start)
+        return self._unreached(_scattered(self.model, sub, idx, len(present)), rows.start)
 
     def segment(self, lo: int, hi: int) -> Kinematics | None:
         """Stage 1 of steps ``lo .. hi - 1``, or None where auto must leave the dyads for
@@ -204,7 +232,7 @@ class Stage1:
             f.name: getattr(self.drive, f.name)[rows] for f in dataclasses.fields(self.drive)
             if isinstance(getattr(self.drive, f.name), np.ndarray)})
         return Kinematics(self.mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der,
-                          velocity, acceleration, link_rates)
+                          velocity, acceleration, link_rates, reach_note=self.reach_note)
 
 
 def _scattered(model, sub: kin.Sweep, idx: np.ndarray, S: int) -> kin.Sweep:

@@ -23,7 +23,7 @@ from .decompose import decompose
 from .branches import refine_branches, set_branches
 from .dyads import branch_check, solve_chain
 from .sparse import no_engine_reason
-from .start import start_state
+from .start import OutOfReach, start_state, steps_out_of_reach
 from .vectorised import max_abs_phi, solve_newton
 from ..status import NO_ASSEMBLY, OK
 
@@ -88,7 +88,7 @@ def dyad_sweep(model: Model, chain, s, s_dot, s_ddot, order: int, forced: bool,
     """The dyads' Sweep of the steps ``s`` (S, nd), or None where auto must leave them for
     Newton (a step fails :func:`branch_check`). ``carry``: kept across the segments of one
     sweep (:func:`solve_chain`), so that segments give the whole sweep's rows and checks."""
-    tol_abs = model.scene.solver.tol * model.size
+    tol_abs = model.tolerance()
     sw = solve_chain(chain, s, s_dot, s_ddot, order=order, gaps=not forced,
                      max_abs_phi=max_abs_phi(model), carry=carry)
     if not (forced or branch_check(chain, sw)):
@@ -106,7 +106,7 @@ def start_branches(model: Model, chain, s: np.ndarray):
     """Assemble the start at s[0] (``start_state``: (q, slope)) and set each dyad's branch of
     ``chain`` from it; return the start."""
     sc = model.scene.solver
-    start = start_state(model, s[0], sc.tol * model.size, sc.max_iter)
+    start = start_state(model, s[0], model.tolerance(), sc.max_iter)
     q0, slope0 = start
     X0 = model.positions(q0[None])[0]
     set_branches(chain, X0, s[0])
@@ -168,7 +168,7 @@ from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "METHODS", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "METHODS", "OutOfReach", "steps_out_of_reach", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]

@@ -34,17 +34,31 @@ def affine_coefficients(model: Model, angle: np.ndarray, drawings: np.ndarray,
     slot = {int(p): k for k, p in enumerate(model.moving)}
     relative_rows = {model.n_constraints + int(j)
                      for j in np.flatnonzero(model.drv_kind == eq.RELATIVE)}
-    values: dict = {}  # (row, col) -> (K n_probes,), terms added in the model's order
-    terms = model.jacobian_terms(X.reshape(K * n_probes, model.n_points, 2), np.tile(probe_s, (K, 1)),
-                                 None if rows is None else rows.take(np.repeat(np.arange(K), n_probes)))
-    for r, p, gx, gy in terms:
-        if p not in slot:
-            continue
-        for col, g in ((2 * slot[p], gx), (2 * slot[p] + 1, gy)):
-            values[(r, col)] = values[(r, col)] + g if (r, col) in values else (
-                np.zeros(K * n_probes) + g)
+    per_row = None if rows is None else rows.take(np.repeat(np.arange(K), n_probes))
+
+    def probed(X):  # (row, col) -> (K n_probes,), terms added in the model's order
+        values: dict = {}
+        terms = model.jacobian_terms(X.reshape(K * n_probes, model.n_points, 2),
+                                     np.tile(probe_s, (K, 1)), per_row)
+        for r, p, gx, gy in terms:
+            if p not in slot:
+                continue
+            for col, g in ((2 * slot[p], gx), (2 * slot[p] + 1, gy)):
+                values[(r, col)] = values[(r, col)] + g if (r, col) in values else (
+                    np.zeros(K * n_probes) + g)
+        return values
+
+    values = probed(X)
     keys = sorted(k for k in values if k[0] not in relative_rows)
     V = np.array([values[k] for k in keys]).reshape(len(keys), K, n_probes).transpose(1, 2, 0)
+    # the coefficients on q with the fixed points at the origin: an entry is affine in q and
+    # in the fixed coordinates separately (no products of the two), so they are the same, but
+    # read off the difference of two probes of size 1 instead of two of the drawing's distance
+    # from the origin (at 1e4 x the size that difference lost 8 digits, squared by q there)
+    X[:, :, fixed] = 0.0
+    zero = probed(X)
+    Vq = np.array([zero.get(k, np.zeros(K * n_probes)) for k in keys]).reshape(
+        len(keys), K, n_probes).transpose(1, 2, 0)
     J0 = V[:, 0]
     C = np.zeros((K, 1 + n + 2 * na, len(keys)))
     base = J0.copy()
@@ -54,7 +68,7 @@ def affine_coefficients(model: Model, angle: np.ndarray, drawings: np.ndarray,
         C[:, 1 + n + na + k] = V[:, 1 + n + na + k] - J0 + bc
         base = base - bc
     C[:, 0] = base
-    C[:, 1:1 + n] = V[:, 1:1 + n] - J0[:, None]
+    C[:, 1:1 + n] = Vq[:, 1:1 + n] - Vq[:, :1]
     # clean rounding noise: entries are exact small rationals of the lengths
     top = np.abs(C).max(axis=(1, 2)) if C.size else np.zeros(K)
     C[np.abs(C) < (1e-14 * np.maximum(1.0, top))[:, None, None]] = 0.0

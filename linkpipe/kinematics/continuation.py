@@ -95,7 +95,7 @@ class _Continuation:
     def __init__(self, model: Model, tol, max_iter, predictor, jacobian, subdivide):
         self.model, self.tol, self.max_iter = model, tol, max_iter
         self.predictor, self.jacobian, self.subdivide = predictor, jacobian, subdivide
-        self.tol_abs = tol * model.size
+        self.tol_abs = model.tolerance(tol)
         self.rcond = model.scene.solver.singular_rcond
         self.square = model.n_rows == model.n_q
         # one-step kernels: the same Newton, Phi and checks with less overhead per step (the

@@ -20,6 +20,48 @@ CARRY_LENGTH_STEP = 0.005
 MAX_CARRY_STEPS = 10_000
 
 
+class OutOfReach(SceneError):
+    """The sweep's first driver value is out of the drawing's reach (one driver): ``along``
+    the drivers' values at the drawing, on the sweep's turn, and ``last`` the last values
+    assembled on the way from them towards the first (internal units, (nd,))."""
+
+    def __init__(self, *args, along, last):
+        super().__init__(*args)
+        self.along, self.last = np.asarray(along, float), np.asarray(last, float)
+
+
+#: the steps a sweep's start may move on to when its first ones are out of reach
+REACH_TRIES = 4
+
+
+def steps_out_of_reach(model: Model, s: np.ndarray, present: np.ndarray, tol_abs: float,
+                       max_iter: int) -> tuple[int, str]:
+    """``(k, message)``: the sweep's first k steps (of ``s`` (S, nd), those ``present``) are
+    out of the drawing's reach, the k-th (or none, k = S) is the first that assembles, and the
+    message says so (0, "" where the first present step assembles). A step is out of reach on
+    the far side of the last value assembled on the way from the drawing towards the first
+    (:func:`reach_from_drawing`); the start is then tried at the first step on the near side
+    (:data:`REACH_TRIES` times). Any other failure to assemble stays the scene's error."""
+    idx = np.flatnonzero(present)
+    if not len(idx):
+        return 0, ""
+    first, message = int(idx[0]), ""
+    for _ in range(REACH_TRIES):
+        try:
+            start_state(model, s[first], tol_abs, max_iter)
+            return first, message
+        except OutOfReach as exc:
+            if not message:
+                message = f"[{exc.table}] {exc.key}: {exc.message}; {exc.hint}"
+            side = np.sign(exc.along - exc.last)[0]  # the drawing's side of the limit
+            near = present & (np.arange(len(s)) > first) & ((s[:, 0] - exc.last[0]) * side >= 0)
+            if not near.any():
+                return len(s), message
+            first = int(np.argmax(near))
+    start_state(model, s[first], tol_abs, max_iter)  # the scene's own error, if any
+    return first, message
+
+
 def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
     """Return (q (n_q,), slope): the assembled start's q and, when the drawn pose was carried
     to ``s0`` by a one-driver path, dq/ds (n_q, 1) along that path's last step (a secant), else
@@ -90,12 +132,13 @@ def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
         first, drawn, along, last = (float(v) / scale for v in (s0[0], drawn[0], along[0], last[0]))
         turn = (f" ({along:.6g} {unit} on the sweep's turn)" if abs(along - drawn) > 1e-9 * max(
             1.0, abs(drawn)) else "")
-        raise SceneError(path, f'drivers "{driver.name}"', "log" if driver.timed == "log" else "from",
+        raise OutOfReach(path, f'drivers "{driver.name}"', "log" if driver.timed == "log" else "from",
                          f"the first driver value {first:.6g} {unit} is out of reach: from the "
                          f"drawing's {drawn:.6g} {unit}{turn} towards it the mechanism "
                          f"assembles as far as {last:.6g} {unit} and no further",
                          "start the sweep within reach (" + _first_values(model.scene.drivers)
-                         + "), or check the link lengths and `local` coordinates")
+                         + "), or check the link lengths and `local` coordinates",
+                         along=reach[0], last=reach[1])
     table, key = constraint_source(model, int(np.argmax(np.abs(sol.fun))))
     where = f"[{table}]" + (f" {key}" if key else "")
     raise SceneError(path, "points", None,
@@ -229,7 +272,7 @@ def _assembled_drawing(model: Model) -> np.ndarray | None:
     if not np.isfinite(drawn).all():
         return None
     q0 = model.q_of(X0)
-    tol_abs = model.scene.solver.tol * model.size
+    tol_abs = model.tolerance()
     fast = _step_kernels(model)
     q, _, _, conv = (fast.newton(q0[0], drawn, tol_abs, 50) if fast is not None
                      else newton(model, q0, drawn[None], tol_abs, 50))
@@ -263,7 +306,21 @@ def drawing_warnings(model: Model) -> tuple[str, ...]:
 
 def scene_warnings(model: Model) -> tuple[str, ...]:
     """Everything legal but probably not meant: the scene's own (parsing) and its drawing's."""
-    return tuple(model.scene.warnings) + drawing_warnings(model)
+    return tuple(model.scene.warnings) + drawing_warnings(model) + far_warnings(model)
+
+
+def far_warnings(model: Model) -> tuple[str, ...]:
+    """A drawing so far from the origin that float64 cannot meet ``[solver] tol`` there (the
+    tolerance is floored at what it can: :meth:`Model.tolerance`)."""
+    wanted, met = model.scene.solver.tol * model.size, float(model.tolerance())
+    if not met > wanted:
+        return ()
+    length = dict(model.scene.units).get("length", "length units")
+    return (f"{model.scene.path}: [points]: the drawing lies {model.extent:.3g} {length} from the "
+            f"origin, {model.extent / model.size:.3g} times the mechanism's size: float64 "
+            f"resolves positions there to {met:.2g} {length}, above the {wanted:.2g} that "
+            f"[solver] tol asks, which the residual is held to instead; put the origin near "
+            "the mechanism for full precision",)
 
 
 def _drawing_warnings(model: Model) -> tuple[str, ...]:

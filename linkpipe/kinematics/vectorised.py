@@ -66,7 +66,7 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
         q, res, it, st = solve_positions(model, s, q_start=q0, start_slope=slope0)
         out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
         return out
-    tol_abs = sc.tol * model.size
+    tol_abs = model.tolerance()
     if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
         start = start_state(model, s[0], tol_abs, sc.max_iter)
     qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
@@ -136,7 +136,7 @@ def _refine_between_nodes(model: Model, eng, out: dict, s, nodes, qn, slopes, re
     prediction than a small part of its interval's motion, marks its interval bad (returned,
     (n_nodes - 1,) bool)."""
     sc, S = model.scene.solver, s.shape[0]
-    tol_abs = sc.tol * model.size
+    tol_abs = model.tolerance()
     interval_ok = regular[:-1] & regular[1:]
     bad_interval = ~interval_ok
     lengths = np.diff(nodes)

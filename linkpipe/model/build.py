@@ -18,6 +18,14 @@ from . import equations as eq
 from .rows import _driver_rows, _link_rows, _slider_rows
 
 
+#: the residual a drawing's coordinates can meet, in units of eps x its largest |coordinate|
+#: (a constraint row sums a few coordinates' rounding), for a drawing farther than
+#: FAR_FROM_ORIGIN x its size from the origin (nearer, a tol that rounding cannot meet is the
+#: scene's error at [solver] tol)
+ROUNDING_FLOOR = 4.0
+FAR_FROM_ORIGIN = 100.0
+
+
 @dataclass(frozen=True)
 class Model:
     """Index arrays of one scene (names resolved to indices once, here)."""
@@ -65,6 +73,23 @@ class Model:
     loc_link: np.ndarray
     # the same rows as plain numbers, for model/equations.py (built from the arrays above)
     rows: eq.Rows
+    #: the largest |coordinate| of the drawing (its distance from the origin sets the rounding
+    #: of every position: eps x extent)
+    extent: float = 0.0
+
+    def tolerance(self, tol: float | None = None, size=None):
+        """The absolute residual tolerance (length units): ``tol`` (default ``[solver] tol``)
+        times the mechanism's size (``size``: a study's per-variant sizes), but never below
+        what float64 can resolve at the drawing's distance from the origin where that is more
+        than :data:`FAR_FROM_ORIGIN` sizes: :data:`ROUNDING_FLOOR` x eps x extent (a four-bar
+        of size 5 drawn at (1e5, 1e5) has coordinates fixed only to ~1.5e-11; 1e-12 x 5 would
+        refuse every step of it). Nearer the origin a tol below rounding stays the scene's
+        error at [solver] tol."""
+        tol = self.scene.solver.tol if tol is None else tol
+        size = self.size if size is None else size
+        far = self.extent > FAR_FROM_ORIGIN * np.max(size)
+        floor = ROUNDING_FLOOR * np.finfo(float).eps * self.extent if far else 0.0
+        return np.maximum(tol * size, floor)
 
     @property
     def n_points(self) -> int:
@@ -274,6 +299,7 @@ def build_model(scene: Scene) -> Model:
         scene=scene, point_names=names, start_position=X0, fixed=fixed,
         moving=np.flatnonzero(~fixed), size=size, **arrays, link_a=ia, link_b=ib,
         dist_link=ints(dist["link"]), loc_link=ints(loc["link"]), rows=eq.rows_of(**arrays),
+        extent=float(np.abs(X0).max()) if X0.size else 0.0,
     )
 
 

@@ -158,36 +158,66 @@ steps = 5
 """
 
 
-@pytest.mark.parametrize("first", [0.01, 3.0])
-def test_a_first_value_out_of_reach_names_the_driver_and_the_reach(first):
+@pytest.mark.parametrize("first, unreached", [(0.01, 1), (3.0, 3)])
+def test_first_values_out_of_reach_are_no_assembly_and_the_note_names_the_reach(first, unreached):
     """An arm of radius 1 about O, a cylinder from C0 (|C0| = sqrt(0.89)) to its end: the
     cylinder's length lies between 1 - |C0| and 1 + |C0| (the arm along the line through O and
-    C0). A first value beyond that is the driver's `from`, and the message says how far the
-    mechanism goes from the drawing towards it (the limit bisected: to 1e-6 m, the solver's
-    tolerance near a fold, where the length's first order in the arm's angle vanishes)."""
-    with pytest.raises(linkpipe.SceneError) as err:
-        linkpipe.solve(linkpipe.parse_scene(CYLINDER_ARM.format(first=first), "arm.toml"))
-    e = err.value
-    assert (e.path, e.table, e.key) == ("arm.toml", 'drivers "cyl"', "from")
+    C0). Steps beyond that are no_assembly (failures are data: the sweep goes on, and starts
+    at the first step in reach: 0.01 -> 1.0 in 5 steps leaves out 0.01; 3.0 -> 1.0 leaves out
+    3.0, 2.5, 2.0); the run's reach_note says how far the mechanism goes from the drawing
+    towards the first value (the limit bisected: to 1e-6 m, the solver's tolerance near a fold,
+    where the length's first order in the arm's angle vanishes). The steps in reach meet the
+    constraints to Newton's tolerance: C on the unit circle at the cylinder's length from C0."""
+    r = linkpipe.solve(linkpipe.parse_scene(CYLINDER_ARM.format(first=first), "arm.toml"))
+    assert list(r.status) == [1] * unreached + [OK] * (5 - unreached)
     limit = 1.0 - np.sqrt(0.89) if first < 1 else 1.0 + np.sqrt(0.89)
-    said = float(e.message.split("as far as ")[1].split(" m")[0])
+    said = float(r.reach_note.split("as far as ")[1].split(" m")[0])
     assert said == pytest.approx(limit, abs=1e-5)  # printed to 6 significant digits
-    assert "out of reach" in e.message and "start the sweep within reach" in e.hint
+    assert f"the first driver value {first:g} m is out of reach" in r.reach_note
+    C, C0 = point(r, "C")[unreached:], np.array([0.5, -0.8])
+    tol = 1e-12 * r.model.size  # Newton's tolerance
+    np.testing.assert_allclose(np.hypot(*C.T), 1.0, rtol=0, atol=tol)
+    # the driver's row is (d^2 - s^2) / (2 L), L its largest length (1 + |C0|): d to tol L / s
+    length = r.driver_value[unreached:, 0]
+    assert (np.abs(np.hypot(*(C - C0).T) - length) <= tol * (1 + np.sqrt(0.89)) / length).all()
+    assert np.isnan(point(r, "C")[:unreached]).all()
 
 
 def test_an_angle_out_of_reach_a_turn_on_says_the_drawings_angle_and_the_limit():
     """Crank 2.5, coupler 2, rocker 3, ground 4: the crank reaches up to the angle where
     |O4 A| = coupler + rocker = 5, cos t = (2.5^2 + 4^2 - 5^2) / (2 * 2.5 * 4) = -0.1375
-    (97.903 deg). Drawn at 60 deg, swept from 480 deg (a turn on, 120 deg): the message gives
-    the drawing's own 60 deg, the 420 deg it is on the sweep's turn, and 360 + 97.903 deg."""
+    (97.903 deg). Drawn at 60 deg, swept from 480 deg (a turn on, 120 deg) to 490: every step is
+    no_assembly, and the run's reach_note gives the drawing's own 60 deg, the 420 deg it is on
+    the sweep's turn, and 360 + 97.903 deg."""
     from test_drawing import NON_GRASHOF
 
     text = NON_GRASHOF.format(ax=1.25, ay=float(2.5 * np.sin(np.radians(60.0)))).replace(
         "from = 60.0\nto = 70.0", "from = 480.0\nto = 490.0")
-    with pytest.raises(linkpipe.SceneError) as err:
-        linkpipe.solve(linkpipe.parse_scene(text, "nong.toml"))
-    e = err.value
-    assert (e.table, e.key) == ('drivers "crank"', "from")
-    assert "from the drawing's 60 deg (420 deg on the sweep's turn)" in e.message, e.message
-    said = float(e.message.split("as far as ")[1].split(" deg")[0])
+    r = linkpipe.solve(linkpipe.parse_scene(text, "nong.toml"))
+    assert (r.status == 1).all()  # every step beyond the reach: no_assembly, no error
+    assert "from the drawing's 60 deg (420 deg on the sweep's turn)" in r.reach_note, r.reach_note
+    said = float(r.reach_note.split("as far as ")[1].split(" deg")[0])
     assert said == pytest.approx(360.0 + np.degrees(np.arccos(-0.1375)), abs=1e-3)  # 6 digits
+
+
+def test_steps_out_of_reach_in_a_sweep_streamed_in_segments(tmp_path):
+    """The arm's 3.0 -> 1.0 m over 300,001 steps (segments of 65,536; the reach ends at
+    1.943 m, step 158,491, inside the third): `run` streams it and stores the same statuses and positions as the
+    whole sweep solved at once, and the file's reach_note attribute says why."""
+    import h5py
+
+    from linkpipe.segments import steps_per_segment
+
+    text = CYLINDER_ARM.format(first=3.0).replace("steps = 5", "steps = 300001")
+    path = tmp_path / "arm.toml"
+    path.write_text(text)
+    whole = linkpipe.solve(linkpipe.parse_scene(text, str(path)))
+    k = int(np.argmax(whole.status == OK))
+    assert k > 2 * steps_per_segment(whole.scene)  # whole segments out of reach, then one in part
+    assert whole.driver_value[k - 1, 0] > 1 + np.sqrt(0.89) >= whole.driver_value[k, 0]
+    assert (whole.status[:k] == 1).all() and (whole.status[k:] == OK).all()
+    assert main(["run", str(path), "--out", str(tmp_path), "--no-rrd", "--quiet"]) == 0
+    with h5py.File(tmp_path / "arm.h5") as f:
+        np.testing.assert_array_equal(f["status"][:], whole.status)
+        np.testing.assert_array_equal(f["position"][:], whole.position)
+        assert f.attrs["reach_note"] == whole.reach_note != ""

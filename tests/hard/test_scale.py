@@ -97,3 +97,40 @@ def test_slider_driven_coordinate_driver(method):
     assert (np.abs(mm.velocity[ok] / K - m.velocity[ok]) <= REL * vs).all()
     # and the crank leaves the inner dead centre on the same side in both (the start guess's)
     np.testing.assert_array_equal(np.sign(m.position[ok, 1, 1]), np.sign(mm.position[ok, 1, 1]))
+
+
+def _shifted(text: str, offset: float) -> str:
+    """The scene with every drawn point moved by (offset, offset)."""
+    import re
+    return re.sub(r"x = ([-0-9.e]+), y = ([-0-9.e]+)", lambda m: (
+        f"x = {float(m.group(1)) + offset!r}, y = {float(m.group(2)) + offset!r}"), text)
+
+
+def test_the_same_mechanism_far_from_the_origin(method):
+    """The crank-rocker with a load moved 1e2 ... 1e5 times its size away from the origin:
+    float64 holds its coordinates only to eps x the offset, so positions agree to that and
+    velocities and the input torque to ~eps x offset / size relative (a handful of
+    coordinates' rounding: bound 32 eps offset / size). The Jacobian's coefficients on q are
+    read with the fixed points at the origin (they had lost eps x offset / size and were then
+    multiplied by q ~ offset: 6.4e-9 relative at 1e4 x the size); where 4 eps x the offset
+    passes tol x the size (1e4, 1e5 here) the residual tolerance is floored at what float64
+    resolves there, with a warning (at 1e5 every step had been refused)."""
+    text = fourbar_text(1.0, 3.5, 3.0, 4.0, 0.0, 360.0, 73, coupler_uv=(1.5, 0.8),
+                        extra=LOADS.format(torque=-2.0))
+    base = solve_text(text, method)
+    size = 4.0
+    eps = np.finfo(float).eps
+    for offset in (1e2, 1e3, 1e4, 1e5):
+        far = solve_text(_shifted(text, offset), method)
+        np.testing.assert_array_equal(far.status, base.status)
+        assert (far.status == 0).all()
+        np.testing.assert_allclose(far.position - offset, base.position, rtol=0,
+                                   atol=8 * eps * offset)
+        bound = 32 * eps * offset / size
+        for name, a, b in (("velocity", far.velocity, base.velocity),
+                           ("input torque", far.forces["input_force"][1],
+                            base.forces["input_force"][1])):
+            err = np.abs(a - b).max() / np.abs(b).max()
+            assert err <= bound, (name, offset, err, bound)
+        floored = [w for w in far.warnings if "float64 resolves positions there" in w]
+        assert len(floored) == (offset >= 1e4), far.warnings  # 4 eps offset > 1e-12 x 4.9

@@ -66,7 +66,8 @@ def log10_residual(result) -> tuple[np.ndarray, float]:
 
     The viewer labels no axis below ~1e-13, so the raw ``solver/residual`` of a solved sweep
     (rounding level, ~1e-16 of the size) plots as unlabelled noise; its log10 beside the
-    tolerance's (``tol`` x the mechanism's size, what Newton stops at) reads at a glance. A
+    tolerance's (``tol`` x the mechanism's size, what Newton stops at, floored at what float64
+    resolves at the drawing's distance from the origin: ``Model.tolerance``) reads at a glance. A
     residual of exactly 0 is drawn one decade below rounding level (log10(eps x size) - 1);
     NaN (a step without assembly) stays NaN and is not drawn.
     """
@@ -76,4 +77,4 @@ def log10_residual(result) -> tuple[np.ndarray, float]:
     with np.errstate(divide="ignore", invalid="ignore"):
         out = np.log10(res)
     out[res == 0] = floor
-    return out, float(np.log10(result.scene.solver.tol * size))
+    return out, float(np.log10(result.model.tolerance()))
