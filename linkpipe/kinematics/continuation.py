@@ -89,6 +89,25 @@ class _Attempt:
     q_lm: np.ndarray | None = None
 
 
+#: a drawing within this fraction of the mechanism's size of the singular shape it starts on
+#: is on it: it does not say which side the sweep leaves to
+ON_THE_SINGULAR_SHAPE = 1e-9
+
+
+def written_side(model: Model, q: np.ndarray, v: np.ndarray) -> float:
+    """+1 or -1: the side of the singular start ``q`` (n_q,) along its null direction ``v``
+    that the sweep leaves to: the side the start configuration is written on, where it is
+    written off the singular shape (by more than :data:`ON_THE_SINGULAR_SHAPE` of the size);
+    else the side where ``v``'s largest coordinate grows (a rule of the shape alone, so the same
+    whatever the step count or the units: rounding had decided it, and the sweep's branch
+    changed with the steps; draw the point off the line to choose)."""
+    offset = float((model.q_of(model.start_position[None])[0] - q) @ v) / float(v @ v) ** 0.5
+    if abs(offset) > ON_THE_SINGULAR_SHAPE * model.size:
+        return 1.0 if offset > 0 else -1.0
+    k = int(np.argmax(np.abs(v)))
+    return 1.0 if v[k] > 0 else -1.0
+
+
 class _Continuation:
     """The steps of :func:`solve_positions`: predict, correct, rescue, accept or classify."""
 
@@ -171,7 +190,7 @@ class _Continuation:
     def leave_singular_start(self, att: _Attempt, path: _Path, s_i) -> None:
         """Leaving a singular shape without a slope (a start at a dead centre or change point):
         which side Newton takes from it is up to rounding, so start on either side of it
-        instead, the side nearer the start configuration as written first."""
+        instead, the side the start configuration is written on first (:func:`written_side`)."""
         model = self.model
         if not (path.dq is None and not path.gap and model.n_q and np.any(s_i != path.s)):
             return
@@ -179,8 +198,7 @@ class _Continuation:
         if not is_singular(condition(Jg)[0], self.rcond):
             return
         v, roots = _null_line_roots(model, path.q[None], s_i)
-        written = model.q_of(model.start_position[None])[0]
-        for t in sorted(roots, key=lambda t: np.abs(path.q + t * v - written).max()):
+        for t in sorted(roots, key=lambda t: -t * written_side(model, path.q, v)):
             qc, res, itc, convc = newton(model, (path.q + t * v)[None], s_i[None], self.tol_abs,
                                          self.max_iter, self.jacobian)
             att.iterations += itc[0]

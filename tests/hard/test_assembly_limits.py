@@ -6,6 +6,8 @@ exception; on a limit (coupler and rocker in line, a double root): `singular`; b
 solved again, in the assembly mode the sweep left (B on the left of A->O4, the sign of
 det Phi_q), which is also where the sweep started.
 """
+import re
+
 import h5py
 import numpy as np
 import pytest
@@ -106,3 +108,45 @@ def test_cli_exit_0_and_hdf5_written(tmp_path, capsys):
         assert f["status"].attrs["flag_meanings"].split()[:3] == ["ok", "no_assembly", "singular"]
     assert (status == NO_ASSEMBLY).sum() > 30 and (status == SINGULAR).sum() == 3
     assert np.isnan(pos[status == NO_ASSEMBLY]).any() and np.isfinite(pos[status == OK]).all()
+
+
+def _scaled(text: str, k: float) -> str:
+    import re
+    text = re.sub(r"x = ([-0-9.e]+), y = ([-0-9.e]+)",
+                  lambda m: f"x = {float(m.group(1)) * k!r}, y = {float(m.group(2)) * k!r}", text)
+    return re.sub(r"= (2\.0|3\.5) }", lambda m: f"= {float(m.group(1)) * k!r} }}", text)
+
+
+def _sides(r) -> set:
+    """The sides B takes of A->O4 at the ok steps (+1 left, -1 right)."""
+    names = r.point_names
+    A, B, O4 = (r.position[:, names.index(n)] for n in ("A", "B", "O4"))
+    d, e = O4 - A, B - A
+    return set(np.sign(d[:, 0] * e[:, 1] - d[:, 1] * e[:, 0])[r.status == OK].tolist())
+
+
+@pytest.mark.parametrize("steps", [73, 145, 721])
+@pytest.mark.parametrize("scale", [1.0, 1e-3, 2e-3, 1e3])
+def test_a_start_drawn_on_its_limit_leaves_it_the_same_way_whatever_the_steps_or_units(
+        steps, scale):
+    """The config starts on the lower limit with B drawn on the line A-O4 (to rounding): the
+    drawing does not say which side the sweep leaves to, and rounding had decided it (the
+    mirrored mode at 145 and 721 steps or in km; 3.7 m off). The rule of the shape alone
+    (the side where the null direction's largest coordinate grows: B on the left of A->O4
+    here) gives the config's mode at every step count and scale."""
+    text = re.sub(r"steps = \d+", f"steps = {steps}", _scaled(CONFIG.read_text(), scale))
+    assert _sides(solve_text(text, "auto")) == {1.0}
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_start_drawn_just_off_its_limit_leaves_it_to_that_side(side):
+    """B drawn 1e-6 of the size off the line A-O4 (far above rounding): the sweep leaves the
+    limit to the side it is drawn on, left or right, at any step count."""
+    A, O4 = np.array([0.035714285714285234, -1.9996810970242027]), np.array([3.5, 0.0])
+    d = (O4 - A) / np.linalg.norm(O4 - A)
+    B = (A + O4) / 2 + side * 1e-6 * L * np.array([-d[1], d[0]])
+    text = CONFIG.read_text().replace("B  = { x = 1.7678571428571426, y = -0.9998405485121014 }",
+                                      f"B  = {{ x = {float(B[0])!r}, y = {float(B[1])!r} }}")
+    for steps in (73, 145):
+        r = solve_text(re.sub(r"steps = \d+", f"steps = {steps}", text), "auto")
+        assert _sides(r) == {side}
