@@ -96,16 +96,25 @@ ON_THE_SINGULAR_SHAPE = 1e-9
 
 def written_side(model: Model, q: np.ndarray, v: np.ndarray) -> float:
     """+1 or -1: the side of the singular start ``q`` (n_q,) along its null direction ``v``
-    that the sweep leaves to: the side the start configuration is written on, where it is
-    written off the singular shape (by more than :data:`ON_THE_SINGULAR_SHAPE` of the size);
-    else the side where ``v``'s largest coordinate grows (a rule of the shape alone, so the same
-    whatever the step count or the units: rounding had decided it, and the sweep's branch
-    changed with the steps; draw the point off the line to choose)."""
+    that the start configuration is written on; 0 where it is written on the singular shape
+    itself (within :data:`ON_THE_SINGULAR_SHAPE` of the size: it does not say)."""
     offset = float((model.q_of(model.start_position[None])[0] - q) @ v) / float(v @ v) ** 0.5
     if abs(offset) > ON_THE_SINGULAR_SHAPE * model.size:
         return 1.0 if offset > 0 else -1.0
-    k = int(np.argmax(np.abs(v)))
-    return 1.0 if v[k] > 0 else -1.0
+    return 0.0
+
+
+def shape_side(model: Model, candidates: list, s_i) -> int:
+    """Which of ``candidates`` (each (q (1, n_q), ...), the roots on either side of a
+    singular start drawn on the shape itself) the sweep leaves to: the first where det Phi_q
+    is positive (the mode's orientation: unchanged by rotating or moving the drawing or by
+    its units, flipped by mirroring it; rounding had decided, and the mode changed with the
+    step count and the units), else the first."""
+    for k, (qc, *_) in enumerate(candidates):
+        J = model.jacobian(model.positions(qc), s_i[None])[0]
+        if J.shape[0] == J.shape[1] and np.linalg.det(J) > 0:
+            return k
+    return 0
 
 
 class _Continuation:
@@ -190,7 +199,8 @@ class _Continuation:
     def leave_singular_start(self, att: _Attempt, path: _Path, s_i) -> None:
         """Leaving a singular shape without a slope (a start at a dead centre or change point):
         which side Newton takes from it is up to rounding, so start on either side of it
-        instead, the side the start configuration is written on first (:func:`written_side`)."""
+        instead: the side the start configuration is written on (:func:`written_side`), or,
+        drawn on the shape itself, the side :func:`shape_side` picks."""
         model = self.model
         if not (path.dq is None and not path.gap and model.n_q and np.any(s_i != path.s)):
             return
@@ -198,14 +208,20 @@ class _Continuation:
         if not is_singular(condition(Jg)[0], self.rcond):
             return
         v, roots = _null_line_roots(model, path.q[None], s_i)
-        for t in sorted(roots, key=lambda t: -t * written_side(model, path.q, v)):
+        side = written_side(model, path.q, v)
+        found = []
+        for t in sorted(roots, key=lambda t: -t * side):
             qc, res, itc, convc = newton(model, (path.q + t * v)[None], s_i[None], self.tol_abs,
                                          self.max_iter, self.jacobian)
             att.iterations += itc[0]
             att.residual = res[0]
             if convc[0] and drivers_aligned(model, qc, s_i[None])[0]:
-                att.q, att.converged = qc, True
-                return
+                found.append((qc, res[0]))
+                if side:  # the side written
+                    break
+        if found:
+            qc, att.residual = found[shape_side(model, found, s_i) if not side else 0]
+            att.q, att.converged = qc, True
 
     def correct(self, att: _Attempt, s_i) -> None:
         """Newton from the guess; a root with an angle driver's vector pointing backwards (the

@@ -83,7 +83,7 @@ def solve_pivot_variants(model: Model, chain: DyadChain, pivots: np.ndarray, siz
     eng = engine(model)
     if eng is not None:  # the variant's own engine: the same entries and coefficient pattern
         usable &= same_pattern(eng, pivots, rows)
-    bad = sw.ok & ~(sw.residual <= 10 * sc.tol * size_rows)  # a redundant constraint not met
+    bad = sw.ok & ~(sw.residual <= 10 * model.tolerance(size=size_rows))  # a redundant row not met
     for arr in (sw.position, sw.velocity, sw.acceleration):
         if arr is not None and bad.any():
             arr[np.ix_(bad, model.moving)] = np.nan
@@ -135,7 +135,7 @@ def own_starts(model: Model, rows, drawn: np.ndarray, s0: np.ndarray, sizes: np.
 
     qT = np.ascontiguousarray(model.q_of(drawn).T)
     with np.errstate(all="ignore"):
-        qT, _, _, converged = iterate(residual, correction, qT, sc.tol * sizes,
+        qT, _, _, converged = iterate(residual, correction, qT, model.tolerance(size=sizes),
                                       max(sc.max_iter, 50), sizes)
     return converged, positions(qT)
 

@@ -38,14 +38,17 @@ def steps_out_of_reach(model: Model, s: np.ndarray, present: np.ndarray, tol_abs
                        max_iter: int) -> tuple[int, str]:
     """``(k, message)``: the sweep's first k steps (of ``s`` (S, nd), those ``present``) are
     out of the drawing's reach, the k-th (or none, k = S) is the first that assembles, and the
-    message says so (0, "" where the first present step assembles). A step is out of reach on
-    the far side of the last value assembled on the way from the drawing towards the first
-    (:func:`reach_from_drawing`); the start is then tried at the first step on the near side
-    (:data:`REACH_TRIES` times). Any other failure to assemble stays the scene's error."""
+    message says so (0, "" where the first present step assembles). Each step that fails gives
+    a limit of the reach on its side of the drawing (the last value assembled on the way from
+    the drawing towards it: :func:`reach_from_drawing`); the start is then tried at the first
+    step within every limit found (an angle measured from the drawing the shorter way round,
+    so a later turn counts), :data:`REACH_TRIES` times. Any other failure to assemble stays
+    the scene's error."""
     idx = np.flatnonzero(present)
     if not len(idx):
         return 0, ""
     first, message = int(idx[0]), ""
+    low, high = -np.inf, np.inf  # the reach, as offsets from the drawing's value
     for _ in range(REACH_TRIES):
         try:
             start_state(model, s[first], tol_abs, max_iter)
@@ -53,8 +56,16 @@ def steps_out_of_reach(model: Model, s: np.ndarray, present: np.ndarray, tol_abs
         except OutOfReach as exc:
             if not message:
                 message = f"[{exc.table}] {exc.key}: {exc.message}; {exc.hint}"
-            side = np.sign(exc.along - exc.last)[0]  # the drawing's side of the limit
-            near = present & (np.arange(len(s)) > first) & ((s[:, 0] - exc.last[0]) * side >= 0)
+            along, limit = float(exc.along[0]), float(exc.last[0] - exc.along[0])
+            if limit > 0:
+                high = min(high, limit)
+            else:
+                low = max(low, limit)
+            offset = s[:, 0] - along
+            if model.drv_angle[0]:  # the shorter way round from the drawing
+                offset = (offset + np.pi) % (2 * np.pi) - np.pi
+            with np.errstate(invalid="ignore"):
+                near = present & (offset >= low) & (offset <= high)
             if not near.any():
                 return len(s), message
             first = int(np.argmax(near))

@@ -122,6 +122,8 @@ def path_reason(study) -> str:
     base = vector.base_result(study)
     if base.solver_method_used != "dyads":
         return "pivots move and the base scene does not take the closed-form dyads"
+    if base.reach_note:  # the variants' own runs start where each one's reach begins
+        return "pivots move and the base scene's first steps are out of its drawing's reach"
     if any(st.ambiguous for st in base_chain(study).steps):
         return "pivots move and a dyad starts on its singular shape"
     if any(sp.kind != "gas" and sp.free_length is None for sp in scene.springs):

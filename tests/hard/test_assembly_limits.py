@@ -110,10 +110,17 @@ def test_cli_exit_0_and_hdf5_written(tmp_path, capsys):
     assert np.isnan(pos[status == NO_ASSEMBLY]).any() and np.isfinite(pos[status == OK]).all()
 
 
-def _scaled(text: str, k: float) -> str:
-    import re
-    text = re.sub(r"x = ([-0-9.e]+), y = ([-0-9.e]+)",
-                  lambda m: f"x = {float(m.group(1)) * k!r}, y = {float(m.group(2)) * k!r}", text)
+def _scaled(text: str, k: float, turn_deg: float = 0.0) -> str:
+    """The scene scaled by ``k`` and turned by ``turn_deg`` about the origin (its drawn points,
+    lengths and the crank's angles)."""
+    c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
+
+    def point(m):
+        x, y = float(m.group(1)) * k, float(m.group(2)) * k
+        return f"x = {float(c * x - s * y)!r}, y = {float(s * x + c * y)!r}"
+
+    text = re.sub(r"x = ([-0-9.e]+), y = ([-0-9.e]+)", point, text)
+    text = re.sub(r"(from|to) = ([-0-9.e]+)", lambda m: f"{m.group(1)} = {float(m.group(2)) + turn_deg!r}", text)
     return re.sub(r"= (2\.0|3\.5) }", lambda m: f"= {float(m.group(1)) * k!r} }}", text)
 
 
@@ -126,15 +133,16 @@ def _sides(r) -> set:
 
 
 @pytest.mark.parametrize("steps", [73, 145, 721])
-@pytest.mark.parametrize("scale", [1.0, 1e-3, 2e-3, 1e3])
+@pytest.mark.parametrize("scale, turn", [(1.0, 0.0), (1e-3, 0.0), (2e-3, 0.0), (1e3, 0.0),
+                                         (1.0, 75.0), (1.0, -120.0), (1e-3, 160.0)])
 def test_a_start_drawn_on_its_limit_leaves_it_the_same_way_whatever_the_steps_or_units(
-        steps, scale):
+        steps, scale, turn):
     """The config starts on the lower limit with B drawn on the line A-O4 (to rounding): the
     drawing does not say which side the sweep leaves to, and rounding had decided it (the
-    mirrored mode at 145 and 721 steps or in km; 3.7 m off). The rule of the shape alone
-    (the side where the null direction's largest coordinate grows: B on the left of A->O4
-    here) gives the config's mode at every step count and scale."""
-    text = re.sub(r"steps = \d+", f"steps = {steps}", _scaled(CONFIG.read_text(), scale))
+    mirrored mode at 145 and 721 steps or in km; 3.7 m off). The mode's orientation decides
+    (det Phi_q > 0: B on the left of A->O4 here), the same at every step count, scale and
+    rotation of the drawing (a rule on the axes had flipped with a 75 deg turn)."""
+    text = re.sub(r"steps = \d+", f"steps = {steps}", _scaled(CONFIG.read_text(), scale, turn))
     assert _sides(solve_text(text, "auto")) == {1.0}
 
 

@@ -221,3 +221,64 @@ def test_steps_out_of_reach_in_a_sweep_streamed_in_segments(tmp_path):
         np.testing.assert_array_equal(f["status"][:], whole.status)
         np.testing.assert_array_equal(f["position"][:], whole.position)
         assert f.attrs["reach_note"] == whole.reach_note != ""
+
+
+def test_an_angle_sweep_that_comes_into_reach_a_turn_later():
+    """The non-Grashof crank (reach -97.903 .. 97.903 deg about its drawing at 60 deg) swept
+    from 120 to 480 deg: 120 .. 260 deg are out of reach, 270 .. 450 deg (-90 .. 90 deg a turn
+    on) assemble, 460 .. 480 are out again; the steps in reach as the same sweep from 270 gives
+    them (they had all been no_assembly: the reach was compared without the turns)."""
+    from test_drawing import NON_GRASHOF
+
+    text = NON_GRASHOF.format(ax=1.25, ay=float(2.5 * np.sin(np.radians(60.0))))
+    swept = text.replace("from = 60.0\nto = 70.0", "from = 120.0\nto = 480.0").replace(
+        "steps = 3", "steps = 37")
+    r = linkpipe.solve(linkpipe.parse_scene(swept, "nong.toml"))
+    ok = np.flatnonzero(r.status == OK)
+    assert list(r.driver_value[ok, 0]) == list(np.arange(270.0, 451.0, 10.0))
+    assert (r.status[:15] == 1).all() and (r.status[34:] == 1).all()
+    inside = linkpipe.solve(linkpipe.parse_scene(swept.replace("from = 120.0", "from = 270.0")
+                                                 .replace("to = 480.0", "to = 450.0")
+                                                 .replace("steps = 37", "steps = 19"), "in.toml"))
+    # each solved to Newton's tolerance (1e-12 of the size) times the Jacobian's condition
+    np.testing.assert_allclose(r.position[ok], inside.position, rtol=0,
+                               atol=1e-12 * r.model.size * r.condition[ok].max())
+
+
+def test_a_log_jumping_past_both_limits_starts_at_its_first_value_in_reach(tmp_path):
+    """The arm's cylinder (reach 0.057 .. 1.943 m) logged 3.0, 0.01, 3.0, 0.01, 3.0, 1.0, 1.1:
+    each failing value bounds the reach on its side, so the start is the first value within
+    both (1.0): five no_assembly steps, then two ok (it had run out of tries and raised)."""
+    (tmp_path / "rig.csv").write_text("t,d\n0,3.0\n1,0.01\n2,3.0\n3,0.01\n4,3.0\n5,1.0\n6,1.1\n")
+    text = CYLINDER_ARM.format(first=3.0).replace("from = 3.0\nto = 1.0\nsteps = 5",
+                                                  'log = "rig.d"') + (
+        '[time]\nlog = "rig"\n[[logs]]\nname = "rig"\nfile = "rig.csv"\ntime = "t"\n')
+    path = tmp_path / "arm.toml"
+    path.write_text(text)
+    r = linkpipe.solve(linkpipe.load_scene(str(path)))
+    assert list(r.status) == [1] * 5 + [OK] * 2
+    assert "the first driver value 3 m is out of reach" in r.reach_note
+
+
+def test_a_study_moving_pivots_of_a_scene_that_starts_out_of_reach(tmp_path):
+    """The arm (3.0 -> 1.0 m, three steps out of reach) with its cylinder's base moved: the
+    study runs each variant as its own scene (the vectorised pivots path starts at step 0; it
+    had raised the base's out-of-reach error), and each row is that scene's own run."""
+    import h5py
+
+    (tmp_path / "arm.toml").write_text(CYLINDER_ARM.format(first=3.0))
+    (tmp_path / "study.toml").write_text(
+        '[scene]\nname = "st"\n[study]\nbase = "arm.toml"\nsamples = 3\nseed = 1\n'
+        '[study.parameters]\n"points.C0.x" = { uniform = [0.45, 0.55] }\n'
+        '[study.metrics]\nmx = "max(abs(position.C.x))"\n')
+    assert main(["study", str(tmp_path / "study.toml"), "--out", str(tmp_path), "--quiet"]) == 0
+    with h5py.File(tmp_path / "st_study.h5") as f:
+        x0 = f["parameter_value"][:, 0]
+        mx, first_failed = f["mx"][:], f["first_failed_step"][:]
+    for v, x in enumerate(x0):
+        own = linkpipe.solve(linkpipe.parse_scene(
+            CYLINDER_ARM.format(first=3.0).replace("x = 0.5, y = -0.8", f"x = {float(x)!r}, y = -0.8"),
+            "own.toml"))
+        assert list(own.status[:3]) == [1, 1, 1]
+        assert first_failed[v] == 0
+        assert mx[v] == np.abs(point(own, "C")[own.status == OK, 0]).max()
