@@ -377,7 +377,13 @@ def _check(args) -> int:
             from .fit import declared_fit_parameters
             from .kinematics.start import scene_warnings
 
-            print(describe(scene, mob, scene_warnings(model), declared_fit_parameters(scene)))
+            from .pipeline import reach_of
+
+            unreached, note = reach_of(model)
+            reach = ((f"the first {unreached} of {scene.n_steps} steps are out of the drawing's "
+                      f"reach and will be no_assembly: {note}",) if note else ())
+            print(describe(scene, mob, scene_warnings(model) + reach,
+                           declared_fit_parameters(scene)))
     return outcome.code
 
 

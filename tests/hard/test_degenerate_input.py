@@ -282,3 +282,14 @@ def test_a_study_moving_pivots_of_a_scene_that_starts_out_of_reach(tmp_path):
         assert list(own.status[:3]) == [1, 1, 1]
         assert first_failed[v] == 0
         assert mx[v] == np.abs(point(own, "C")[own.status == OK, 0]).max()
+
+
+def test_check_says_which_first_steps_are_out_of_reach(tmp_path, capsys):
+    """`check` on the arm from 3.0 m: valid (exit 0), with a warning naming the 3 of 5 steps
+    out of reach and how far the mechanism assembles (as `run`'s reach_note)."""
+    path = tmp_path / "arm.toml"
+    path.write_text(CYLINDER_ARM.format(first=3.0))
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "warning: the first 3 of 5 steps are out of the drawing's reach" in out
+    assert linkpipe.solve(str(path)).reach_note in out
