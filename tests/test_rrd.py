@@ -2,6 +2,7 @@
 import dataclasses
 import os
 import pathlib
+import re
 import signal
 import subprocess
 import sys
@@ -161,8 +162,9 @@ def test_values_match_the_result_and_the_hdf5_file(solve, tmp_path):
     np.testing.assert_allclose(got, position, rtol=1e-6, atol=1e-6)      # rerun stores float32
     labels = _column(points, "/mechanism/points", "Points2D:labels")
     assert all(list(row) == list(result.point_names) for row in labels)
-    seconds = points["time"].to_numpy().astype("timedelta64[ns]").astype(np.int64) / 1e9
-    np.testing.assert_allclose(seconds, result.time, atol=1e-9)
+    nanoseconds = points["time"].to_numpy().astype("timedelta64[ns]").astype(np.int64)
+    # the instants to the nearest nanosecond (rerun's float conversion truncated: 1 ns short)
+    np.testing.assert_array_equal(nanoseconds, np.round(result.time * 1e9).astype(np.int64))
 
     iterations = rec.steps("/solver/iterations")
     np.testing.assert_array_equal(iterations["step"], np.arange(S))
@@ -752,3 +754,29 @@ def test_a_step_cap_given_alone_is_the_recordings_only_cap(tmp_path, capsys):
     assert cli.main(["run", str(scene), "--out", str(tmp_path / "b"), "--no-h5",
                      "--rrd-max-steps", "20000", "--rrd-max-mb", "0.5"]) == 0
     assert "0.5 MB at most" in capsys.readouterr().out
+
+
+def test_a_sweep_where_every_step_fails_keeps_its_plots(tmp_path):
+    """The triple rocker swept 170 .. 190 deg never assembles: every step no_assembly. Its
+    plots still hold a row at every step, NaN (the contract's per-step Scalars; a series NaN
+    throughout had been left out, so plots/link_angle and plots/input_force were missing)."""
+    from conftest import CONFIG_DIR
+    from linkpipe.__main__ import main
+
+    text = (CONFIG_DIR / "hard" / "triple_rocker_limits.toml").read_text()
+    text = re.sub(r"from = [-0-9.e]+\nto = [-0-9.e]+\nsteps = \d+",
+                  "from = 170.0\nto = 190.0\nsteps = 21", text)
+    text += '\n[analysis]\neffects = ["gravity"]\n[gravity]\ng = [0.0, -9.81]\n' \
+            '[[masses]]\nlink = "coupler"\nmass = 1.0\ncenter = [1.0, 0.0]\n'
+    scene = tmp_path / "never.toml"
+    scene.write_text(text)
+    assert main(["run", str(scene), "--out", str(tmp_path), "--no-h5"]) == 0
+    rec = Recording(tmp_path / "triple_rocker_limits.rrd")
+    for entity in ("/plots/link_angle/crank", "/plots/input_force/crank"):
+        frame = rec.steps(entity)
+        np.testing.assert_array_equal(frame["step"], np.arange(21))
+        values = np.concatenate(_column(frame, entity, "Scalars:scalars").to_list())
+        assert values.shape == (21,) and np.isnan(values).all(), entity
+    frame = rec.steps("/solver/residual")  # the residual where Newton stopped: above tolerance
+    values = np.concatenate(_column(frame, "/solver/residual", "Scalars:scalars").to_list())
+    assert values.shape == (21,) and (values > 1e-12 * 3.5).all()

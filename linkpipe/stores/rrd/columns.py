@@ -14,14 +14,16 @@ def sender(stream: rr.RecordingStream, result):
     sweep, the driver's value (:func:`driver_timeline`), at the steps ``rows`` (all if None)."""
     steps = (np.arange(result.n_steps) if result.step_numbers is None
              else np.asarray(result.step_numbers))
-    seconds = None if result.time is None else np.asarray(result.time, float)
+    # nanoseconds rounded to the nearest (rerun truncates float seconds: 1 ns short at times)
+    nanoseconds = (None if result.time is None else
+                   np.round(np.asarray(result.time, float) * 1e9).astype("timedelta64[ns]"))
     by_value = driver_timeline(result)
 
     def send(entity: str, columns, rows: np.ndarray | None = None) -> None:
         rows = slice(None) if rows is None else rows
         index = [rr.TimeColumn("step", sequence=steps[rows])]
-        if seconds is not None:
-            index.append(rr.TimeColumn("time", duration=seconds[rows]))
+        if nanoseconds is not None:
+            index.append(rr.TimeColumn("time", duration=nanoseconds[rows]))
         if by_value is not None:
             index.append(rr.TimeColumn(by_value[0], sequence=by_value[1][rows]))
         stream.send_columns(entity, indexes=index, columns=columns)

@@ -51,9 +51,7 @@ def log_series(stream, send, result) -> None:
     for entity, title, values, colour in series_of(result):
         values = np.asarray(values, dtype=float)
         finite = np.isfinite(values)
-        if not finite.any():
-            continue
-        if not finite.all():  # +-inf (e.g. a failed step's residual) would wreck the axis
+        if not finite.all():  # (a series NaN at every step is logged too: every step failed)  # +-inf (e.g. a failed step's residual) would wreck the axis
             values = np.where(finite, values, np.nan)
         stream.log(entity, rr.SeriesLines(names=title, colors=[colour]), static=True)
         # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
