@@ -375,11 +375,9 @@ def _check(args) -> int:
             model, mob = preflight(scene, steps_per_segment(scene),
                                    min(scene.n_steps, RRD_MAX_STEPS))
             from .fit import declared_fit_parameters
-            from .kinematics.start import scene_warnings
+            from .kinematics.start import scene_warnings, sweep_reach
 
-            from .pipeline import reach_of
-
-            unreached, note = reach_of(model)
+            unreached, note = sweep_reach(model)
             reach = ((f"the first {unreached} of {scene.n_steps} steps are out of the drawing's "
                       f"reach and will be no_assembly: {note}",) if note else ())
             print(describe(scene, mob, scene_warnings(model) + reach,

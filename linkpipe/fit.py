@@ -316,9 +316,8 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     sol = least_squares(residuals, x0, bounds=(lower, upper), method="trf", x_scale="jac",
                         diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12,
                         max_nfev=max_evaluations, callback=per_iteration)
-    se, identifiable = standard_errors(sol.jac, sol.fun, all(m.sigma is not None
-                                                             for m in scene.measurements))
     sigma_given = all(m.sigma is not None for m in scene.measurements)
+    se, identifiable = standard_errors(sol.jac, sol.fun, sigma_given)
     failing = sol.fun == penalty  # steps that fail at the fitted values (counted as penalty)
     real = sol.fun[~failing]
     dof = real.size - len(params)

@@ -138,23 +138,8 @@ def preflight(scene: Scene, segment: int | None = None, recorded_steps: int = 0)
     check_memory(scene, segment, recorded_steps)
     model = build_model(scene)
     mob = mobility_of(model)
-    reach_of(model)  # the start assembles (first steps out of the drawing's reach are data)
+    kin.sweep_reach(model)  # the start assembles (first steps out of the drawing's reach are data)
     return model, mob
-
-
-def reach_of(model) -> tuple[int, str]:
-    """``(k, note)``: the sweep's first k steps are out of its drawing's reach, and why
-    (:func:`linkpipe.kinematics.steps_out_of_reach`; (0, "") where its first step
-    assembles); SceneError where the start cannot be assembled at all. Computed once per
-    model (``check`` reports it after :func:`preflight`)."""
-    from .cache import derived
-
-    def build(m):
-        _, s, _, _ = kin.driver_motion(m)  # a scene has at least one step
-        present = np.isfinite(s).all(axis=1)  # not every logged value is missing
-        return kin.steps_out_of_reach(m, s, present, m.tolerance(), m.scene.solver.max_iter)
-
-    return derived(model, "reach", build)
 
 
 #: BLAS threads while a scene is solved: its solves are many small systems (stacks of 2x2 to

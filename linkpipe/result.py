@@ -12,7 +12,8 @@ import numpy as np
 
 from .model import Mobility, Model
 from .scene import Scene
-from .status import FLAG_MEANINGS, NON_FINITE, OK, code_counts, counts, named_counts, finite_rows
+from .status import (FLAG_MEANINGS, NON_FINITE, OK, code_counts, counts, finite_rows,
+                     named_counts, not_finite_at)
 from .status import message as status_message
 from .output_units import common_unit, driver_units_of, input_force_units, units_of
 
@@ -99,43 +100,6 @@ def _nanmax(a) -> float:
     return float(fin.max()) if fin.size else np.nan
 
 
-def not_finite_at(result: "Result", step: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """Why a solved step is non_finite, as (causes, entries): the causes linkpipe can name, as
-    text (a gas spring at or below its dead length), and what ``result`` stores that is not
-    finite at ``step`` (an index into its rows), each as ``variable[entry]``
-    (``spring_force[strut]``, ``joint_force[A@crank]``), in the order of
-    :meth:`Result.variables`."""
-    labels = {c.name: [str(x) for x in c.data] for c in result.coordinates()}
-    out = []
-    for v in result.variables():
-        if not v.dims or v.dims[0] != "step" or v.data.dtype.kind != "f":
-            continue
-        row = np.asarray(v.data[step])
-        bad = ~np.isfinite(row)
-        if not bad.any():
-            continue
-        if row.ndim == 0:
-            out.append(v.name)
-            continue
-        entries = np.flatnonzero(bad.reshape(bad.shape[0], -1).any(axis=1))
-        names = labels.get(v.dims[1], [])
-        out.extend(f"{v.name}[{names[e] if e < len(names) else e}]" for e in entries)
-    return _gas_springs_dead(result, step), tuple(out)
-
-
-def _gas_springs_dead(result: "Result", step: int) -> tuple[str, ...]:
-    """Why a gas spring's force is not finite at ``step``: its length at or below its
-    dead_length (the gas volume is gone), as text naming the spring, or ()."""
-    length = (result.forces or {}).get("spring_length")
-    if length is None:
-        return ()
-    unit = result.units()["length"]
-    return tuple(f"gas spring {sp.name}: length {length[1][step, j]:.4g} {unit} at or below its "
-                 f"dead_length {sp.dead_length:.4g} {unit}"
-                 for j, sp in enumerate(result.scene.springs)
-                 if sp.kind == "gas" and length[1][step, j] <= sp.dead_length)
-
-
 @dataclass(frozen=True)
 class Totals:
     """What a run's summary and the HDF5 root attributes say of the whole sweep, kept apart from
@@ -205,10 +169,15 @@ class Totals:
                       biggest(self.max_acceleration_residual, later.max_acceleration_residual),
                       smallest(self.input_force_min, later.input_force_min),
                       biggest(self.input_force_max, later.input_force_max),
-                      *((self.first_non_finite, self.non_finite_causes, self.non_finite_there)
-                        if self.first_non_finite >= 0 else
-                        (later.first_non_finite + self.n_steps, later.non_finite_causes,
-                         later.non_finite_there) if later.first_non_finite >= 0 else (-1, (), ())))
+                      *self._first_non_finite(later))
+
+    def _first_non_finite(self, later: "Totals") -> tuple:
+        """(step, causes, entries) of the first non_finite step of this run then ``later``'s
+        (its step counted from this run's first)."""
+        if self.first_non_finite >= 0 or later.first_non_finite < 0:
+            return self.first_non_finite, self.non_finite_causes, self.non_finite_there
+        return (later.first_non_finite + self.n_steps, later.non_finite_causes,
+                later.non_finite_there)
 
     @property
     def n_ok(self) -> int:

@@ -109,8 +109,7 @@ class Stage1:
         try:
             self._plan()
         except kin.OutOfReach:
-            self.unreached, self.reach_note = kin.steps_out_of_reach(
-                model, self.s, self.present, model.tolerance(), scene.solver.max_iter)
+            self.unreached, self.reach_note = kin.sweep_reach(model)
             self.solvable = self.present & (np.arange(self.n_steps) >= self.unreached)
             self._plan()
         self.restart()

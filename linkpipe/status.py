@@ -121,3 +121,40 @@ def ok_only_if_finite(status: np.ndarray, arrays, finite: np.ndarray | None = No
     if finite is not None:
         ok &= finite
     return np.where((status == OK) & ~ok, NON_FINITE, status).astype(np.int8)
+
+
+def not_finite_at(result, step: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """Why a solved step is non_finite, as (causes, entries): the causes linkpipe can name, as
+    text (a gas spring at or below its dead length), and what ``result`` stores that is not
+    finite at ``step`` (an index into its rows), each as ``variable[entry]``
+    (``spring_force[strut]``, ``joint_force[A@crank]``), in the order of
+    :meth:`linkpipe.result.Result.variables`."""
+    labels = {c.name: [str(x) for x in c.data] for c in result.coordinates()}
+    out = []
+    for v in result.variables():
+        if not v.dims or v.dims[0] != "step" or v.data.dtype.kind != "f":
+            continue
+        row = np.asarray(v.data[step])
+        bad = ~np.isfinite(row)
+        if not bad.any():
+            continue
+        if row.ndim == 0:
+            out.append(v.name)
+            continue
+        entries = np.flatnonzero(bad.reshape(bad.shape[0], -1).any(axis=1))
+        names = labels.get(v.dims[1], [])
+        out.extend(f"{v.name}[{names[e] if e < len(names) else e}]" for e in entries)
+    return _gas_springs_dead(result, step), tuple(out)
+
+
+def _gas_springs_dead(result, step: int) -> tuple[str, ...]:
+    """Why a gas spring's force is not finite at ``step``: its length at or below its
+    dead_length (the gas volume is gone), as text naming the spring, or ()."""
+    length = (result.forces or {}).get("spring_length")
+    if length is None:
+        return ()
+    unit = result.units()["length"]
+    return tuple(f"gas spring {sp.name}: length {length[1][step, j]:.4g} {unit} at or below its "
+                 f"dead_length {sp.dead_length:.4g} {unit}"
+                 for j, sp in enumerate(result.scene.springs)
+                 if sp.kind == "gas" and length[1][step, j] <= sp.dead_length)

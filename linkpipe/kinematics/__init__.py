@@ -23,7 +23,7 @@ from .decompose import decompose
 from .branches import refine_branches, set_branches
 from .dyads import branch_check, solve_chain
 from .sparse import no_engine_reason
-from .start import OutOfReach, start_state, steps_out_of_reach
+from .start import OutOfReach, start_state, steps_out_of_reach, sweep_reach
 from .vectorised import max_abs_phi, solve_newton
 from ..status import NO_ASSEMBLY, OK
 
@@ -168,7 +168,7 @@ from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "METHODS", "OutOfReach", "steps_out_of_reach", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "METHODS", "OutOfReach", "steps_out_of_reach", "sweep_reach", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "solve_with_dyads", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]

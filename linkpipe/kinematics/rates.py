@@ -10,12 +10,11 @@ import numpy as np
 
 from ..model import Model, driver_scale
 from ..model.drive import driver_motion as drive_motion
-from .linalg import (ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse, estimated_condition,
-                     is_singular)
+from .linalg import (CHUNK, ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse,
+                     estimated_condition, is_singular)
 from .affine import entries_at
 from .sparse import engine
 from .sparse_lu import uses_sparse
-from .linalg import CHUNK
 from ..status import OK, SINGULAR
 from ..workers import for_chunks
 

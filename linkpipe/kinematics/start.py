@@ -73,6 +73,21 @@ def steps_out_of_reach(model: Model, s: np.ndarray, present: np.ndarray, tol_abs
     return first, message
 
 
+def sweep_reach(model: Model) -> tuple[int, str]:
+    """:func:`steps_out_of_reach` of ``model``'s own sweep (its drivers' values, the steps
+    that have every value), computed once per model: ``preflight``, ``check`` and stage 1
+    share it. SceneError where the start cannot be assembled at all."""
+    from ..cache import derived
+    from .rates import driver_motion  # rates imports this module
+
+    def build(m: Model) -> tuple[int, str]:
+        _, s, _, _ = driver_motion(m)
+        return steps_out_of_reach(m, s, np.isfinite(s).all(axis=1), m.tolerance(),
+                                  m.scene.solver.max_iter)
+
+    return derived(model, "sweep_reach", build)
+
+
 def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
     """Return (q (n_q,), slope): the assembled start's q and, when the drawn pose was carried
     to ``s0`` by a one-driver path, dq/ds (n_q, 1) along that path's last step (a secant), else

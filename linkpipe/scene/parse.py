@@ -154,17 +154,15 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
             out.append(f"{self.path}: every driver is held (from = to): the sweep is "
                        f"{drivers[0].steps} identical steps; use steps = 1 for a single "
                        "position, or give a driver from != to to sweep")
-        t = self.time
-        if t is not None and t.step is not None and t.steps == 1 and t.to_value > t.from_value:
-            out.append(f"{self.path}: [time] step = {t.step:g} oversteps to = {t.to_value:g} "
-                       f"from from = {t.from_value:g}: the sweep is the single instant at from; "
-                       f"use a step no larger than to - from = {t.to_value - t.from_value:g}")
-        for d in moving:  # from, from + s, ... never reached to
-            if self.time is None and d.step is not None and d.steps == 1:
-                out.append(f'{self.path}: [drivers "{d.name}"] step = {d.step:g} oversteps '
-                           f"to = {d.to_value:g} from from = {d.from_value:g}: the sweep is the "
-                           "single position at from; use a step no larger than |to - from| = "
-                           f"{abs(d.to_value - d.from_value):g} to sweep")
+        # from, from + s, ... never reached to: the single step at from
+        swept = ([("[time]", self.time, "instant")] if self.time is not None else
+                 [(f'[drivers "{d.name}"]', d, "position") for d in moving])
+        for table, sw, single in swept:
+            if sw.step is not None and sw.steps == 1 and sw.to_value != sw.from_value:
+                out.append(f"{self.path}: {table} step = {sw.step:g} oversteps to = "
+                           f"{sw.to_value:g} from from = {sw.from_value:g}: the sweep is the "
+                           f"single {single} at from; use a step no larger than |to - from| = "
+                           f"{abs(sw.to_value - sw.from_value):g} to sweep")
         if gravity is not None and "gravity" in effects:
             note = units.gravity_warning(gravity, self.units.get("length"))
             if note:

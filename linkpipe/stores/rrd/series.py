@@ -51,7 +51,9 @@ def log_series(stream, send, result) -> None:
     for entity, title, values, colour in series_of(result):
         values = np.asarray(values, dtype=float)
         finite = np.isfinite(values)
-        if not finite.all():  # (a series NaN at every step is logged too: every step failed)  # +-inf (e.g. a failed step's residual) would wreck the axis
+        # a series NaN at every step (every step failed) is logged too; +-inf (e.g. a failed
+        # step's residual) would wreck the axis
+        if not finite.all():
             values = np.where(finite, values, np.nan)
         stream.log(entity, rr.SeriesLines(names=title, colors=[colour]), static=True)
         # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
