@@ -214,15 +214,25 @@ def _reporting(path, outcome: _Outcome):
         outcome.fail(path, 1, f"{path}: internal error: {type(exc).__name__}: {exc}")
 
 
-def _load_all(paths, outcome: _Outcome) -> list:
+def _load_all(paths, outcome: _Outcome, out="outputs") -> list:
     """Load every scene first (bad ones reported, the others kept); two scenes that would write
-    the same outputs are an error before any work (exit 2, naming both files)."""
+    the same outputs, or a name too long for a file name in ``out``, are an error before any
+    work (exit 2, naming the file)."""
     from .scene import load_scene
+    from .stores import longest_output_name
 
     scenes, first_path = [], {}
     for path in paths:
         with _reporting(path, outcome):
-            scene = load_scene(path)
+            scene = _read_scene(load_scene, path)
+            longest, limit = longest_output_name(out)
+            if len(scene.name.encode("utf-8")) > longest:
+                raise SceneError(path, "scene", "name", f"{len(scene.name.encode('utf-8'))} bytes "
+                                 f"long: the files named after it in {out} (its .h5, .rrd, "
+                                 f"lock and temporaries) would be longer than the file "
+                                 f"system's limit of {limit} bytes for a file name",
+                                 f"give [scene] name at most {longest} bytes (characters, "
+                                 "in plain ASCII)")
             if scene.name in first_path:
                 outcome.duplicate_names = True
                 raise SceneError(path, "scene", "name", f"the name {scene.name!r} is also the name "
@@ -231,6 +241,17 @@ def _load_all(paths, outcome: _Outcome) -> list:
             first_path[scene.name] = path
             scenes.append(scene)
     return scenes
+
+
+def _read_scene(load, path):
+    """``load(path)``, a file nested deeper than the TOML reader follows (it recurses: Python's
+    recursion limit) being the file's mistake, not an internal error."""
+    try:
+        return load(path)
+    except RecursionError:
+        raise SceneError(path, "", None, "arrays or inline tables nested more deeply than the "
+                         "TOML reader can follow", "a scene nests a few levels at most: remove "
+                         "the extra brackets") from None
 
 
 def _run(args) -> int:
@@ -245,7 +266,7 @@ def _run(args) -> int:
     if args.logs:
         return _fleet("run", args, args.scenes)
     outcome = _Outcome()
-    scenes = _load_all(args.scenes, outcome)
+    scenes = _load_all(args.scenes, outcome, out)
     if outcome.duplicate_names:
         return 2  # before any work: two scenes would overwrite each other's outputs
     for scene in scenes:

@@ -1,10 +1,10 @@
-"""Decide which stages a scene needs, run them, time them; return a :class:`Result` (stage 1
-itself: :mod:`.stage1`)."""
+""":func:`solve`: a scene's whole sweep as one segment of the spine (:mod:`.spine`: stage 1,
+then forces -> status -> Result), its measurements compared; what a run checks before any work
+(the memory estimate, degrees of freedom, the start: :func:`preflight`)."""
 from __future__ import annotations
 
 import contextlib
 import time as _time
-from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -12,40 +12,10 @@ from threadpoolctl import threadpool_limits
 from . import kinematics as kin
 from .model import build_model
 from .result import Result
-from .output_units import units_of
-from .stage1 import Kinematics, mobility_of, whole_stage1
-from .stage1 import time_axis as stage1_time_axis
-from .status import assign, code_counts
-from .status import message as status_message
+from .spine import Stages, finish, finished
+from .stage1 import Kinematics, mobility_of
 from .errors import MemoryRefused, SceneError
 from .scene import Scene, load_scene
-from .scene.timing import MEASURED_NEEDS
-
-
-@dataclass(frozen=True)
-class Stages:
-    """What a scene calls for: kinematic orders and whether the force stage runs."""
-
-    velocity: bool
-    acceleration: bool
-    forces: bool
-
-    @classmethod
-    def of(cls, scene: Scene) -> "Stages":
-        eff = set(scene.effects)
-        out = scene.outputs
-        vectors = bool(out.vectors)
-        measured = {MEASURED_NEEDS.get(m.of[0]) for m in scene.measurements}  # their rates
-        acc = ("inertia" in eff or "acceleration" in out.kinematics or vectors
-               or "acceleration" in measured)
-        vel = (acc or "damping" in eff or "velocity" in out.kinematics or vectors
-               or "velocity" in measured)
-        return cls(velocity=vel, acceleration=acc, forces=bool(eff))
-
-    @property
-    def stages(self) -> tuple[str, ...]:
-        return ("positions",) + (("velocities",) if self.velocity else ()) + (
-            ("accelerations",) if self.acceleration else ()) + (("forces",) if self.forces else ())
 
 
 #: what a run needs beside its stored arrays: the interpreter and libraries (~0.25 GB measured
@@ -159,7 +129,7 @@ def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREA
     differ): stage 1 is reused, not solved again. ``wanted``: the names of the variables the
     caller will read (None: every one the scene calls for); the Lagrange multipliers and the
     forces only they give are solved only when one of them is wanted (a fit's trials read its
-    measurements alone). The Result is built once, here.
+    measurements alone). The Result is built once, by :func:`linkpipe.spine.finish`.
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -174,7 +144,8 @@ def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREA
 
 def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
            wanted: frozenset | None = None) -> Result:
-    stages = Stages.of(scene)
+    """The spine over one segment (:func:`linkpipe.spine.finished`), or :func:`finish` on a
+    reused stage 1."""
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     t0 = _time.perf_counter()
@@ -182,65 +153,12 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
         check_memory(scene)
     model = build_model(scene)
     seconds["model"] = _time.perf_counter() - t0
-    k = whole_stage1(scene, model, stages, tell, seconds) if kinematics is None else kinematics
-    kinematic_status = k.der["status"]
-    forces = None
-    if stages.forces:
-        from .forces import LAGRANGE_VARIABLES, compute_forces
-
-        tell("forces")
-        t0 = _time.perf_counter()
-        motion = k.motion()
-        lagrange = wanted is None or bool(wanted & LAGRANGE_VARIABLES)
-        forces = compute_forces(model, motion, units_of(scene), lagrange=lagrange,
-                                cache=k.force_cache if kinematics is not None and not lagrange
-                                else None)
-        seconds["forces"] = _time.perf_counter() - t0
-    status = status_of(model, kinematic_status, k.sweep.residual, [], forces, finite=k.finite)
-    result = result_of(scene, model, k, forces, status, seconds)
+    if kinematics is None:
+        result = next(finished(scene, model, max(1, scene.n_steps), seconds, tell, wanted))
+    else:
+        result = finish(scene, model, kinematics, wanted=wanted, reused=True, seconds=seconds,
+                        tell=tell)
     return _with_measurements(result) if scene.measurements else result
-
-
-def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
-              time_axis: tuple | None = None, step_numbers: np.ndarray | None = None) -> Result:
-    """The Result of a solved stage 1 ``k``, its ``forces`` (or None) and final ``status``
-    (S,): step-first arrays of any number of rows (a study's (variant, step) rows too).
-    ``time_axis``: (time, note) of the whole sweep where ``k`` holds a segment of it, with the
-    segment's ``step_numbers``."""
-    stages = Stages.of(scene)
-    X, der = k.sweep.position, k.der
-    value, drive = k.drive.value, k.drive
-    time, time_note = stage1_time_axis(scene, value) if time_axis is None else time_axis
-    return Result(
-        scene=scene, model=model, mobility=k.mobility, driver_value=value, time=time,
-        driver_velocity=drive.rate, driver_acceleration=drive.acceleration,
-        time_note=time_note, reach_note=k.reach_note, position=X, link_angle=k.link_angle,
-        status=status,
-        residual=k.sweep.residual, iterations=k.sweep.iterations, condition=der["condition"],
-        velocity=k.velocity, acceleration=k.acceleration,
-        link_angular_velocity=k.link_rates[0], link_angular_acceleration=k.link_rates[1],
-        velocity_residual=der["velocity_residual"] if stages.velocity else None,
-        acceleration_residual=der["acceleration_residual"] if stages.acceleration else None,
-        forces=forces.variables if forces else None,
-        force_coords=forces.coords if forces else {},
-        seconds=seconds, message=status_message(code_counts(status)),
-        solver_method_used=k.sweep.method, solver_note=k.sweep.note,
-        linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
-        kinematics=k, step_numbers=step_numbers)
-
-
-def status_of(model, kinematic_status, residual, stored: list, forces, size=None,
-              finite: np.ndarray | None = None) -> np.ndarray:
-    """Every step's final status (S,): the stages' verdicts, the residual against the
-    tolerance, and whether everything ``stored`` (kinematic arrays, step axis first, None
-    where not computed) and the forces' arrays are finite (:func:`linkpipe.status.assign`).
-    ``size``: the length scale of the tolerance, float or (S,) (default ``model.size``);
-    ``finite`` (S,): rows of arrays checked before (:attr:`Kinematics.finite`)."""
-    if forces:
-        stored = stored + forces.defined_arrays()
-    return assign([kinematic_status] + ([forces.status] if forces else []), residual,
-                  model.tolerance(size=size),
-                  [a for a in stored if a is not None], finite=finite)
 
 
 def _with_measurements(result: Result) -> Result:

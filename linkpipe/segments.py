@@ -31,12 +31,11 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .model import build_model
-from .pipeline import (DEFAULT_THREADS, Stages, bytes_per_step, check_memory, result_of,
-                       solve, status_of)
+from .pipeline import DEFAULT_THREADS, bytes_per_step, check_memory, solve
 from .result import Result, Totals, combine_flags
-from .output_units import units_of
 from .scene import Scene
-from .stage1 import Stage1
+from .spine import finished
+from .stage1 import RESTART  # what stream's sinks are told where the sweep starts again
 
 #: the bytes of stored arrays one segment may hold (its transients come on top: about 1.3 x):
 #: 12 MB, 16,384-step segments of the crank-rocker with every rate (A/B, 8 runs of a 360k-step
@@ -52,8 +51,6 @@ SEGMENT_BYTES = 12 * 2**20
 #: same batch as in the whole sweep, so they agree to the last bit (a batched solve's last few
 #: steps take a different SIMD path, with other rounding, than the ones before them)
 MIN_SEGMENT_STEPS, MAX_SEGMENT_STEPS = 2**14, 2**17
-#: what :func:`stream` hands its sinks when the sweep starts again from its first step
-RESTART = object()
 
 
 def segment_steps(scene: Scene) -> int:
@@ -83,36 +80,12 @@ def steps_per_segment(scene: Scene) -> int:
 def segments(scene: Scene, segment: int, seconds: dict, progress=None):
     """Yield the Result of each segment of ``segment`` steps of ``scene``'s sweep, in step
     order (``step_numbers`` set), or :data:`RESTART` where the sweep goes to the general path
-    after some segments (the segments then come again from the first step)."""
-    tell = progress if callable(progress) else (lambda stage, done=None: None)
-    stages = Stages.of(scene)
+    after some segments (the segments then come again from the first step): the spine,
+    :func:`linkpipe.spine.finished`, as :func:`linkpipe.solve` takes it over one segment."""
     t0 = _time.perf_counter()
     model = build_model(scene)
     seconds["model"] = seconds.get("model", 0.0) + _time.perf_counter() - t0
-    stage1 = Stage1(scene, model, stages, tell, seconds)
-    S, lo = scene.n_steps, 0
-    while lo < S:
-        hi = min(S, lo + segment)
-        k = stage1.segment(lo, hi)
-        if k is None:  # auto leaves the dyads for Newton: the whole sweep, from its first step
-            stage1.use_newton()
-            lo = 0
-            yield RESTART
-            continue
-        forces = None
-        if stages.forces:
-            from .forces import compute_forces
-
-            tell("forces")
-            t0 = _time.perf_counter()
-            forces = compute_forces(model, k.motion(), units_of(scene))
-            seconds["forces"] = seconds.get("forces", 0.0) + _time.perf_counter() - t0
-        status = status_of(model, k.der["status"], k.sweep.residual, [], forces, finite=k.finite)
-        time, time_note = stage1.time_axis
-        yield result_of(scene, model, k, forces, status, seconds,
-                        (None if time is None else time[lo:hi], time_note), np.arange(lo, hi))
-        tell("segment", hi)
-        lo = hi
+    yield from finished(scene, model, segment, seconds, progress)
 
 
 class Sampled:

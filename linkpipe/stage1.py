@@ -17,7 +17,7 @@ from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
 from .result import Motion
 from .scene import Scene
-from .status import NO_ASSEMBLY, NO_INPUT, OK, finite_rows
+from .status import OK, finite_rows
 
 
 def mobility_of(model):
@@ -62,33 +62,58 @@ class Kinematics:
                       influence=self.der["influence"],
                       link_angular_acceleration=self.link_rates[1], link_angle=self.link_angle)
 
+    def stored(self) -> list[np.ndarray]:
+        """The kinematic arrays a Result stores that must be finite at an ok step (the one
+        list: :attr:`finite`), step axis first."""
+        arrays = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
+                  *self.link_rates]
+        return [a for a in arrays if a is not None]
+
     @functools.cached_property
     def finite(self) -> np.ndarray:
-        """(S,) True where every stored kinematic array is finite (computed once: a fit's
-        trials reuse it)."""
-        stored = [self.sweep.position, self.link_angle, self.velocity, self.acceleration,
-                  *self.link_rates]
-        return finite_rows([a for a in stored if a is not None], len(self.s))
+        """(S,) True where every :meth:`stored` array is finite (computed once: a fit's trials
+        reuse it)."""
+        return finite_rows(self.stored(), len(self.s))
+
+    def tiled(self, V: int, position: np.ndarray | None = None) -> "Kinematics":
+        """This stage 1 repeated for V variants on one (variant, step) row axis (V x S rows,
+        variant first): a study's variants that share it; ``position`` (V x S, n_points, 2):
+        the rows' own positions (anchors moved) instead of the tiled ones."""
+        def rows(a):
+            return None if a is None else np.tile(a, (V,) + (1,) * (a.ndim - 1))
+
+        drive = dataclasses.replace(self.drive, **{
+            f.name: rows(getattr(self.drive, f.name)) for f in dataclasses.fields(self.drive)
+            if isinstance(getattr(self.drive, f.name), np.ndarray)})
+        sweep = dataclasses.replace(  # its rates are the Kinematics' own (tiled once, below)
+            self.sweep, position=rows(self.sweep.position) if position is None else position,
+            velocity=None, acceleration=None,
+            **{f: rows(getattr(self.sweep, f)) for f in ("residual", "iterations", "status")})
+        velocity, acceleration = rows(self.velocity), rows(self.acceleration)
+        der = {key: rows(a) if isinstance(a, np.ndarray) else a for key, a in self.der.items()
+               if key not in ("velocity", "acceleration")}
+        der.update(velocity=velocity, acceleration=acceleration)
+        return Kinematics(self.mobility, drive, rows(self.s), rows(self.s_dot), rows(self.s_ddot),
+                          sweep, rows(self.link_angle), der, velocity, acceleration,
+                          tuple(rows(a) for a in self.link_rates), reach_note=self.reach_note)
 
 
-def whole_stage1(scene: Scene, model, stages, tell, seconds: dict) -> Kinematics:
-    """Positions, velocities, accelerations, condition and influence coefficients of the whole
-    sweep: :class:`Stage1` with the sweep as one segment."""
-    return Stage1(scene, model, stages, tell, seconds).whole()
+#: what :meth:`Stage1.parts` yields where the sweep's plan left the closed-form dyads for
+#: Newton after some segments: the segments come again from the first step
+RESTART = object()
 
 
 class Stage1:
-    """Stage 1 of one scene, solved over the whole sweep or segment by segment (a long sweep
-    streamed to its files: :mod:`linkpipe.segments`); segments give the whole sweep's rows to
-    the last bit (``tests/test_segments.py``).
+    """Stage 1 of one scene, solved over the whole sweep or segment by segment (:meth:`parts`;
+    a long sweep streamed to its files: :mod:`linkpipe.segments`); segments give the whole
+    sweep's rows to the last bit (``tests/test_segments.py``).
 
-    Made once per sweep: the drivers' motion (S, nd) in internal units, the time axis, the
-    start and the dyads' branches. The closed-form dyads solve segment by segment (their
-    branch margins carried across); where auto must leave them for Newton at some segment
-    (:meth:`segment` returns None), :meth:`use_newton` solves the positions of the whole sweep
-    by the general path, and the segments start again from the first. Link angles are unwrapped
-    across segments (:class:`~linkpipe.kinematics.rates.AngleCarry`), torsion springs' turns
-    set at the sweep's first solved step.
+    Made once per sweep: the drivers' motion (S, nd) in internal units, the time axis and how
+    the positions are found (:class:`linkpipe.kinematics.Plan`: the method, the start, the
+    dyads' branches, carried across segments; it switches itself to Newton where auto must
+    leave the dyads, and :meth:`parts` then starts again from the first segment). Link angles
+    are unwrapped across segments (:class:`~linkpipe.kinematics.rates.AngleCarry`), torsion
+    springs' turns set at the sweep's first solved step.
     """
 
     def __init__(self, scene: Scene, model, stages, tell=lambda stage: None,
@@ -101,40 +126,12 @@ class Stage1:
         self.s, self.s_dot, self.s_ddot = (self.drive.value * scale, self.drive.rate * scale,
                                            self.drive.acceleration * scale)
         self.time_axis = time_axis(scene, self.drive.value)
-        self.order = 2 if stages.acceleration else 1 if stages.velocity else 0
-        self.present = np.isfinite(self.s).all(axis=1)  # False where a logged value is missing
-        # the steps solved: those present, from the first the drawing reaches (the first
-        # ``unreached`` steps out of its reach are no_assembly: ``reach_note`` says why)
-        self.solvable, self.unreached, self.reach_note = self.present, 0, ""
-        try:
-            self._plan()
-        except kin.OutOfReach:
-            self.unreached, self.reach_note = kin.sweep_reach(model)
-            self.solvable = self.present & (np.arange(self.n_steps) >= self.unreached)
-            self._plan()
+        self.order = stages.order
+        t0 = _time.perf_counter()
+        self.plan = kin.Plan(model, self.s)  # the general path solves the whole sweep here
+        self._add("positions", t0)
+        self.reach_note = self.plan.reach_note
         self.restart()
-
-    def _plan(self) -> None:
-        """The dyads and their branches at the first solvable steps, or the general path."""
-        model, method = self.model, self.scene.solver.method
-        self.newton: kin.Sweep | None = None
-        self.chain, self.note, self.start = None, "", None
-        first = np.flatnonzero(self.solvable)[:2]
-        if not len(first):
-            self.newton = self._unreached(_sweep_where_present(model, self.s, self.solvable))
-        elif method in ("auto", "dyads"):
-            self.chain, self.note, self.start = kin.dyad_plan(model, self.s[first],
-                                                              method == "dyads")
-        if self.chain is None and self.newton is None:
-            self.use_newton()
-
-    def _unreached(self, sweep: kin.Sweep, lo: int = 0) -> kin.Sweep:
-        """``sweep`` (of steps ``lo`` ..) with the steps out of the drawing's reach that have
-        every driver value no_assembly (they were left out of the solve, as no_input)."""
-        n = min(self.unreached - lo, len(sweep.status))
-        if n > 0:
-            sweep.status[:n] = np.where(self.present[lo:lo + n], NO_ASSEMBLY, sweep.status[:n])
-        return sweep
 
     @property
     def n_steps(self) -> int:
@@ -142,72 +139,53 @@ class Stage1:
 
     def restart(self) -> None:
         """Segments from the first step again (what is carried from one segment to the next)."""
-        self.chain_carry: dict = {}
+        self.plan.restart()
         self.angle_carry = kin.AngleCarry.start(len(self.model.link_a))
-
-    def use_newton(self) -> None:
-        """The general path's positions of the whole sweep (auto left the dyads, or the scene
-        asks for Newton); segments then slice them."""
-        t0 = _time.perf_counter()
-        note = self.note or (kin.DYADS_LEFT if self.chain is not None else "")
-        self.chain = None
-        if self.solvable.all():
-            self.newton = kin.solve_with_newton(self.model, self.s, note, self.start)
-        else:
-            self.newton = self._unreached(_sweep_where_present(self.model, self.s, self.solvable,
-                                                               note, self.start))
-        self._add("positions", t0)
-        self.restart()
 
     def _add(self, stage: str, t0: float) -> None:
         self.seconds[stage] = self.seconds.get(stage, 0.0) + _time.perf_counter() - t0
 
     def whole(self) -> Kinematics:
         """The whole sweep as one segment."""
-        k = self.segment(0, self.n_steps)
-        if k is None:
-            self.use_newton()
-            k = self.segment(0, self.n_steps)
+        _, _, k = next(self.parts(self.n_steps))
         return k
 
-    def _positions(self, rows: slice) -> kin.Sweep | None:
-        """The Sweep of steps ``rows``: the dyads' (None where auto must leave them) or a slice
-        of the general path's."""
-        if self.newton is not None:
-            return kin.Sweep(*(getattr(self.newton, f)[rows] for f in
-                               ("position", "residual", "iterations", "status")),
-                             self.newton.method, self.newton.note)
-        forced = self.scene.solver.method == "dyads"
-        present = self.solvable[rows]
-        s, sd, sdd = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
-        if present.all():
-            return kin.dyad_sweep(self.model, self.chain, s, sd, sdd, self.order, forced,
-                                  self.chain_carry)
-        idx = np.flatnonzero(present)
-        sub = (kin.dyad_sweep(self.model, self.chain, s[idx], sd[idx], sdd[idx], self.order,
-                              forced, self.chain_carry) if len(idx) else None)
-        if sub is None and len(idx):
-            return None
-        if sub is None:  # no step of these solved: every one out of reach or without a value
-            return self._unreached(_sweep_where_present(self.model, s, present), rows.start)
-        return self._unreached(_scattered(self.model, sub, idx, len(present)), rows.start)
+    def parts(self, segment: int):
+        """Yield ``(lo, hi, Kinematics)`` of each segment of ``segment`` steps, in step order,
+        or :data:`RESTART` where the plan left the dyads for Newton after earlier segments (the
+        segments then come again from the first step; a sweep of one segment never restarts)."""
+        S, lo = self.n_steps, 0
+        while True:
+            hi = min(S, lo + segment)
+            k = self._segment(lo, hi)
+            if k is None:
+                lo = 0
+                yield RESTART
+                continue
+            yield lo, hi, k
+            if hi >= S:
+                return
+            lo = hi
 
-    def segment(self, lo: int, hi: int) -> Kinematics | None:
-        """Stage 1 of steps ``lo .. hi - 1``, or None where auto must leave the dyads for
-        Newton (call :meth:`use_newton`, then start again from the first segment)."""
+    def _segment(self, lo: int, hi: int) -> Kinematics | None:
+        """Stage 1 of steps ``lo .. hi - 1``, or None where the plan left the dyads for Newton
+        here after earlier segments (the carries restarted)."""
         model, stages, rows = self.model, self.stages, slice(lo, hi)
         self.tell("positions")
         t0 = _time.perf_counter()
-        sweep = self._positions(rows)
-        if sweep is None:
+        s, s_dot, s_ddot = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
+        path = self.plan.used
+        sweep = self.plan.positions(rows, s_dot, s_ddot, self.order)
+        if self.plan.used != path and lo > 0:
+            self._add("positions", t0)
+            self.restart()
             return None
         X = sweep.position
         link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry,
-                                                                 s=self.s[rows])
+                                                                 s=s)
         self._add("positions", t0)
         self.tell("jacobian")
         t0 = _time.perf_counter()
-        s, s_dot, s_ddot = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
         Xz = X if np.isfinite(X).all() else np.where(np.isfinite(X), X, 0.0)
         der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                               velocity=sweep.velocity, acceleration=sweep.acceleration,
@@ -232,36 +210,6 @@ class Stage1:
             if isinstance(getattr(self.drive, f.name), np.ndarray)})
         return Kinematics(self.mobility, drive, s, s_dot, s_ddot, sweep, link_angle, der,
                           velocity, acceleration, link_rates, reach_note=self.reach_note)
-
-
-def _scattered(model, sub: kin.Sweep, idx: np.ndarray, S: int) -> kin.Sweep:
-    """A Sweep of S steps with ``sub``'s rows at ``idx`` (steps that have every driver value);
-    the others no_input, every moving quantity NaN."""
-    X = np.full((S, model.n_points, 2), np.nan)
-    X[:, model.fixed] = model.start_position[model.fixed]
-    full = dict(position=X, residual=np.full(S, np.nan), iterations=np.zeros(S, np.int32),
-                status=np.full(S, NO_INPUT, np.int8))
-    for key in ("position", "residual", "iterations", "status"):
-        full[key][idx] = getattr(sub, key)
-    for key in ("velocity", "acceleration"):
-        if getattr(sub, key) is not None:
-            full[key] = np.full((S, model.n_points, 2), np.nan)
-            full[key][idx] = getattr(sub, key)
-    return kin.Sweep(**full, method=sub.method, note=sub.note)
-
-
-def _sweep_where_present(model, s, present, note: str = "", start=None) -> kin.Sweep:
-    """The general path on the steps that have every driver value (the others: status
-    no_input, every moving quantity NaN). The continuation runs from one present step to the
-    next, so a missing sample leaves its neighbours' solutions as they would be without it."""
-    S, idx = s.shape[0], np.flatnonzero(present)
-    if not len(idx):
-        X = np.full((S, model.n_points, 2), np.nan)
-        X[:, model.fixed] = model.start_position[model.fixed]
-        return kin.Sweep(X, np.full(S, np.nan), np.zeros(S, np.int32),
-                         np.full(S, NO_INPUT, np.int8), method="none",
-                         note="no step has every driver value")
-    return _scattered(model, kin.solve_with_newton(model, s[idx], note, start), idx, S)
 
 
 def _fd_derivatives(model, X, Xz, s, s_dot, s_ddot, status, need_acceleration, time) -> dict:

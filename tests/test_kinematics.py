@@ -196,7 +196,7 @@ def test_link_angles_unwrap_across_gaps_as_each_link_alone():
     last bit, with NaN gaps anywhere (leading, inner, trailing, a link never assembled)."""
     from hypothesis import given, settings, strategies as st
 
-    from linkpipe.kinematics.rates import unwrap_runs
+    from linkpipe.kinematics.angles import unwrap_runs
 
     @settings(max_examples=60, deadline=None)
     @given(seed=st.integers(0, 10_000), S=st.integers(1, 60), L=st.integers(1, 4),
@@ -244,7 +244,7 @@ def test_running_sums_of_sparse_corrections_are_cumsums_bit_for_bit():
     step, to the last bit, with few turns, many turns, none, and a carried start."""
     from hypothesis import given, settings, strategies as st
 
-    from linkpipe.kinematics.rates import _running_sums
+    from linkpipe.kinematics.angles import _running_sums
 
     @settings(max_examples=80, deadline=None)
     @given(seed=st.integers(0, 10_000), S=st.integers(1, 5000), L=st.integers(1, 4),

@@ -566,7 +566,7 @@ def test_a_sweep_too_long_for_memory_stops_the_study_not_a_row(tmp_path, monkeyp
     variant's failed row nor a fit's failed trial."""
     import linkpipe.pipeline as pipeline
     from linkpipe.errors import MemoryRefused
-    from linkpipe.study.batch import solve_variant
+    from linkpipe.study.variants import solve_variant
 
     study = load_study(str(write_study(tmp_path)))
     monkeypatch.setattr(pipeline, "available_memory", lambda: 1)

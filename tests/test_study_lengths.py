@@ -22,7 +22,7 @@ from linkpipe.model.rows import variant_rows
 from linkpipe.status import NO_ASSEMBLY, OK
 from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study
-from linkpipe.study import pivots, vector
+from linkpipe.study import paths, pivots, vector
 from test_study import EVERY_EFFECT
 from test_study_pivots import (CHUNK_EDGES, assert_rows_are_own_runs, chunk_study, own_run, study_of,
                                vectorised_rows_are_own_runs, write)
@@ -70,7 +70,7 @@ def test_the_shipped_tolerance_study_is_vectorised_and_equals_one_by_one_runs_to
     assert [s[0] for s in study.slots] == (["spring_k", "point"] + ["pivot"] * 4
                                            + ["length"] * 3)
     assert usable(study).all()  # +-0.5 mm: every variant on the vectorised rows
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status == OK).all()
     assert_bitwise_own_runs(GOAL, study, arrays, range(study.n_variants))
     f = read_arrays(run_study(study, tmp_path / "out"))
@@ -95,7 +95,7 @@ def test_lengths_that_cannot_close_or_leave_the_branches_are_their_own_runs(tmp_
     assert study.slots is not None
     keep = usable(study)
     assert keep.any() and not keep.all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status == NO_ASSEMBLY).any()
     assert_rows_are_own_runs(GOAL, study, status, arrays)
     assert_bitwise_own_runs(GOAL, study, arrays, np.flatnonzero(keep))
@@ -112,7 +112,7 @@ def test_crank_rocker_link_length_grid_equals_one_by_one_runs_to_the_bit(tmp_pat
                              '"points.O4.x" = { uniform = [3.99, 4.01] }\n'))
     assert study.path_note.startswith("vectorised: the link lengths")
     assert usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_bitwise_own_runs(ROCKER, study, arrays, range(study.n_variants))
 
 
@@ -193,7 +193,7 @@ def test_every_shipped_config_link_length_variants_are_their_own_runs_to_the_bit
     if study.slots is None:
         assert study.path_note.startswith("variant by variant: ")
         pytest.skip(study.path_note)
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     keep = usable(study)
     assert_rows_are_own_runs(base, study, status, arrays)
     assert_bitwise_own_runs(base, study, arrays, np.flatnonzero(keep))

@@ -18,7 +18,7 @@ from linkpipe.scene import parse_scene
 from linkpipe.status import NO_ASSEMBLY, OK
 from linkpipe.stores.study import read_arrays
 from linkpipe.study import load_study, run_study
-from linkpipe.study import pivots, vector
+from linkpipe.study import paths, pivots, vector
 from test_study import EVERY_EFFECT
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -62,7 +62,7 @@ def vectorised_rows_are_own_runs(base, study):
     """Assert the study takes the vectorised path and its rows of every variant are the
     variants' own runs; return the rows (status, arrays)."""
     assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(base, study, status, arrays)
     return status, arrays
 
@@ -119,7 +119,7 @@ def test_pin_tolerance_study_is_vectorised_and_equals_one_by_one_runs(tmp_path):
     assert study.path_note.startswith("vectorised: the pivots")
     assert [s[0] for s in study.slots] == ["spring_k", "point"] + ["pivot"] * 4
     assert usable(study).all()  # +-0.5 mm: every variant on the base's branches
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status == OK).all()
     assert_rows_are_own_runs(GOAL, study, status, arrays)
     f = read_arrays(run_study(study, tmp_path / "out"))
@@ -138,7 +138,7 @@ def test_far_moves_and_a_variant_that_cannot_assemble_are_their_own_runs(tmp_pat
     assert study.slots is not None
     keep = usable(study)
     assert keep.any() and not keep.all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status[-2:] == NO_ASSEMBLY).any(axis=1).all()  # 3 ft down: steps that cannot close
     assert_rows_are_own_runs(GOAL, study, status, arrays)
 
@@ -149,7 +149,7 @@ def test_crank_rocker_pivot_grid_equals_one_by_one_runs(tmp_path):
                              '"points.O4.x" = { from = 3.9, to = 4.1, steps = 3 }\n'
                              '"points.O2.y" = { uniform = [-0.01, 0.01] }\n'))
     assert study.path_note.startswith("vectorised") and usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
 
 
@@ -205,7 +205,7 @@ def chunk_study(tmp_path, seed: int, geometry: str):
     own."""
     (tmp_path / "goal_every_effect.toml").write_text(EVERY_EFFECT)
     study = load_study(write(tmp_path, CHUNK_STUDY.format(seed=seed, geometry=geometry)))
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status == OK).all()
     f = read_arrays(run_study(study, tmp_path / "out"))
     np.testing.assert_array_equal(
@@ -253,7 +253,7 @@ def test_every_shipped_config_pivot_variants_are_their_own_runs_to_the_bit(tmp_p
         assert "rows change" in study.path_note  # lengths taken from the drawing
         return
     assert usable(study).all()  # every variant on the vectorised rows, none its own run
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     for v in range(study.n_variants):
         r = own_run(base, study, v)
         stored = {x.name: x.data for x in r.variables() if x.dims[:1] == ("step",)}
@@ -273,7 +273,7 @@ def test_a_preload_holds_at_each_variants_own_assembled_start(tmp_path):
     base = write(tmp_path, text, "rocker.toml")
     anchor = study_of(tmp_path, base, '"points.K.x" = { from = 4.0, to = 6.0, steps = 3 }')
     assert anchor.slots is not None and anchor.path_note.startswith("vectorised")
-    _, arrays = vector.variant_arrays(anchor, anchor.slots, 0, anchor.n_variants)
+    _, arrays = paths.variant_arrays(anchor, anchor.slots, 0, anchor.n_variants)
     for v, x in enumerate(anchor.values[:, 0]):
         own = linkpipe.solve(parse_scene(text.replace("x = 5.0", f"x = {float(x)!r}"), str(base)))
         assert own.forces["spring_force"][1][0, 0] == pytest.approx(50.0, abs=1e-6)
@@ -294,7 +294,7 @@ def test_each_variant_takes_its_link_turns_from_its_own_drawing(tmp_path):
     base = write(tmp_path, text, "rocker.toml")
     study = study_of(tmp_path, base, '"points.O4.y" = { from = -0.01, to = 0.01, steps = 3 }')
     assert study.slots is not None
-    _, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    _, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     for v, y in enumerate(study.values[:, 0]):
         own = linkpipe.solve(parse_scene(text.replace("O4 = { x = 4.0, y = 0.0",
                                                       f"O4 = {{ x = 4.0, y = {float(y)!r}"), str(base)))

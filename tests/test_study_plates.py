@@ -26,7 +26,7 @@ from linkpipe.model.rows import variant_rows
 from linkpipe.scene import parse_scene
 from linkpipe.status import NO_ASSEMBLY, OK
 from linkpipe.stores.study import read_arrays
-from linkpipe.study import load_study, run_study, vector
+from linkpipe.study import load_study, paths, run_study
 from linkpipe.study.batch import solve_batch
 from linkpipe.study.pivots import rows_inputs
 from test_study_lengths import assert_bitwise_own_runs, assert_variant_is_own_model, usable
@@ -105,7 +105,7 @@ def test_the_shear_press_lever_side_lengths_are_vectorised_and_equal_own_runs_to
     assert study.path_note.startswith("vectorised: the link lengths and the plates' side lengths")
     assert [s[0] for s in study.slots] == ["side", "side", "length", "load_force"]
     assert usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status == OK).all()
     assert_bitwise_own_runs(PRESS, study, arrays, range(study.n_variants))
 
@@ -117,7 +117,7 @@ def test_side_lengths_that_cannot_close_are_their_own_runs(tmp_path):
     study = study_of(tmp_path, PRESS, '"links.lever.lengths.B-P" = { from = 0.30, to = 0.50, steps = 11 }\n')
     assert study.slots == (("side", "lever", "B-P"),)
     values = study.values[:, 0]
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     closes = values >= 0.42
     assert (status[~closes] == NO_ASSEMBLY).all() and np.isnan(arrays["position"][~closes]).all()
     assert_rows_are_own_runs(PRESS, study, status, arrays)
@@ -139,7 +139,7 @@ def test_a_plate_with_a_chained_point_local_and_drawn_points_every_effect(tmp_pa
                      extra='[study.metrics]\npeak = "max(abs(input_force.crank))"\n')
     assert study.slots is not None and "side lengths" in study.path_note
     assert usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status == OK).all()
     assert_bitwise_own_runs(base, study, arrays, range(study.n_variants))
     f = read_arrays(run_study(study, tmp_path / "out"))
@@ -154,7 +154,7 @@ def test_the_crank_rocker_drawn_points_are_vectorised_and_equal_own_runs_to_the_
     assert study.path_note.startswith("vectorised: the moving points' drawn coordinates")
     assert [s[0] for s in study.slots] == ["drawn", "drawn"]
     assert usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_bitwise_own_runs(ROCKER, study, arrays, range(study.n_variants))
 
 
@@ -173,7 +173,7 @@ def test_lengths_and_local_coordinates_from_the_drawing_follow_each_drawn_point(
                      '"points.P.x" = { uniform = [1.2, 1.3] }\n', samples=6, seed=1)
     assert study.slots is not None and "drawn coordinates" in study.path_note
     assert usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_bitwise_own_runs(base, study, arrays, range(study.n_variants))
 
 
@@ -186,13 +186,13 @@ def test_drawn_points_of_a_plate_place_it_again(tmp_path):
                      '"points.P.y" = { from = 2.0, to = 2.2, steps = 2 }\n', samples=3, seed=2)
     assert study.slots is not None
     assert usable(study).all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_bitwise_own_runs(base, study, arrays, range(study.n_variants))
     # P.y from 2.0 down to -1.0: drawn right of A -> B below y ~ 1.4 at x = 1 (the other
     # side: a plate of another shape, its own decomposition and branches), and on the line
     study = study_of(tmp_path, base, '"points.P.y" = { from = -1.0, to = 2.0, steps = 7 }\n')
     assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(base, study, status, arrays)
     keep = usable(study)
     assert keep.any()
@@ -207,7 +207,7 @@ def test_drawn_points_far_from_the_base_are_their_own_runs(tmp_path):
     assert study.slots is not None
     keep = usable(study)
     assert keep.any() and not keep.all()
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
     assert_bitwise_own_runs(ROCKER, study, arrays, np.flatnonzero(keep))
 
@@ -220,14 +220,14 @@ def test_a_drawn_point_that_fails_the_scene_checks_is_its_own_run(tmp_path):
     study = study_of(tmp_path, base, '"points.P.x" = { from = 1.0, to = 2.02085, steps = 2 }\n'
                      '"points.P.y" = { from = 1.4214, to = 2.0, steps = 2 }\n')
     assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     on_line = (study.values[:, 0] == 2.02085) & (study.values[:, 1] == 1.4214)
     assert on_line.sum() == 1 and (status[on_line] == NO_ASSEMBLY).all()
     assert_rows_are_own_runs(base, study, status, arrays)
     study = study_of(tmp_path, ROCKER, '"points.B.x" = { from = 1.0, to = 3.0417, steps = 2 }\n'
                      '"points.B.y" = { from = 0.0, to = 2.8428, steps = 2 }\n')
     assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert (status[0] == NO_ASSEMBLY).all()  # B drawn on A
     assert_rows_are_own_runs(ROCKER, study, status, arrays)
 
@@ -275,7 +275,7 @@ def test_every_shipped_config_drawn_point_variants_are_their_own_runs_to_the_bit
     if study.slots is None:
         assert study.path_note.startswith("variant by variant: ")
         pytest.skip(study.path_note)
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(base, study, status, arrays)
     assert_bitwise_own_runs(base, study, arrays, np.flatnonzero(usable(study)))
 
@@ -294,7 +294,7 @@ def test_random_side_lengths_and_drawn_points_equal_one_by_one_runs(tmp_path_fac
                      f'"points.B.x" = {{ uniform = [{0.062 + bx!r}, {0.072 + bx!r}] }}\n',
                      samples=3, seed=seed)
     assert study.slots is not None
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(PRESS, study, status, arrays)
     assert_bitwise_own_runs(PRESS, study, arrays, np.flatnonzero(usable(study)))
 
@@ -339,5 +339,5 @@ def test_wide_ranges_on_the_shear_press_equal_own_runs(case, tmp_path):
             f'[study.parameters]\n{WIDE[case]}\n')
     study = load_study(write(tmp_path, text))
     assert study.slots is not None, study.path_note
-    status, arrays = vector.variant_arrays(study, study.slots, 0, study.n_variants)
+    status, arrays = paths.variant_arrays(study, study.slots, 0, study.n_variants)
     assert_rows_are_own_runs(ROOT / "configs" / "shear_press.toml", study, status, arrays)

@@ -12,7 +12,7 @@ import linkpipe
 from linkpipe import closed_forms
 from linkpipe.__main__ import main
 from linkpipe.errors import SceneError
-from linkpipe.kinematics import driver_motion, solve_positions
+from linkpipe.kinematics import driver_motion, solve_positions, start_state
 from linkpipe.kinematics.vectorised import solve_newton
 from linkpipe.model import build_model
 from linkpipe.model.drive import LAWS, law_motion, rate_motion
@@ -153,7 +153,8 @@ def test_uneven_steps_and_a_reversal_stay_on_the_vectorised_path():
     assert np.diff(s[:, 0]).max() > 0 > np.diff(s[:, 0]).min()  # it turns back
     out = solve_newton(model, s)
     assert out["sequential"].mean() < 0.1
-    q, _, _, status = solve_positions(model, s)
+    q, _, _, status = solve_positions(model, s, *start_state(model, s[0], model.tolerance(),
+                                                             model.scene.solver.max_iter))
     assert (out["status"] == OK).all() and (status == OK).all()
     assert np.abs(out["q"] - q).max() <= 1e-10 * model.size
 

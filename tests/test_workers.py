@@ -73,16 +73,17 @@ def test_jacobian_stage_and_rates_equal_on_one_and_three_threads(config, monkeyp
     """Every shipped scene's Jacobian stage, link angles, rates and finiteness in chunks of 16
     steps (many chunks, whatever the sweep's length): three threads give one thread's arrays."""
     from linkpipe import status
-    from linkpipe.kinematics import rates as rates_module
+    from linkpipe.kinematics import angles as angles_module
 
-    monkeypatch.setattr(rates_module, "CHUNK", 16)  # link angles' chunks
+    monkeypatch.setattr(angles_module, "CHUNK", 16)  # link angles' chunks
     monkeypatch.setattr(status, "FINITE_CHUNK", 16)
     scene = linkpipe.load_scene(config)
     model = build_model(scene)
     stages = Stages.of(scene)
     with using(1):
         stage1 = Stage1(scene, model, stages)
-        sweep = stage1._positions(slice(0, stage1.n_steps)) or kin.solve_with_newton(model, stage1.s)
+        sweep = stage1.plan.positions(slice(0, stage1.n_steps), stage1.s_dot, stage1.s_ddot,
+                                      stage1.order)
     X = np.where(np.isfinite(sweep.position), sweep.position, 0.0)
 
     def run():

@@ -16,7 +16,7 @@ def start_assembled(model) -> np.ndarray:
     """The start configuration a spring's start length is measured on (n_points, 2): the
     drawing assembled at its own driver values where it assembles there (its points may be a
     guess), else the drawing."""
-    from ..kinematics.start import assembled_drawing
+    from ..kinematics.drawing import assembled_drawing
 
     X = assembled_drawing(model)
     return model.start_position if X is None else X
@@ -34,7 +34,7 @@ class ForceConstants:
     (n_torsion_springs,) or (S, n_torsion_springs);
     ``start_position`` (n_points, 2) or
     (S, n_points, 2), the drawn positions; ``start_assembled`` the same shape, the drawing
-    assembled at its own driver values (:func:`linkpipe.kinematics.start.assembled_drawing`;
+    assembled at its own driver values (:func:`linkpipe.kinematics.drawing.assembled_drawing`;
     the drawing itself where it does not assemble there): a spring's start length, at which
     its ``preload`` holds; ``size`` the
     mechanism's length scale, a float or (S,) (the leverage an input must have); ``pivots``

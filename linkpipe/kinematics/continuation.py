@@ -13,7 +13,6 @@ from ..status import NO_ASSEMBLY, NOT_CONVERGED
 from .linalg import EXACT_WITHIN, MODE_SETTLED_BELOW, POLISH_FROM, POLISH_WITHIN, condition, condition_and_inverse_one, is_singular, lin_solve
 from .roots import _classify_failure, _converging_at_cap, _lm_root, _mirror_root, _null_line_roots, _polish, aim_drivers, drivers_aligned, newton
 from .sparse_lu import StepFactor
-from .start import start_state
 from .step import _step_kernels
 
 
@@ -21,19 +20,20 @@ SUBSTEPS, SUBDIVIDE = 8, 2  # a failing step's retry: 8 sub-steps, at most 2 lev
 CLASSIFY_ITER = 10  # Newton iterations past a capped run that look for its root (not counted)
 
 
-def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
+def solve_positions(model: Model, s: np.ndarray, q_start: np.ndarray,
+                    start_slope: np.ndarray | None = None, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
-                    jacobian: str | None = None, q_start: np.ndarray | None = None,
-                    start_slope: np.ndarray | None = None, stop_on_failure: bool = False,
+                    jacobian: str | None = None, stop_on_failure: bool = False,
                     subdivide: int = SUBDIVIDE):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
     steps, residual (S,), iterations (S,), status (S,) int8 (OK / NO_ASSEMBLY / NOT_CONVERGED).
     ``predictor`` is "none", "first" (q + dq/ds * ds) or "second" (adds the curvature term).
-    ``q_start`` (n_q,): continue from this assembled configuration instead of assembling the
-    scene's start (the vectorised general path re-runs single intervals of a sweep this way),
-    with ``start_slope`` (n_q, nd) as the first predictor's dq/ds (see :func:`start_state`).
+    ``q_start`` (n_q,): the assembled configuration at ``s[0]`` the sweep continues from (the
+    scene's start: :func:`linkpipe.kinematics.start.start_state`; the vectorised general path
+    re-runs single intervals of a sweep from one of its steps), with ``start_slope`` (n_q, nd)
+    as the first predictor's dq/ds (None: none known).
     ``stop_on_failure``: return at the first step that fails (the rest stay NaN, status 0).
     ``subdivide``: how many levels of ``SUBSTEPS`` sub-steps a step that fails right after an
     assembled one is retried in before it counts as failed.
@@ -49,8 +49,6 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                         sc.max_iter if max_iter is None else max_iter,
                         sc.predictor if predictor is None else predictor,
                         sc.jacobian if jacobian is None else jacobian, subdivide)
-    if q_start is None:
-        q_start, start_slope = start_state(model, s[0], run.tol_abs, run.max_iter)
     return run.sweep(s, q_start, start_slope, stop_on_failure)
 
 

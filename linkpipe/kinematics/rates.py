@@ -1,15 +1,11 @@
 """Velocities, accelerations, condition numbers and the Jacobian's inverse of a solved sweep
-(the "jacobian" stage), on the sparse engine or densely; finite-difference derivatives;
-link angles and their rates; the drivers' motion."""
+(the "jacobian" stage), on the sparse engine or densely; finite-difference derivatives; the
+links' rates (their angles: :mod:`.angles`)."""
 from __future__ import annotations
-
-import dataclasses
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import Model, driver_scale
-from ..model.drive import driver_motion as drive_motion
+from ..model import Model
 from .linalg import (CHUNK, ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse,
                      estimated_condition, is_singular)
 from .affine import entries_at
@@ -262,208 +258,9 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
     return V, A
 
 
-def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
-                          carry: "AngleCarry | None" = None, s: np.ndarray | None = None,
-                          drawings: np.ndarray | None = None):
-    """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
-
-    One vectorised pass: each gap is filled with the link's last angle before it (the first
-    one, before its first), so the jump across the gap is unwrapped as between neighbours and
-    the filled steps add zero corrections; the gaps are NaN again afterwards. ``period``: the
-    rows are runs of this many steps (a study's variants), each unwrapped on its own.
-
-    Whole turns: a link's first finite angle is taken within half a turn of its direction in
-    the drawing (:func:`drawn_link_angles`), not of (-pi, pi] at that step, so the same pose
-    reads the same angle whichever way a sweep runs through it. ``s`` (S, n_drivers), the
-    drivers' values in radians: a link that an absolute angle driver turns (it carries both
-    of the driver's points) takes its whole turns from the driver's value, which the scene
-    gives unwrapped (905.9 deg is legal), plus its fixed offset from the driver's direction
-    (:func:`driven_links`), so a sweep of more than half a turn per step keeps them.
-
-    ``drawings`` (V, n_points, 2), with ``period``: each run's own drawing (a study's
-    variants that move pivots or drawn points), the reference of its whole turns and its
-    plates' offsets (default: the model's drawing for every run).
-
-    ``carry``: a sweep solved in segments of steps (:mod:`linkpipe.segments`): the
-    :class:`AngleCarry` of the segments before (None for the first); then the return is
-    ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
-    to the last bit (``tests/test_segments.py``)."""
-    ang = np.empty((X.shape[0], len(model.link_a)))
-
-    def work(lo: int, hi: int) -> None:
-        ang[lo:hi] = model.link_angles(X[lo:hi])
-
-    for_chunks(work, X.shape[0], CHUNK)
-    drawn = drawn_link_angles(model) if drawings is None else model.link_angles(drawings)
-    if carry is not None:
-        out, after = unwrap_runs(ang, carry)
-        shift = np.where(np.isnan(carry.shift), _turns_towards(drawn, out), carry.shift)
-        after = dataclasses.replace(after, shift=np.where(np.isnan(after.last), np.nan, shift))
-        out += np.nan_to_num(shift)
-    elif period:
-        runs = unwrap_runs(ang.reshape(-1, period, ang.shape[-1]))[0]  # (V, period, L)
-        out = (runs + np.nan_to_num(_turns_towards(drawn, runs))[:, None, :]).reshape(ang.shape)
-        after = None
-    else:
-        out, after = unwrap_runs(ang)[0], None
-        out += np.nan_to_num(_turns_towards(drawn, out))
-    if s is not None:
-        for li, j, offset in driven_links(model, drawings):
-            if np.ndim(offset):  # one per run (drawings)
-                offset = np.repeat(offset, period)
-            turns = np.round((s[:, j] + offset - ang[:, li]) / (2 * np.pi))
-            out[:, li] = ang[:, li] + 2 * np.pi * turns
-    return (out, after) if carry is not None else out
-
-
-def _turns_towards(drawn: np.ndarray, unwrapped: np.ndarray) -> np.ndarray:
-    """The whole turns (radians, (..., n_links)) that bring each link's first finite angle of
-    ``unwrapped`` (..., S, n_links) within half a turn of its ``drawn`` angle (NaN: no finite
-    angle yet)."""
-    fin = np.isfinite(unwrapped)
-    first = np.take_along_axis(unwrapped, np.argmax(fin, axis=-2)[..., None, :], axis=-2)[..., 0, :]
-    turns = 2 * np.pi * np.round((drawn - first) / (2 * np.pi))
-    return np.where(fin.any(axis=-2), turns, np.nan)
-
-
-def drawn_link_angles(model: Model) -> np.ndarray:
-    """Each link's direction (first to second point) in the drawing, in (-pi, pi] (n_links,):
-    the drawing assembled at its own driver values where it assembles there (its points may
-    be a guess), else as drawn. The reference a link's whole turns are taken from."""
-    from ..cache import derived
-
-    return derived(model, "drawn_link_angles", _drawn_link_angles)
-
-
-def _drawn_link_angles(model: Model) -> np.ndarray:
-    from .start import assembled_drawing
-
-    X = assembled_drawing(model)
-    X = model.start_position if X is None else X
-    return model.link_angles(X[None])[0]
-
-
-#: an offset within this of half a turn is half a turn (+pi): the drawing's rounding must not
-#: decide between +pi and -pi, a whole turn apart in the link's angle
-HALF_TURN_WITHIN = 1e-9
-
-
-def driven_links(model: Model, drawings: np.ndarray | None = None) -> list[tuple]:
-    """``(link, driver, offset)`` of each link whose direction an absolute angle driver sets:
-    a link that carries both of the driver's points. Its first two points the driver's pair:
-    offset 0 (or pi, the pair reversed); else the body's fixed angle from the driver's
-    direction to the link's, in the drawing as assembled (:func:`drawn_link_angles`), in
-    (-pi, pi] with half a turn always +pi: the cut where a plate point drawn a little either
-    side of exactly opposite the driver's direction reads a turn apart. ``drawings``
-    (V, n_points, 2): the offset (V,) in each of these drawings instead."""
-    from .start import assembled_drawing
-
-    out = []
-    for j, driver in enumerate(model.scene.drivers):
-        if driver.kind != "angle" or driver.relative_to is not None:
-            continue
-        a, b = (model.point_names.index(p) for p in driver.points)
-        for li, (la, lb) in enumerate(zip(model.link_a, model.link_b)):
-            if (la, lb) in ((a, b), (b, a)):
-                out.append((li, j, 0.0 if (la, lb) == (a, b) else np.pi))
-            elif set(driver.points) <= set(model.scene.links[li].points):
-                if drawings is None:
-                    X = assembled_drawing(model)
-                    X = (model.start_position if X is None else X)[None]
-                else:
-                    X = drawings
-                d = X[:, b] - X[:, a]
-                offset = model.link_angles(X)[:, li] - np.arctan2(d[:, 1], d[:, 0])
-                offset = (offset + np.pi) % (2 * np.pi) - np.pi  # [-pi, pi)
-                offset = np.where(np.abs(np.abs(offset) - np.pi) < HALF_TURN_WITHIN, np.pi, offset)
-                out.append((li, j, float(offset[0]) if drawings is None else offset))
-    return out
-
-
-@dataclass(frozen=True)
-class AngleCarry:
-    """What unwrapping a segment of steps takes from the segments before it, per link
-    (n_links,): the last finite raw angle (NaN: none yet) and the correction summed up to it."""
-
-    last: np.ndarray
-    correction: np.ndarray
-    #: the whole turns (radians) added to each link's unwrapped angle, set at its first finite
-    #: angle (:func:`link_angles_unwrapped`; NaN: not yet)
-    shift: np.ndarray | None = None
-
-    @classmethod
-    def start(cls, n_links: int) -> "AngleCarry":
-        return cls(np.full(n_links, np.nan), np.zeros(n_links), np.full(n_links, np.nan))
-
-
-def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
-    """``(unwrapped, carry)`` of angles (..., S, n_links) along the steps axis, NaN gaps as
-    :func:`link_angles_unwrapped` says: numpy's ``unwrap`` (period 2 pi) written out so that its
-    running sum of corrections can start from a ``carry`` (the steps before; None: none) and
-    go on in the next segment in the same order of additions (``np.unwrap`` itself restarts
-    it: ``tests/test_segments.py`` checks this against ``np.unwrap`` bit for bit)."""
-    lead = ang.shape[:-2] + ang.shape[-1:]
-    before = carry if carry is not None else AngleCarry(np.full(lead, np.nan), np.zeros(lead))
-    ext = np.concatenate([before.last[..., None, :], ang], axis=-2)  # (..., S + 1, L)
-    fin = np.isfinite(ext)
-    gaps = not fin.all()
-    if gaps and ang.shape[-2] and fin[..., 1:, :].all():  # only the carry's last is missing:
-        first = ext[..., 1, :]                             # the first step stands in for it
-        ext[..., 0, :] = np.where(fin[..., 0, :], ext[..., 0, :], first)
-        gaps = False
-    if gaps:
-        rows = np.where(fin, np.arange(ext.shape[-2])[:, None], -1)
-        np.maximum.accumulate(rows, axis=-2, out=rows)  # the last finite step at or before each
-        first = np.argmax(fin, axis=-2)  # the first finite step (0 where there is none)
-        rows = np.where(rows < 0, first[..., None, :], rows)
-        ext = np.take_along_axis(ext, rows, axis=-2)
-    dd = np.diff(ext, axis=-2)
-    # np.unwrap's correction, (dd + pi) mod 2 pi - pi - dd, taken only where it is not zero
-    # (|dd| >= pi, or NaN): the same values, without a pass of mod over every step
-    correction = np.zeros(dd.shape)
-    jumps = ~(np.abs(dd) < np.pi)
-    if gaps:  # NaN steps of a link that has no finite angle at all add zero
-        jumps &= ~(np.isnan(dd) & ~fin.any(axis=-2)[..., None, :])
-    if jumps.any():
-        d = dd[jumps]
-        ddmod = np.mod(d - (-np.pi), 2 * np.pi) + (-np.pi)  # np.unwrap's steps, in its order
-        np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (d > 0))
-        correction[jumps] = ddmod - d
-    corrections = np.concatenate([before.correction[..., None, :], correction], axis=-2)
-    summed = (_running_sums(corrections) if corrections.ndim == 2 and not gaps else
-              np.cumsum(corrections, axis=-2))
-    out = ext[..., 1:, :] + summed[..., 1:, :]
-    seen = np.ones(lead, bool)
-    if gaps:
-        out[~fin[..., 1:, :]] = np.nan
-        seen = fin.any(axis=-2)  # a link with no finite angle yet keeps its carry as it was
-    after = AngleCarry(np.where(seen, ext[..., -1, :], before.last),
-                       np.where(seen, summed[..., -1, :], before.correction))
-    return out, after
-
-
 #: steps per chunk of :func:`link_rates`: a chunk's dozen (chunk,) columns fit in L2, and few
 #: enough chunks that two threads gain (8,192-step chunks were slower on two threads than one)
 RATES_CHUNK = 32768
-
-
-def _running_sums(corrections: np.ndarray) -> np.ndarray:
-    """``np.cumsum(corrections, axis=0)`` of (S + 1, L) finite corrections, bit for bit, where
-    they are mostly zero (a link turns past pi a few times in a sweep): the running sum is
-    taken over the non-zero ones alone, in order (adding the zeros between changes no bit),
-    and held between them; a column with many turns takes the cumsum itself."""
-    out = np.empty_like(corrections)
-    S1 = corrections.shape[0]
-    at, of = np.nonzero(corrections[1:])  # row-major: each column's rows in order
-    for j in range(corrections.shape[1]):
-        col = corrections[:, j]
-        rows = at[of == j] + 1
-        if len(rows) > S1 // 64:
-            out[:, j] = np.cumsum(col)
-            continue
-        sums = np.cumsum(np.concatenate([col[:1], col[rows]]))
-        out[:, j] = np.repeat(sums, np.diff(np.concatenate([[0], rows, [S1]])))
-    return out
 
 
 def link_rates(model: Model, X, V, A=None, chunk: int = RATES_CHUNK):
@@ -489,12 +286,3 @@ def link_rates(model: Model, X, V, A=None, chunk: int = RATES_CHUNK):
 
     for_chunks(work, S, chunk)
     return w, al
-
-
-def driver_motion(model: Model):
-    """Return driver values in scene units and (s, s_dot, s_ddot) in internal units, each
-    (S, nd): a v1 sweep's constant rates, or a [time] sweep's per-step rates
-    (:func:`linkpipe.model.drive.driver_motion`; NaN at steps without a logged value)."""
-    motion = drive_motion(model.scene)
-    scale = driver_scale(model.scene)
-    return motion.value, motion.value * scale, motion.rate * scale, motion.acceleration * scale

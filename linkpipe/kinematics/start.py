@@ -3,8 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..cache import derived
 from ..errors import SceneError
 from ..model import Model, constraint_source
+from ..model.drive import internal_motion
+from .continuation import solve_positions
+from .drawing import assembled_drawing
 from .linalg import condition, is_singular
 from .roots import _null_line_roots, drivers_aligned, newton
 from .step import _step_kernels
@@ -77,11 +81,8 @@ def sweep_reach(model: Model) -> tuple[int, str]:
     """:func:`steps_out_of_reach` of ``model``'s own sweep (its drivers' values, the steps
     that have every value), computed once per model: ``preflight``, ``check`` and stage 1
     share it. SceneError where the start cannot be assembled at all."""
-    from ..cache import derived
-    from .rates import driver_motion  # rates imports this module
-
     def build(m: Model) -> tuple[int, str]:
-        _, s, _, _ = driver_motion(m)
+        _, s, _, _ = internal_motion(m)
         return steps_out_of_reach(m, s, np.isfinite(s).all(axis=1), m.tolerance(),
                                   m.scene.solver.max_iter)
 
@@ -182,8 +183,6 @@ def reach_from_drawing(model: Model, s0: np.ndarray, tol_abs: float, max_iter: i
     of at most a quarter of a carry step (at most 4,000), the last step's limit bisected to
     2^-40 of a step; None where the drawing does not
     assemble at its own values or the whole way assembles (the limit is then not the reach)."""
-    from .continuation import solve_positions  # the continuation starts here: a cycle
-
     X = assembled_drawing(model)
     if X is None:
         return None
@@ -228,8 +227,6 @@ def _carry_drawn_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: in
     its own driver values, or when the path to ``s0`` leaves the assembly range. ``slope`` as
     :func:`start_state` says (None with several drivers: one path gives one direction only).
     """
-    from .continuation import solve_positions  # the continuation starts here: a cycle
-
     if not model.n_drivers or not model.n_q:
         return None
     delta, n_needed = carry_steps(model, model.start_position[None], s0, model.size)
@@ -279,36 +276,6 @@ def carry_steps(model: Model, X0: np.ndarray, s0: np.ndarray, size):
 DRAWING_MOVED_FRACTION = 0.1
 
 
-def assembled_drawing(model: Model) -> np.ndarray | None:
-    """The drawing assembled (n_points, 2): Newton from the drawn pose at the driver values the
-    drawing itself has (fixed points as drawn), computed once per model; None without unknowns
-    or drivers, or where the drawing does not assemble at its own driver values (the start is
-    then solved at the sweep's first values directly). The scene's "start configuration" where
-    its points are a guess: a spring's ``preload`` is its tension here."""
-    from ..cache import derived
-
-    return derived(model, "assembled_drawing", _assembled_drawing)
-
-
-def _assembled_drawing(model: Model) -> np.ndarray | None:
-    if not model.n_q or not model.n_drivers:
-        return None
-    X0 = model.start_position[None]
-    drawn = model.driver_values_at(X0)[0]
-    if not np.isfinite(drawn).all():
-        return None
-    q0 = model.q_of(X0)
-    tol_abs = model.tolerance()
-    fast = _step_kernels(model)
-    q, _, _, conv = (fast.newton(q0[0], drawn, tol_abs, 50) if fast is not None
-                     else newton(model, q0, drawn[None], tol_abs, 50))
-    if not conv[0]:
-        return None
-    X = model.positions(np.asarray(q, dtype=float).reshape(1, -1))[0]
-    X.setflags(write=False)
-    return X
-
-
 def drawing_offset(model: Model) -> tuple[str, float] | None:
     """``(point, distance)``: the moving point that the drawing's own assembly
     (:func:`assembled_drawing`) moves farthest, and how far (length units); None where there
@@ -325,8 +292,6 @@ def drawing_offset(model: Model) -> tuple[str, float] | None:
 def drawing_warnings(model: Model) -> tuple[str, ...]:
     """The warning (one, or none) that the drawn pose is far from an assembled one
     (:data:`DRAWING_MOVED_FRACTION`), computed once per model."""
-    from ..cache import derived
-
     return derived(model, "drawing_warnings", _drawing_warnings)
 
 

@@ -60,15 +60,13 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
     k = max(1, int(np.ceil((S - 1) / max(1, coarse))))
     nodes = _nodes(s, k) if S >= VECTORISE_FROM else None
     out = {}
+    if start is None:  # (q, slope): the runs start there, and any re-run from step 0
+        start = start_state(model, s[0], model.tolerance(), sc.max_iter)
     if (eng is None or sc.jacobian != "analytic" or S < VECTORISE_FROM
             or len(nodes) > MAX_NODE_SHARE * S):
-        q0, slope0 = start if start is not None else (None, None)
-        q, res, it, st = solve_positions(model, s, q_start=q0, start_slope=slope0)
+        q, res, it, st = solve_positions(model, s, q_start=start[0], start_slope=start[1])
         out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
         return out
-    tol_abs = model.tolerance()
-    if start is None:  # (q, slope): the coarse run starts there, and any re-run from step 0
-        start = start_state(model, s[0], tol_abs, sc.max_iter)
     qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
     qn, resn = _one_more_newton_step(eng, qn, s[nodes], stn == OK, resn)
     out = dict(q=np.full((S, model.n_q), np.nan), residual=np.full(S, np.nan),
@@ -274,7 +272,7 @@ def _sequential_from_before(model, s, q, a, b, start):
     prev = np.flatnonzero(np.isfinite(q[:a + 1]).all(axis=1))
     p = prev[-1] if len(prev) else 0
     slope = start[1] if p == 0 else None
-    qs, rs, its, sts = solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else None,
+    qs, rs, its, sts = solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else start[0],
                                            start_slope=slope)
     return qs[a - p:], rs[a - p:], its[a - p:], sts[a - p:]
 

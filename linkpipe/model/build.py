@@ -15,7 +15,7 @@ import numpy as np
 
 from ..scene import Scene
 from . import equations as eq
-from .rows import _driver_rows, _link_rows, _slider_rows
+from .rows import driver_rows, link_rows, slider_rows
 
 
 #: the residual a drawing's coordinates can meet, in units of eps x its largest |coordinate|
@@ -279,9 +279,9 @@ def build_model(scene: Scene) -> Model:
     def flts(x, shape=(-1,)):
         return np.asarray(x, dtype=float).reshape(shape)
 
-    dist, loc = _link_rows(scene, index, X0, fixed)
-    sfix_p, sfix_c, sfix_n, smov = _slider_rows(scene, index, X0)
-    drivers = _driver_rows(scene, index, X0)
+    dist, loc = link_rows(scene, index, X0, fixed)
+    sfix_p, sfix_c, sfix_n, smov = slider_rows(scene, index, X0)
+    drivers = driver_rows(scene, index, X0)
     arrays = dict(
         dist_a=ints(dist["a"]), dist_b=ints(dist["b"]), dist_len=flts(dist["len"]),
         loc_a=ints(loc["a"]), loc_b=ints(loc["b"]), loc_p=ints(loc["p"]),

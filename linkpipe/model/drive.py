@@ -148,3 +148,14 @@ def driver_motion(scene: Scene) -> DriverMotion:
     for arr in (value, rate, acc):
         arr[~present] = np.nan
     return DriverMotion(value, rate, acc, t, present)
+
+
+def internal_motion(model):
+    """Return driver values in scene units and (s, s_dot, s_ddot) in internal units, each
+    (S, nd), of ``model``'s scene (:func:`driver_motion` scaled by
+    :func:`linkpipe.model.build.driver_scale`; NaN at steps without a logged value)."""
+    from .build import driver_scale
+
+    motion = driver_motion(model.scene)
+    scale = driver_scale(model.scene)
+    return motion.value, motion.value * scale, motion.rate * scale, motion.acceleration * scale

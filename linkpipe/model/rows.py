@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from ..errors import SceneError
@@ -15,14 +13,10 @@ from ..scene import Scene, sides
 from ..scene.geometry import MIN_LENGTH, drawing_extent, frame_too_close
 from . import equations as eq
 
-if TYPE_CHECKING:
-    from .build import Model
-
-
 _R90 = np.array([[0.0, -1.0], [1.0, 0.0]])  # d_perp = _R90 @ d
 
 
-def _link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray,
+def link_rows(scene: Scene, index: dict, X0: np.ndarray, fixed: np.ndarray,
                lengths: dict | None = None, distances: dict | None = None,
                reach: list | None = None, fits: list | None = None):
     """Each link's distance row (between its first two points, unless both are fixed) and two
@@ -90,15 +84,15 @@ def _placed_again(link, xy, index: dict, length, distances: dict, fits: list | N
     return {p: placed[p] for p in triangles} | explicit
 
 
-def variant_rows(model: Model, lengths: dict | None = None, distances: dict | None = None,
+def variant_rows(model, lengths: dict | None = None, distances: dict | None = None,
                  drawn: np.ndarray | None = None):
     """The rows of V variants of the model's scene that differ in link lengths (``lengths``
     {link name: (V,)}, the distance of each link's first two points), in the side lengths that
     place further points of a plate (``distances`` {(link name, key): (V,)}, ``key`` as
     ``lengths`` writes it) and in their drawings (``drawn`` (V, n_points, 2): lengths and local
     coordinates the scene takes from the drawing, the side a point is drawn on), built by the
-    code that builds the model's own (:func:`_link_rows`, :func:`_slider_rows`,
-    :func:`_driver_rows`, :func:`linkpipe.scene.sides.placement`): ``(rows, ok)`` with rows an
+    code that builds the model's own (:func:`link_rows`, :func:`slider_rows`,
+    :func:`driver_rows`, :func:`linkpipe.scene.sides.placement`): ``(rows, ok)`` with rows an
     :class:`equations.Rows` whose varied numbers are (V,) arrays, and ok (V,) True where a
     variant passes the model's and the placement's checks (no further point out of its
     frame's reach, every plate's triangle closes, the frame and reference points apart)."""
@@ -107,7 +101,7 @@ def variant_rows(model: Model, lengths: dict | None = None, distances: dict | No
     X0 = model.start_position if drawn is None else drawn
     reach: list = []
     fits: list = []
-    dist, loc = _link_rows(scene, index, X0, model.fixed, lengths, distances, reach, fits)
+    dist, loc = link_rows(scene, index, X0, model.fixed, lengths, distances, reach, fits)
     n_variants = max([len(x) for x in (lengths or {}).values()]
                      + [len(x) for x in (distances or {}).values()]
                      + [X0.shape[0] if X0.ndim == 3 else 1])
@@ -122,8 +116,8 @@ def variant_rows(model: Model, lengths: dict | None = None, distances: dict | No
     arrays.update(dist_len=dist["len"], loc_u=loc["u"], loc_v=loc["v"], loc_len=loc["len"])
     if drawn is not None:  # a moving guide's length and a relative angle's scale as drawn
         apart: list = []
-        arrays["smov_len"] = _slider_rows(scene, index, X0)[3]["len"]
-        arrays["drv_len"] = _driver_rows(scene, index, X0, apart)["len"]
+        arrays["smov_len"] = slider_rows(scene, index, X0)[3]["len"]
+        arrays["drv_len"] = driver_rows(scene, index, X0, apart)["len"]
         for value in apart:
             ok &= value
         extent = drawing_extent(X0)
@@ -156,7 +150,7 @@ def _check_reach(scene: Scene, link, pname: str, reach: float) -> None:
         f"two points)")
 
 
-def _slider_rows(scene: Scene, index: dict, X0: np.ndarray):
+def slider_rows(scene: Scene, index: dict, X0: np.ndarray):
     """Fixed guides (point, a point of the line, unit normal) and moving guides (point, the
     guide's two points, their distance)."""
     sfix_p, sfix_c, sfix_n = [], [], []
@@ -178,7 +172,7 @@ def _slider_rows(scene: Scene, index: dict, X0: np.ndarray):
     return sfix_p, sfix_c, sfix_n, smov
 
 
-def _driver_rows(scene: Scene, index: dict, X0: np.ndarray, apart: list | None = None) -> dict:
+def driver_rows(scene: Scene, index: dict, X0: np.ndarray, apart: list | None = None) -> dict:
     """Per driver (dict of lists): its kind, (tail) point, head point, axis, the reference
     vector's points of a relative angle and the row's length scale (-1 / 0.0 where unused).
     X0 (n_points, 2), or (V, n_points, 2) for V variants' drawings (:func:`variant_rows`);

@@ -56,7 +56,7 @@ def drawn_local(ax, ay, bx, by, px, py):
     """(u, v) of a point drawn at (px, py) in the frame of a link whose first two points are
     drawn at (ax, ay), (bx, by): u along a -> b, v a quarter turn counter-clockwise (floats,
     or arrays elementwise). The model takes every further point's local coordinates that the
-    scene does not give from here (:func:`linkpipe.model.rows._link_rows`)."""
+    scene does not give from here (:func:`linkpipe.model.rows.link_rows`)."""
     dx, dy = bx - ax, by - ay
     drawn = np.hypot(dx, dy)
     ex, ey = dx / drawn, dy / drawn

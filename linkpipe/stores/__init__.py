@@ -199,11 +199,43 @@ def output_folder(out: str | os.PathLike) -> pathlib.Path:
 def output_lock(folder: str | os.PathLike, name: str) -> Iterator[None]:
     """Hold an advisory lock on one output name in ``folder`` (``.<name>.lock``, flock) while its
     files are written: a second run writing the same name waits, so an ``.h5`` and its ``.rrd``
-    always come from the same run."""
+    always come from the same run. The lock file is removed when its holder is done (no empty
+    ``.<name>.lock`` stays behind): removed while still held, so a run that waited on it finds
+    its name gone once it holds it, and locks the name afresh."""
     lock = pathlib.Path(folder) / f".{name}.lock"
-    with open(lock, "a") as handle:
+    while True:
+        handle = open(lock, "a")
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+            held = os.fstat(handle.fileno())
+            now = os.stat(lock)
+            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+                break  # the file we hold is the one the name points at
+        except FileNotFoundError:
+            pass  # its holder removed it while we waited: lock the name afresh
+        handle.close()
+    try:
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
+        fcntl.flock(handle, fcntl.LOCK_UN)
+        handle.close()
+
+
+#: what the longest file a run writes adds to its output name: the temporary of a study's
+#: recording, ``.<name>_study.rrd.<pid>.<12 hex digits>.tmp`` (a pid of up to 10 digits)
+NAME_OVERHEAD = len("._study.rrd..") + 10 + 12 + len(".tmp")
+
+
+def longest_output_name(folder: str | os.PathLike) -> tuple[int, int]:
+    """``(longest name, limit)``: the most bytes (UTF-8) an output name may have in ``folder``
+    (made or not yet) so that every file named after it, its lock and its temporaries fit the
+    file system's limit on one file name (``limit``, bytes: 255 where it does not say)."""
+    where = pathlib.Path(folder).absolute()
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    try:
+        limit = int(os.pathconf(where, "PC_NAME_MAX"))
+    except (OSError, ValueError):
+        limit = 255
+    return limit - NAME_OVERHEAD, limit

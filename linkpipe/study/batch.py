@@ -1,8 +1,9 @@
 """Solve one batch of a study's variants and reduce it to the study file's rows.
 
-Two paths give the same rows: the vectorised one (:mod:`.vector`: variants that differ in
-force numbers only, all at once) and variant by variant (each variant's scene parsed and
-solved by :func:`linkpipe.solve`).
+Two paths give the same rows: the vectorised ones (:mod:`.paths` decides which: :mod:`.vector`,
+variants that differ in force numbers only, all at once; :mod:`.pivots`, the geometry too)
+and variant by variant (each variant's scene parsed and solved by :func:`linkpipe.solve`:
+:mod:`.variants`).
 
 :func:`solve_batch` is the one task every executor runs (in-process, or on Dask workers): it
 takes the study and a range of variants and returns their rows {variable: (V, ...)}. A
@@ -15,29 +16,12 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..errors import MemoryRefused, SceneError
-from ..fit import scene_with
-from ..pipeline import DEFAULT_THREADS, solve
+from ..pipeline import DEFAULT_THREADS
 from ..status import NO_ASSEMBLY
 from .metrics import BatchArrays, batch_metrics, transmission_pins
+from .paths import variant_arrays
 from .reductions import references
-from .vector import variant_arrays
-
-
-def variant_scene(study, v: int):
-    """The scene of variant ``v`` (parsed and checked as a scene file is; SceneError if not)."""
-    return scene_with(study.scene, study.data, study.parameters, study.values[v])
-
-
-def solve_variant(study, v: int, threads: int | None = DEFAULT_THREADS):
-    """The Result of variant ``v``, or None where its scene cannot be built or assembled
-    (``threads``: as :func:`linkpipe.solve`'s; None leaves the BLAS pool as it is)."""
-    try:
-        return solve(variant_scene(study, v), threads=threads)
-    except MemoryRefused:
-        raise  # the study's sweep is too long for this machine: not a row of data
-    except SceneError:
-        return None
+from .variants import solve_variant
 
 
 def wanted_series(study) -> list[tuple[str, tuple]]:
@@ -47,7 +31,7 @@ def wanted_series(study) -> list[tuple[str, tuple]]:
 
 def solve_batch(study, lo: int, hi: int) -> dict[str, np.ndarray]:
     """Rows ``{variable: (hi - lo, ...)}`` of variants ``lo .. hi - 1``: all at once on the
-    vectorised path (:mod:`.vector`) where the study allows it, else variant by variant. The
+    vectorised paths (:mod:`.paths`) where the study allows it, else variant by variant. The
     BLAS pool is set once for the batch (as :func:`linkpipe.solve` sets it for a scene)."""
     with threadpool_limits(limits=DEFAULT_THREADS, user_api="blas"):
         if study.slots is not None:

@@ -24,7 +24,7 @@ rows, force parameters of the study and the model's constants as per-row constan
 (:mod:`.vector`, :class:`linkpipe.forces.constants.ForceConstants`). A variant whose own
 run would take another path or other branches (or not assemble), or whose own scene would
 decompose into other dyads or fail the model's checks, is solved by its own run
-(:func:`linkpipe.study.batch.solve_variant`) and its rows put in place: every row is its own
+(:func:`linkpipe.study.variants.solve_variant`) and its rows put in place: every row is its own
 run's (``tests/test_study_pivots.py``, ``tests/test_study_lengths.py``).
 """
 from __future__ import annotations
@@ -34,41 +34,16 @@ import dataclasses
 import numpy as np
 
 from .. import kinematics as kin
-from ..forces import compute_forces
-from ..forces.applied import center_frame
 from ..forces.constants import ForceConstants
 from ..kinematics.decompose import bodies_of, chain_at
-from ..model.build import build_model
 from ..model.rows import variant_rows
-from ..pipeline import Stages, result_of, status_of
+from ..spine import Stages, finish
 from ..stage1 import Kinematics
-from ..result import Motion
-from ..output_units import units_of
 from ..status import NO_ASSEMBLY
 from . import vector
+from .variants import solve_variant
 
 _CHAIN: dict = {}  # study fingerprint -> the base scene's dyad chain with its branches
-
-
-def changed_constants(study, trial) -> str:
-    """What of the model a trial scene (a pivot moved) changes beyond its fixed points ("":
-    nothing, the vectorised path applies)."""
-    base, model = build_model(study.scene), build_model(trial)
-    for family in ("dist", "local", "sfix", "smov", "drivers"):
-        if getattr(model.rows, family) != getattr(base.rows, family):
-            return (f"the model's {family} rows change with it (a length or local coordinate "
-                    "taken from the drawing)")
-    for m in study.scene.masses:
-        if center_frame(model, m.link, m.center) != center_frame(base, m.link, m.center):
-            return f"the mass centre of {m.link} is taken from the drawing"
-    return ""
-
-
-#: the slots of the geometry path: a pivot, a frame length, a plate's side length, a drawn
-#: coordinate of a moving point
-GEOMETRY = ("pivot", "length", "side", "drawn")
-#: the slots whose variants' model rows are built again (:func:`variant_rows`)
-REBUILT = ("length", "side", "drawn")
 
 
 def rows_inputs(model, slots, values: np.ndarray) -> tuple[dict, dict, np.ndarray | None]:
@@ -87,49 +62,6 @@ def rows_inputs(model, slots, values: np.ndarray) -> tuple[dict, dict, np.ndarra
             if slot[0] in ("point", "pivot", "drawn"):
                 drawn[:, slot[1], slot[2]] = values[:, j]
     return lengths, distances, drawn
-
-
-def passes_checks(study, slot, value: float) -> bool:
-    """Whether the variant with one parameter (``slot``) at ``value`` passes the model's and
-    the placement's checks as :func:`variant_rows` tells them (a study's extreme value that
-    its own scene refuses must be refused here too, its variants then being their own runs)."""
-    base = build_model(study.scene)
-    _, ok = variant_rows(base, *rows_inputs(base, [slot], np.array([[float(value)]])))
-    return bool(ok[0])
-
-
-def unlike_own_model(study, trial, slot, value: float) -> str:
-    """What of the model a trial scene (one parameter, ``slot``, at ``value``: a frame length,
-    a side length or a drawn coordinate) builds otherwise than :func:`variant_rows` builds it
-    for that value ("": nothing, the vectorised path applies)."""
-    base, own = build_model(study.scene), build_model(trial)
-    rows, _ = variant_rows(base, *rows_inputs(base, [slot], np.array([[float(value)]])))
-    rows = rows.take(0)  # the one variant's numbers
-    for family in rows.FAMILIES:
-        if getattr(rows, family) != getattr(own.rows, family):
-            return f"the model's {family} rows are not the variant's own"
-    for m in study.scene.masses:
-        if center_frame(base, m.link, m.center, rows) != center_frame(own, m.link, m.center):
-            return f"the mass centre frame of {m.link} is not the variant's own"
-    return ""
-
-
-def path_reason(study) -> str:
-    """Why a study that moves pivots cannot take the vectorised path ("" when it can)."""
-    scene = study.scene
-    if scene.solver.method != "auto" or scene.solver.derivatives == "finite_difference":
-        return 'pivots move: the vectorised path needs [solver] method = "auto" and analytic derivatives'
-    base = vector.base_result(study)
-    if base.solver_method_used != "dyads":
-        return "pivots move and the base scene does not take the closed-form dyads"
-    if base.reach_note:  # the variants' own runs start where each one's reach begins
-        return "pivots move and the base scene's first steps are out of its drawing's reach"
-    if any(st.ambiguous for st in base_chain(study).steps):
-        return "pivots move and a dyad starts on its singular shape"
-    if any(sp.kind != "gas" and sp.free_length is None for sp in scene.springs):
-        return ("pivots move and a spring's start length (its preload's, or its free length) "
-                "is each variant's own assembled drawing")
-    return ""
 
 
 def base_chain(study):
@@ -151,31 +83,22 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
     V, S = hi - lo, base.n_steps
     per_row = vector.per_row_constants(study, model, slots, study.values[lo:hi], S)
     stages = Stages.of(scene)
-    order = 2 if stages.acceleration else 1 if stages.velocity else 0
+    order = stages.order
     chain, rows, alike = variant_model(study, slots, study.values[lo:hi])
     usable, a = kin.solve_pivot_variants(model, chain, per_row["start_position"][::S],
                                          per_row["size"][::S],
                                          k.s, k.s_dot, k.s_ddot, order, stages.forces, rows)
     usable &= alike
-    der = a["der"]
-    forces = None
-    if stages.forces:
-        motion = Motion(s=a["s"], s_dot=a["s_dot"], s_ddot=a["s_ddot"], position=a["position"],
-                        velocity=a["velocity"], acceleration=a["acceleration"],
-                        status=der["status"], influence=der["influence"],
-                        link_angular_acceleration=a["link_rates"][1], link_angle=a["link_angle"])
-        forces = compute_forces(model, motion, units_of(scene),
-                                ForceConstants(**per_row, pivots=True, model_rows=a["rows"]))
-    stored = [a["position"], a["link_angle"], a["velocity"], a["acceleration"], *a["link_rates"]]
-    status = status_of(model, der["status"], a["residual"], stored, forces, per_row["size"])
     drive = dataclasses.replace(k.drive, **{f.name: np.tile(v, (V,) + (1,) * (v.ndim - 1))
                                             for f in dataclasses.fields(k.drive)
                                             for v in [getattr(k.drive, f.name)] if v is not None})
     sweep = kin.Sweep(a["position"], a["residual"], np.zeros(V * S, dtype=np.int32), a["status"],
-                      "dyads", k.sweep.note, a["velocity"], a["acceleration"])
-    rows = Kinematics(k.mobility, drive, a["s"], a["s_dot"], a["s_ddot"], sweep, a["link_angle"],
-                      der, a["velocity"], a["acceleration"], a["link_rates"])
-    result = result_of(scene, model, rows, forces, status, {})
+                      "dyads", k.sweep.note)
+    motion = Kinematics(k.mobility, drive, a["s"], a["s_dot"], a["s_ddot"], sweep,
+                        a["link_angle"], a["der"], a["velocity"], a["acceleration"],
+                        a["link_rates"])
+    result = finish(scene, model, motion,
+                    ForceConstants(**per_row, pivots=True, model_rows=a["rows"]))
     out = {v.name: v.data.reshape((V, S) + v.data.shape[1:]) for v in result.variables()
            if v.dims[:1] == ("step",)}
     for v in np.flatnonzero(~usable):
@@ -202,8 +125,6 @@ def variant_model(study, slots, values: np.ndarray):
 def _own_run(study, variant: int, out: dict, row: int) -> None:
     """Put variant ``variant``'s own run into row ``row`` of every array of ``out`` (NaN and
     no_assembly where its scene cannot be built or assembled)."""
-    from .batch import solve_variant  # batch imports vector, which imports this module
-
     r = solve_variant(study, variant, None)
     stored = {} if r is None else {v.name: v.data for v in r.variables()}
     for name, arr in out.items():

@@ -27,7 +27,7 @@ from ..fit import locate
 from ..scene import Scene, load_scene
 from ..scene.keys import KEYS, _is_number, _suggest
 from ..version import __version__
-from . import reductions, vector
+from . import paths, reductions
 
 #: variants solved together (one task of an executor, one write to the HDF5), at most, and
 #: the (variant, step) rows a batch holds at most when the study file gives no batch_size:
@@ -133,7 +133,7 @@ def study_kind(path) -> str | None:
             return None
         with open(path, "rb") as f:
             data = tomllib.load(f)
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # nested too deeply: the scene reader says so
         return None
     if not isinstance(data.get("study"), dict):
         return None
@@ -153,6 +153,9 @@ def _read(path: str) -> tuple[str, dict]:
         return text, tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(path, "", None, f"not valid TOML: {exc}", "fix the syntax there") from None
+    except RecursionError:  # the TOML reader recurses
+        raise SceneError(path, "", None, "arrays or inline tables nested more deeply than the "
+                         "TOML reader can follow", "remove the extra brackets") from None
 
 
 def load_study(path, catalog_of=None) -> Study:
@@ -193,7 +196,7 @@ def load_study(path, catalog_of=None) -> Study:
             digest.update(column.encode() + np.ascontiguousarray(log.columns[column]).tobytes())
     study = Study(path, name, text, scene, base, params, values, metrics, catalog, samples, seed,
                   batch, digest.hexdigest())
-    slots, why = vector.plan(study)
+    slots, why = paths.plan(study)
     kinds = {s[0] for s in slots or ()}
     rebuilt = [what for kind, what in (("length", "the link lengths"),
                                        ("side", "the plates' side lengths"),

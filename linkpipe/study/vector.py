@@ -28,15 +28,10 @@ import dataclasses
 
 import numpy as np
 
-from ..errors import SceneError
-from ..fit import scene_with
-from ..forces import compute_forces
 from ..forces.constants import ForceConstants
 from ..model.build import mechanism_size
-from ..pipeline import solve, status_of
-from ..result import Motion
-from ..output_units import units_of
-from . import pivots
+from ..pipeline import solve
+from ..spine import finish
 
 #: force tables and the keys of them the vectorised path varies: key -> ForceConstants field
 FORCE_KEYS = {"springs": {"k": "spring_k", "free_length": "spring_free_length",
@@ -48,11 +43,16 @@ FORCE_KEYS = {"springs": {"k": "spring_k", "free_length": "spring_free_length",
               "masses": {"mass": "mass", "inertia": "inertia"},
               "gravity": {"g": "gravity"}, "loads": {"force": "load_force", "torque": "load_torque"}}
 _BASE: dict = {}  # study fingerprint -> the base Result (stage 1 solved once per process)
+#: the slots of the geometry path (:mod:`.pivots`): a pivot, a frame length, a plate's side
+#: length, a drawn coordinate of a moving point
+GEOMETRY = ("pivot", "length", "side", "drawn")
+#: the slots whose variants' model rows are built again (:func:`linkpipe.model.rows.variant_rows`)
+REBUILT = ("length", "side", "drawn")
 
 
 def slot_of(scene, path: tuple):
     """``(field, index...)`` of a parameter's place in :class:`ForceConstants` (``("point",
-    p, axis)`` for a point's coordinate (:func:`plan` tells anchors, pivots and moving points
+    p, axis)`` for a point's coordinate (:func:`.paths.plan` tells anchors, pivots and moving points
     apart); ``("length", link)`` for the distance of a link's first two points, its frame;
     ``("side", link, key)`` for a side length that places a further point of a plate:
     :mod:`.pivots`), or None when it is not a force number."""
@@ -73,78 +73,6 @@ def slot_of(scene, path: tuple):
     if len(path) < 3 or path[2] not in keys:
         return None
     return (keys[path[2]],) + tuple(path[1:2]) + tuple(path[3:])
-
-
-def _scene_value(scene, slot) -> float:
-    """The parsed scene's number at ``slot`` (to check that a value reaches it unchanged)."""
-    field, *index = slot
-    if field == "length":
-        return next(link.length for link in scene.links if link.name == index[0])
-    if field == "side":
-        link = next(link for link in scene.links if link.name == index[0])
-        return next(d for key, d in link.distances.values() if key == index[1])
-    if field in ("point", "pivot", "drawn"):
-        p = scene.points[index[0]]
-        return p.x if index[1] == 0 else p.y
-    if field == "gravity":
-        return scene.gravity[index[0]]
-    table, key = next((t, k) for t, keys in FORCE_KEYS.items() for k, f in keys.items() if f == field)
-    value = getattr(getattr(scene, table)[index[0]], key)
-    return value[index[1]] if len(index) > 1 else value
-
-
-def _anchor_reason(scene, point: int) -> str:
-    name = scene.point_names[point]
-    if not scene.points[point].fixed:
-        return f"{name} moves"
-    used = {p for l in scene.links for p in l.points}
-    used |= {p for s in scene.sliders for p in (s.point, *(s.line_points or ()))}
-    for d in scene.drivers:
-        used |= set(d.points) | set(d.relative_to or ()) | ({d.input.point} if d.input else set())
-    return f"{name} is a point of the mechanism" if name in used else ""
-
-
-def plan(study) -> tuple[list | None, str]:
-    """``(slots, "")`` when the study can take the vectorised path, else ``(None, why not)``."""
-    scene = study.scene
-    if scene.measurements or scene.time is not None:
-        return None, "the scene has measurements or a [time] table"
-    slots = []
-    for j, p in enumerate(study.parameters):
-        slot = slot_of(scene, p.path)
-        if slot is None:
-            return None, (f"{p.address} is not one of the force numbers this path varies"
-                          if p.path[0] in FORCE_KEYS else f"{p.address} changes the kinematics")
-        why = _anchor_reason(scene, slot[1]) if slot[0] == "point" else ""
-        if why.endswith("moves"):  # a drawn coordinate of a moving point
-            slot, why = ("drawn",) + slot[1:], ""
-        elif why:  # a pivot: the mechanism's own fixed point
-            slot = ("pivot",) + slot[1:]
-        for value in (study.values[:, j].min(), study.values[:, j].max()):
-            try:
-                trial = scene_with(scene, study.data, [p], [value])
-            except SceneError as exc:
-                if slot[0] in pivots.REBUILT and not pivots.passes_checks(study, slot, value):
-                    continue  # the placement's own checks refuse it too: that variant's own run
-                return None, f"{p.address} = {value:g} fails the scene's checks ({exc.message})"
-            if _scene_value(trial, slot) != value:
-                return None, f"{p.address}: the scene does not take the value as written"
-            try:  # the trial's model has checks of its own (a far point beyond its frame)
-                changed = pivots.changed_constants(study, trial) if why else ""
-                unlike = (pivots.unlike_own_model(study, trial, slot, value)
-                          if slot[0] in pivots.REBUILT else "")
-            except SceneError as exc:
-                if slot[0] in pivots.REBUILT and not pivots.passes_checks(study, slot, value):
-                    continue  # variant_rows refuses it too: that variant's own run
-                return None, f"{p.address} = {value:g} fails the model's checks ({exc.message})"
-            if changed:
-                return None, f"{p.address}: {why} and {changed}"
-            if unlike:
-                return None, f"{p.address}: {unlike}"
-        slots.append(slot)
-    moved = any(s[0] in pivots.GEOMETRY for s in slots)
-    why = pivots.path_reason(study) if moved else "" if scene.effects else "the scene has no forces"
-    return (None, why) if why else (slots, "")
 
 
 def base_result(study):
@@ -173,7 +101,7 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
         if field in ("point", "pivot", "drawn"):
             field = "start_position"
         per_row[field][(slice(None),) + tuple(index)] = np.repeat(values[:, j], S)
-    if any(s[0] in ("point",) + pivots.GEOMETRY for s in slots):  # a moved point may widen the drawing
+    if any(s[0] in ("point",) + GEOMETRY for s in slots):  # a moved point may widen the drawing
         per_row["size"] = np.repeat(mechanism_size(study.scene, per_row["start_position"][::S]), S)
     else:
         per_row["size"] = model.size
@@ -181,40 +109,17 @@ def per_row_constants(study, model, slots, values: np.ndarray, S: int) -> dict:
 
 
 def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
-    """``(status (V, S), {variable: (V, S, ...)})`` of variants ``lo .. hi - 1``: every
-    step-first variable a one-by-one run stores. Overflow and 0/0 are data here, as in a
-    scene's own run (:func:`linkpipe.solve`): statuses, not warnings."""
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        return _variant_arrays(study, slots, lo, hi)
-
-
-def _variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
-    if any(s[0] in pivots.GEOMETRY for s in slots):
-        return pivots.variant_arrays(study, slots, lo, hi)
+    """``(status (V, S), {variable: (V, S, ...)})`` of variants ``lo .. hi - 1`` whose slots
+    are force numbers and anchors: stage 1 tiled, the force stage on every row
+    (:func:`linkpipe.spine.finish`)."""
     base = base_result(study)
     k, model = base.kinematics, base.model
     V, S = hi - lo, base.n_steps
-
-    def rows(a):
-        return None if a is None else np.tile(a, (V,) + (1,) * (a.ndim - 1))
-
     per_row = per_row_constants(study, model, slots, study.values[lo:hi], S)
-    X = rows(k.sweep.position)
+    X = np.tile(k.sweep.position, (V, 1, 1))
     for field, p, axis in (s for s in slots if s[0] == "point"):
         X[:, p, axis] = per_row["start_position"][:, p, axis]
-    motion = Motion(s=rows(k.s), s_dot=rows(k.s_dot), s_ddot=rows(k.s_ddot), position=X,
-                    velocity=rows(k.velocity), acceleration=rows(k.acceleration),
-                    status=rows(k.der["status"]), influence=rows(k.der["influence"]),
-                    link_angular_acceleration=rows(k.link_rates[1]), link_angle=rows(k.link_angle))
-    forces = compute_forces(model, motion, units_of(study.scene), ForceConstants(**per_row))
-    status = status_of(model, motion.status, rows(k.sweep.residual),
-                       [X, rows(k.link_angle), motion.velocity, motion.acceleration,
-                        rows(k.link_rates[0]), motion.link_angular_acceleration], forces,
-                       per_row["size"])
-    stored = {v.name: v.data for v in base.variables() if v.dims[:1] == ("step",)}
-    out = {name: rows(data) for name, data in stored.items()}
-    out.update({name: data for name, (dims, data, _) in forces.variables.items()
-                if dims[:1] == ("step",)})
-    out["position"], out["status"] = X, status
-    shaped = {name: a.reshape((V, S) + a.shape[1:]) for name, a in out.items()}
-    return shaped["status"], shaped
+    result = finish(study.scene, model, k.tiled(V, X), ForceConstants(**per_row))
+    out = {v.name: v.data.reshape((V, S) + v.data.shape[1:]) for v in result.variables()
+           if v.dims[:1] == ("step",)}
+    return out["status"], out

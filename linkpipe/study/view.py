@@ -59,7 +59,7 @@ def ranked(key: np.ndarray, worst_status: np.ndarray) -> np.ndarray:
 
 def study_view(study, columns: dict) -> StudyView:
     """The view of a finished study's file (``columns``: its arrays, as read back)."""
-    from .batch import solve_variant
+    from .variants import solve_variant
 
     force = input_force_units(study.scene.drivers, units_of(study.scene))
     metrics, units = {}, {}

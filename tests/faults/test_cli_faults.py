@@ -158,3 +158,82 @@ def test_the_other_scenes_run_after_one_fails_and_the_summary_names_it(tmp_path,
     assert f"failed: {bad}" in captured.err
     with h5py.File(out / "fourbar_crank_rocker.h5") as f:
         assert (f["status"][()] == 0).all()
+
+
+def test_a_scene_nested_too_deeply_is_one_message_exit_2(tmp_path, capsys):
+    """5,000 nested arrays (the TOML reader recurses past Python's limit): run and check each
+    say so in one line naming the file, exit 2, no traceback, nothing written."""
+    deep = tmp_path / "deep.toml"
+    deep.write_text(CRANK_ROCKER.read_text() + "\n[extra]\nx = " + "[" * 5000 + "]" * 5000 + "\n")
+    out = tmp_path / "out"
+    for argv in (["run", str(deep), "--out", str(out)], ["check", str(deep)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith(f"error: {deep}: ")
+        assert "nested more deeply than the TOML reader can follow" in err
+        assert "Traceback" not in err and "RecursionError" not in err
+    assert not out.exists()
+
+
+def test_a_scene_name_too_long_for_a_file_name_is_one_message_exit_2(tmp_path, capsys):
+    """A [scene] name of 300 characters: its lock, outputs and temporaries would pass the file
+    system's 255-byte limit on a file name. run and check refuse it in one line naming
+    [scene] name and the longest name allowed, exit 2, nothing written; a name of exactly that
+    length runs and leaves its files (and no lock)."""
+    from linkpipe.stores import longest_output_name
+
+    out = tmp_path / "out"
+    longest, limit = longest_output_name(out)
+    assert limit == os.pathconf(tmp_path, "PC_NAME_MAX")
+
+    def named(n):
+        path = tmp_path / f"name{n}.toml"
+        path.write_text(CRANK_ROCKER.read_text().replace('name = "fourbar_crank_rocker"',
+                                                         f'name = "{"n" * n}"'))
+        return path
+
+    for argv in (["run", str(named(300)), "--out", str(out)], ["check", str(named(300))]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "[scene] name: 300 bytes long" in err
+        assert f"at most {longest} bytes" in err and "Traceback" not in err
+    assert not out.exists()
+    assert main(["run", str(named(longest)), "--out", str(out), "--quiet"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["n" * longest + ".h5", "n" * longest + ".rrd"]
+
+
+def test_a_run_leaves_no_lock_file(tmp_path):
+    """The advisory lock on an output name is removed by its holder: after a run (and after one
+    that failed) the output folder holds the outputs alone."""
+    out = tmp_path / "out"
+    assert main(["run", str(CRANK_ROCKER), "--out", str(out), "--quiet"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["fourbar_crank_rocker.h5",
+                                                      "fourbar_crank_rocker.rrd"]
+
+
+def test_the_lock_on_a_name_is_held_by_one_run_at_a_time_although_its_file_goes(tmp_path):
+    """Runs that wait on a name while its holder removes the lock file each lock it afresh:
+    never two holders at once (four threads, each with its own open file, flock's unit), and
+    no lock file once all are done."""
+    import threading
+
+    from linkpipe.stores import output_lock
+
+    holders, most, turns = [], [0], []
+
+    def run(k):
+        for _ in range(20):
+            with output_lock(tmp_path, "same"):
+                holders.append(k)
+                most[0] = max(most[0], len(holders))
+                time.sleep(0.001)
+                turns.append(k)
+                holders.remove(k)
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert most[0] == 1 and len(turns) == 80
+    assert not (tmp_path / ".same.lock").exists()
