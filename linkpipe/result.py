@@ -408,57 +408,6 @@ class Result:
                                 f"{L}/{T}^2", {"long_name": "max abs residual of Phi_q qdd = gamma"}))
         return out
 
-    def attributes(self) -> dict[str, Any]:
-        """Root attributes of the HDF5 file."""
-        from .version import __version__
-        import datetime
-
-        sc, totals = self.scene, self.totals
-        attrs: dict[str, Any] = {
-            "linkpipe_version": __version__,
-            "scene_name": sc.name,
-            "scene_toml": sc.text,
-            "scene_path": str(sc.path),
-            "effects": list(sc.effects),
-            "present_but_off": list(sc.present_but_off),
-            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "solver_tol": sc.solver.tol,
-            "solver_max_iter": sc.solver.max_iter,
-            "solver_method": sc.solver.method,
-            "solver_method_used": self.solver_method_used,
-            "solver_note": self.solver_note,
-            "solver_linear_algebra": sc.solver.linear_algebra,
-            "solver_linear_algebra_used": self.linear_algebra_used,
-            "solver_jacobian": sc.solver.jacobian,
-            "solver_derivatives": sc.solver.derivatives,
-            "solver_predictor": sc.solver.predictor,
-            "solver_singular_rcond": sc.solver.singular_rcond,
-            "solver_rate_residuals": sc.solver.rate_residuals,
-            "degrees_of_freedom": self.mobility.dof,
-            "redundant_constraints": self.mobility.redundant,
-            "forces_not_unique": self.forces_not_unique(),
-            "steps_ok": totals.n_ok,
-            "steps_failed": totals.n_steps - totals.n_ok,
-            "max_residual": totals.max_residual,
-            "newton_iterations_mean": (totals.iterations_sum / totals.n_steps
-                                       if totals.n_steps else 0.0),
-            "newton_iterations_max": totals.iterations_max,
-        }
-        for key in ("max_velocity_residual", "max_acceleration_residual"):
-            value = getattr(totals, key)
-            if value is not None and np.isfinite(value):
-                attrs[key] = value
-        if self.time_note:
-            attrs["time_note"] = self.time_note
-        if self.reach_note:
-            attrs["reach_note"] = self.reach_note
-        attrs["warnings"] = list(self.warnings)  # legal but probably not meant
-        for key, val in self.units().items():
-            attrs[f"units_{key}"] = val
-        for stage, sec in self.seconds.items():
-            attrs[f"seconds_{stage}"] = float(sec)
-        return attrs
-
 
 def combine_flags(into: dict, part: dict) -> None:
     """Fold the per-sweep flags of one chunk (or segment) of steps, ``part`` {name: (dims, data,

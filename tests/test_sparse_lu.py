@@ -19,6 +19,7 @@ from linkpipe.forces.lagrange import body_rows, joints
 from linkpipe.kinematics.sparse_lu import SPARSE_FROM, step_lu, uses_sparse
 from linkpipe.model import build_model
 from linkpipe.scene import parse_scene
+from linkpipe.stores import hdf5
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
 from bench_threads import chain_text  # noqa: E402
@@ -55,7 +56,7 @@ def test_the_choice_is_automatic_by_size_and_said():
     assert not uses_sparse(build_model(chain_scene(16, 10, "dense")))
     r = linkpipe.solve(chain_scene(16, 50))
     assert r.linear_algebra_used == f"sparse LU (auto: 64 >= {SPARSE_FROM} unknowns)"
-    assert r.attributes()["solver_linear_algebra_used"] == r.linear_algebra_used
+    assert hdf5.root_attributes(r)["solver_linear_algebra_used"] == r.linear_algebra_used
     from linkpipe.__main__ import summary
     assert "linear algebra sparse LU (auto: 64 >= 64 unknowns)" in summary(r)
     assert linkpipe.solve(chain_scene(8, 50)).linear_algebra_used.startswith("dense (auto: 32 < ")

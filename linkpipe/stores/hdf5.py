@@ -18,6 +18,7 @@ import numpy as np
 from ..result import combine_flags
 from ..result import Variable
 from ..workers import held_interrupts
+from ..version import __version__
 from . import atomic_path
 
 STR = h5py.string_dtype("utf-8")
@@ -60,7 +61,7 @@ class SweepWriter:
     without a step axis (the ``*_unique`` flags, which a part without an ok step does not
     give) are the minimum over the parts that give them, as the force stage takes them over
     its chunks. ``restart()``: the parts come again from the first step. ``finish(result)``:
-    the flags and the root attributes (``result.attributes()``: the whole sweep's totals).
+    the flags and the root attributes (:func:`root_attributes`: the whole sweep's totals).
 
     A full disk must fail cleanly, one part written or many: the datasets are contiguous (a
     failed write into a chunked one was measured to crash the process when the file closes:
@@ -210,7 +211,7 @@ class SweepWriter:
             else:  # a flag the first part did not give (no ok step in it)
                 self._datasets[name] = _write_variable(self._file, Variable(name, dims, data, units),
                                                        self._scales)
-        for key, value in result.attributes().items():
+        for key, value in root_attributes(result).items():
             _set_attr(self._file.attrs, key, value)
         self._finished = True
 
@@ -364,3 +365,55 @@ def _read_dataframe(path):
                 key = ".".join([name, *(str(rest[k][i]) for k, i in enumerate(idx))])
                 columns[key] = flat[:, j]
     return pd.DataFrame(columns, index=pd.Index(step, name="step"))
+
+
+def root_attributes(result) -> dict[str, Any]:
+    """The root attributes of a Result's HDF5 file (docs/output-format.md): the scene, the
+    solver's settings and what it used, and the whole sweep's totals."""
+    import datetime
+
+    sc, totals = result.scene, result.totals
+    attrs: dict[str, Any] = {
+        "linkpipe_version": __version__,
+        "scene_name": sc.name,
+        "scene_toml": sc.text,
+        "scene_path": str(sc.path),
+        "effects": list(sc.effects),
+        "present_but_off": list(sc.present_but_off),
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "solver_tol": sc.solver.tol,
+        "solver_max_iter": sc.solver.max_iter,
+        "solver_method": sc.solver.method,
+        "solver_method_used": result.solver_method_used,
+        "solver_note": result.solver_note,
+        "solver_linear_algebra": sc.solver.linear_algebra,
+        "solver_linear_algebra_used": result.linear_algebra_used,
+        "solver_jacobian": sc.solver.jacobian,
+        "solver_derivatives": sc.solver.derivatives,
+        "solver_predictor": sc.solver.predictor,
+        "solver_singular_rcond": sc.solver.singular_rcond,
+        "solver_rate_residuals": sc.solver.rate_residuals,
+        "degrees_of_freedom": result.mobility.dof,
+        "redundant_constraints": result.mobility.redundant,
+        "forces_not_unique": result.forces_not_unique(),
+        "steps_ok": totals.n_ok,
+        "steps_failed": totals.n_steps - totals.n_ok,
+        "max_residual": totals.max_residual,
+        "newton_iterations_mean": (totals.iterations_sum / totals.n_steps
+                                   if totals.n_steps else 0.0),
+        "newton_iterations_max": totals.iterations_max,
+    }
+    for key in ("max_velocity_residual", "max_acceleration_residual"):
+        value = getattr(totals, key)
+        if value is not None and np.isfinite(value):
+            attrs[key] = value
+    if result.time_note:
+        attrs["time_note"] = result.time_note
+    if result.reach_note:
+        attrs["reach_note"] = result.reach_note
+    attrs["warnings"] = list(result.warnings)  # legal but probably not meant
+    for key, val in result.units().items():
+        attrs[f"units_{key}"] = val
+    for stage, sec in result.seconds.items():
+        attrs[f"seconds_{stage}"] = float(sec)
+    return attrs
