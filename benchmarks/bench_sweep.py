@@ -7,18 +7,29 @@ Part 1, the crank-rocker of ``configs/fourbar_crank_rocker.toml`` (crank 1, coup
 3, ground 4, coupler point P), one crank turn at 10 rad/s in 36k and 360k steps; every tool
 returns positions, velocities and accelerations of all five points, arrays (S, 5, 2):
 
-* linkpipe fast path: ``linkpipe.kinematics.solve_sweep`` with ``method = "auto"`` (what the pipeline's
-  stage 1 runs: the dyad chain, the start assembly, the branch check, the residuals, the
-  statuses, and the dyads' velocities and accelerations);
+* linkpipe dyads kernel: ``linkpipe.kinematics.solve_sweep`` with ``method = "auto"`` (the
+  positions part of stage 1 only: the dyad chain, the start assembly, the branch check, the
+  residuals, the statuses, and the dyads' velocities and accelerations; no link angles, no
+  condition, no link rates, no forces, statuses or Result);
+* linkpipe stage 1: ``linkpipe.stage1.Stage1(...).whole()``, what ``run`` and ``solve`` run
+  for stage 1 (the kernel above, then link angles unwrapped, the condition and the link rates);
+* linkpipe ``run`` end to end: ``python -m linkpipe run SCENE --no-h5 --no-rrd`` (its
+  ``main``, in this process: the scene read and checked, stage 1, statuses, the summary),
+  the marginal of the sweep: the run at S steps less the same run at 361 steps;
 * linkpipe general path: ``linkpipe.kinematics.solve_sweep`` with ``method = "newton"`` and
-  ``linkpipe.kinematics.derivatives``, as the pipeline runs them (coarse sequential continuation,
-  then batched Newton from Hermite predictions; velocities and accelerations by sparse solves);
+  ``linkpipe.kinematics.derivatives`` (coarse sequential continuation, then batched Newton from
+  Hermite predictions; velocities and accelerations by sparse solves);
 * the closed form: Norton's four-bar written out in plain numpy for this one mechanism (circle
   intersection, then the 2x2 velocity and acceleration systems by Cramer's rule), whole arrays;
 * pylinkage 1.3 ``step_fast_with_kinematics`` (numba), when installed (``pip install -e .[bench]``).
 
 Times are the best of several calls after a warm-up; errors are the largest deviation from the
 closed form (itself exact to rounding), relative to the largest magnitude of that quantity.
+
+The targets of issue 29 print beside them: ``run``'s marginal at 360k steps against
+pylinkage+numba's warm kernel (>= 2x), and the .h5 write's marginal (a run with the .h5 less
+one without) against the disk's own floor for the same bytes (write, fsync, rename of a file
+of that size in the same folder, in this run: <= 1.25x).
 
 Part 2, the whole pipeline in a fresh process per case (seconds per stage after the imports,
 peak resident memory): the crank-rocker with 100,000 steps and every effect on, and the Jansen
@@ -145,6 +156,95 @@ def linkpipe_newton(model, theta):
     return out.position, der["velocity"], der["acceleration"]
 
 
+def linkpipe_stage1(model, theta):
+    """Stage 1 as ``run`` and ``solve`` run it (``model``'s scene, its own sweep of len(theta)
+    steps from 0 to 360 deg at 10 rad/s): positions, velocities, accelerations."""
+    from linkpipe.spine import Stages
+    from linkpipe.stage1 import Stage1
+
+    k = Stage1(model.scene, model, Stages.of(model.scene)).whole()
+    assert k.sweep.method == "dyads"
+    return k.sweep.position, k.velocity, k.acceleration
+
+
+def scene_file(S: int, folder: pathlib.Path) -> pathlib.Path:
+    """The crank-rocker's scene with S steps (velocities and accelerations as it asks for)."""
+    text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
+    path = folder / f"crank_rocker_{S}.toml"
+    path.write_text(text.replace("steps = 361", f"steps = {S}").replace(
+        'name = "fourbar_crank_rocker"', f'name = "crank_rocker_{S}"'))
+    return path
+
+
+def run_cli(S: int, folder: pathlib.Path, h5: bool, repeats: int) -> float:
+    """Best seconds of ``python -m linkpipe run`` (its ``main`` in this process) on the
+    crank-rocker of S steps, without the .rrd, with or without the .h5."""
+    from linkpipe.__main__ import main
+
+    argv = ["run", str(scene_file(S, folder)), "--out", str(folder / "out"), "--quiet", "--no-rrd"]
+    argv += [] if h5 else ["--no-h5"]
+    best, code = best_of(lambda: main(argv), repeats)
+    assert code == 0
+    return best
+
+
+def disk_floor(n_bytes: int, folder: pathlib.Path, repeats: int) -> float:
+    """Best seconds to write ``n_bytes`` to a new file in ``folder``, fsync it and rename it
+    into place: what a durable write of that many bytes costs on this disk."""
+    data = np.random.default_rng(0).bytes(n_bytes)
+
+    def once():
+        tmp, final = folder / ".floor.tmp", folder / "floor.bin"
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, final)
+
+    return best_of(once, repeats)[0]
+
+
+def run_targets(S: int, repeats: int, pylinkage_seconds: float | None):
+    """Issue 29's targets at S steps: run's marginal against pylinkage's warm kernel, the .h5
+    write's marginal against the disk's floor."""
+    folder = scratch()
+    small = run_cli(361, folder, False, repeats)
+    bare = run_cli(S, folder, False, repeats)
+    with_h5 = run_cli(S, folder, True, repeats)
+    n_bytes = (folder / "out" / f"crank_rocker_{S}.h5").stat().st_size
+    floor = disk_floor(n_bytes, folder, repeats)
+    return dict(steps=S, run_361=small, run=bare, run_h5=with_h5, h5_bytes=n_bytes,
+                floor=floor, pylinkage=pylinkage_seconds)
+
+
+def print_run_targets(r) -> str:
+    S = r["steps"]
+    marginal = r["run"] - r["run_361"]
+    write = r["run_h5"] - r["run"]
+    lines = [f"`run` end to end, crank-rocker {S:,} steps, positions + velocities + "
+             f"accelerations (`main([...])` in this process, best of several):", "",
+             "| what is timed | seconds |", "|---|---:|",
+             f"| run --no-h5 --no-rrd, 361 steps | {r['run_361']:.4f} |",
+             f"| run --no-h5 --no-rrd, {S:,} steps | {r['run']:.4f} |",
+             f"| run --no-rrd (.h5 written, {r['h5_bytes'] / 2**20:.1f} MiB), {S:,} steps | "
+             f"{r['run_h5']:.4f} |",
+             f"| the sweep's marginal (run at {S:,} less run at 361) | {marginal:.4f} |",
+             f"| the .h5 write's marginal (with .h5 less without) | {write:.4f} |",
+             f"| the disk's floor: write + fsync + rename of {r['h5_bytes'] / 2**20:.1f} MiB | "
+             f"{r['floor']:.4f} |", ""]
+    if r["pylinkage"] is not None:
+        x = r["pylinkage"] / marginal
+        lines.append(f"- run's marginal vs pylinkage+numba's warm kernel ({r['pylinkage']:.4f} s) = "
+                     f"{x:.2f}x faster (target >= 2x): {'met' if x >= 2 else 'MISSED'}"
+                     + ("" if x >= 2 else f", by {2 / x:.1f}x"))
+    else:
+        lines.append("- run's marginal vs pylinkage+numba: pylinkage not installed, not measured")
+    y = write / r["floor"]
+    lines.append(f"- .h5 write's marginal / the disk's floor = {y:.2f}x (target <= 1.25x): "
+                 f"{'met' if y <= 1.25 else 'MISSED'}")
+    return "\n".join(lines)
+
+
 def pylinkage_available() -> str:
     try:
         import numba  # noqa: F401
@@ -208,10 +308,12 @@ def part1(sizes, repeats):
         t_cfc, _ = best_of(lambda: closed_form_chunked(theta), repeats)
         m_fast = linkpipe_model(S)
         t_fast, got_fast = best_of(lambda: linkpipe_fast(m_fast, theta), repeats)
+        t_stage1, got_stage1 = best_of(lambda: linkpipe_stage1(m_fast, theta), repeats)
         m_newton = linkpipe_model(S, "newton")
         t_newton, got_newton = best_of(lambda: linkpipe_newton(m_newton, theta), repeats)
         row = dict(steps=S, closed_form=t_cf, closed_form_chunked=t_cfc, fast=t_fast, newton=t_newton,
-                   err_fast=rel_errors(got_fast, ref), err_newton=rel_errors(got_newton, ref))
+                   stage1=t_stage1, err_fast=rel_errors(got_fast, ref),
+                   err_stage1=rel_errors(got_stage1, ref), err_newton=rel_errors(got_newton, ref))
         if pyl.startswith("pylinkage"):
             best, got = math.inf, None
             for _ in range(repeats):
@@ -233,8 +335,12 @@ def print_part1(rows, pyl, first_call):
     lines.append("|---|---:|---:|---:|---:|---|")
     for r in rows:
         S = r["steps"]
-        items = [("linkpipe fast path (dyads, stage 1)", r["fast"], r["err_fast"]),
-                 ("linkpipe general path (Newton, vectorised)", r["newton"], r["err_newton"]),
+        items = [("linkpipe dyads kernel (kinematics.solve_sweep: positions and rates only)",
+                  r["fast"], r["err_fast"]),
+                 ("linkpipe stage 1 as run runs it (Stage1: + link angles, condition, link rates)",
+                  r["stage1"], r["err_stage1"]),
+                 ("linkpipe general path kernel (Newton positions + kinematics.derivatives)",
+                  r["newton"], r["err_newton"]),
                  ("closed form, plain numpy (reference)", r["closed_form"], [0.0, 0.0, 0.0]),
                  ("closed form, numpy in cache-sized chunks", r["closed_form_chunked"], None)]
         if "pylinkage" in r:
@@ -254,19 +360,24 @@ def print_part1(rows, pyl, first_call):
     else:
         lines.append(f"Targets (judged at 360,000 steps; this run's largest sweep is {S:,} steps, "
                      "so the verdicts below are indicative only):")
-    cps = {k: S / big[k] for k in ("fast", "newton", "closed_form", "closed_form_chunked", "pylinkage") if k in big}
+    cps = {k: S / big[k] for k in ("fast", "stage1", "newton", "closed_form", "closed_form_chunked",
+                                   "pylinkage") if k in big}
     def verdict(ok):
         return "met" if ok else "MISSED"
     if "pylinkage" in cps:
         x = cps["fast"] / cps["pylinkage"]
-        lines.append(f"- fast path / pylinkage+numba = {x:.2f}x (target >= 2x): {verdict(x >= 2)}")
+        lines.append(f"- dyads kernel / pylinkage+numba = {x:.2f}x (the kernel alone; target >= 2x): "
+                     f"{verdict(x >= 2)}")
+        x = cps["stage1"] / cps["pylinkage"]
+        lines.append(f"- stage 1 as run runs it / pylinkage+numba = {x:.2f}x (target >= 2x): "
+                     f"{verdict(x >= 2)}")
     else:
         lines.append("- fast path / pylinkage+numba: pylinkage not installed, not measured")
     x = cps["fast"] / cps["closed_form"]
-    lines.append(f"- fast path / closed form = {x:.2f}x (target >= 0.8x): {verdict(x >= 0.8)}"
+    lines.append(f"- dyads kernel / closed form = {x:.2f}x (target >= 0.8x): {verdict(x >= 0.8)}"
                  f" (against the chunked closed form: {cps['fast'] / cps['closed_form_chunked']:.2f}x)")
     e = max(big["err_fast"])
-    lines.append(f"- fast path max relative error {e:.1e} (target <= 1e-12): {verdict(e <= 1e-12)}")
+    lines.append(f"- dyads kernel max relative error {e:.1e} (target <= 1e-12): {verdict(e <= 1e-12)}")
     x = cps["newton"]
     lines.append(f"- general path {x / 1e6:.2f} M configurations/s (target >= 1 M): {verdict(x >= 1e6)};"
                  f" max relative error {max(big['err_newton']):.1e}: {verdict(max(big['err_newton']) <= 1e-12)}")
@@ -448,6 +559,9 @@ def main(argv=None):
     sizes = (36_000,) if args.quick else (36_000, 360_000)
     rows, pyl, first = part1(sizes, args.repeats)
     print(print_part1(rows, pyl, first))
+    print()
+    big = max(rows, key=lambda r: r["steps"])
+    print(print_run_targets(run_targets(big["steps"], args.repeats, big.get("pylinkage"))))
     if args.quick:
         return 0
     print()
