@@ -167,6 +167,25 @@ class Stage1:
                 return
             lo = hi
 
+    def _link_rates(self, sweep, der, X, velocity, acceleration) -> tuple:
+        """The links' angular velocities and accelerations (S, n_links) (None, None without
+        rates): the dyads' own, from their pass, where they gave them (the steps that are not
+        ok recomputed from the final rates: NaN, or a link's fixed points' zeros), else from
+        the positions and rates (:func:`linkpipe.kinematics.link_rates`)."""
+        if not self.stages.velocity:
+            return None, None
+        given = sweep.link_rates
+        if given is None or self.scene.solver.derivatives == "finite_difference":
+            return kin.link_rates(self.model, X, velocity, acceleration)
+        w, al = given[0], given[1] if acceleration is not None else None
+        redo = np.flatnonzero(der["status"] != OK)
+        if len(redo):
+            w[redo], al_redo = kin.link_rates(self.model, X[redo], velocity[redo],
+                                              None if al is None else acceleration[redo])
+            if al is not None:
+                al[redo] = al_redo
+        return w, al
+
     def _segment(self, lo: int, hi: int) -> Kinematics | None:
         """Stage 1 of steps ``lo .. hi - 1``, or None where the plan left the dyads for Newton
         here after earlier segments (the carries restarted)."""
@@ -175,14 +194,18 @@ class Stage1:
         t0 = _time.perf_counter()
         s, s_dot, s_ddot = self.s[rows], self.s_dot[rows], self.s_ddot[rows]
         path = self.plan.used
-        sweep = self.plan.positions(rows, s_dot, s_ddot, self.order)
+        sweep = self.plan.positions(rows, s_dot, s_ddot, self.order, links=True)
         if self.plan.used != path and lo > 0:
             self._add("positions", t0)
             self.restart()
             return None
         X = sweep.position
+        raw = sweep.link_angle  # the dyads' own pass: exact where every point is finite
+        if raw is not None:
+            redo = np.flatnonzero(sweep.status != OK)
+            raw[redo] = model.link_angles(X[redo])
         link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry,
-                                                                 s=s)
+                                                                 s=s, raw=raw)
         self._add("positions", t0)
         self.tell("jacobian")
         t0 = _time.perf_counter()
@@ -202,8 +225,7 @@ class Stage1:
         velocity = der["velocity"] if stages.velocity else None
         acceleration = der["acceleration"] if stages.acceleration else None
         t0 = _time.perf_counter()
-        link_rates = (kin.link_rates(model, X, velocity, acceleration) if stages.velocity
-                      else (None, None))
+        link_rates = self._link_rates(sweep, der, X, velocity, acceleration)
         self._add("jacobian", t0)  # the links' rates: derivatives too
         drive = dataclasses.replace(self.drive, **{
             f.name: getattr(self.drive, f.name)[rows] for f in dataclasses.fields(self.drive)

@@ -372,3 +372,36 @@ def test_rate_residuals_are_stored_only_when_asked_and_are_the_models(method, tm
     hdf5.write(r1, tmp_path / "r.h5")
     with h5py.File(tmp_path / "r.h5") as f:
         np.testing.assert_array_equal(f["velocity_residual"][:], r1.velocity_residual)
+
+
+def _dyads_or_skip(scene):
+    try:
+        r = linkpipe.solve(scene)
+    except SceneError:
+        pytest.skip("does not decompose into closed-form dyads")
+    if r.solver_method_used != "dyads":
+        pytest.skip("auto takes the general path")
+    return r
+
+
+@pytest.mark.parametrize("config", CONFIGS + sorted((CONFIG_DIR / "hard").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_link_angles_and_rates_from_the_dyads_pass_equal_the_separate_passes_bit_for_bit(config):
+    """Stage 1 takes the links' directions and rates from the dyads' own pass (the chunk's
+    buffers while in cache): on every shipped scene the dyads solve (and on the hard cases with
+    method = "dyads", whose failed steps are recomputed from the final arrays) they equal
+    link_angles_unwrapped and link_rates run on the final positions and rates, to the bit."""
+    scene = linkpipe.load_scene(config)
+    if config.parent.name == "hard":
+        scene = with_solver(scene, method="dyads")
+    r = _dyads_or_skip(scene)
+    if config.stem == "triple_rocker_limits":  # steps past its limits: recomputed, NaN
+        assert (r.status == st.NO_ASSEMBLY).any()
+    model, k = r.model, r.kinematics
+    angles = kin.link_angles_unwrapped(model, r.position, s=k.s)
+    np.testing.assert_array_equal(r.link_angle, angles)
+    if r.velocity is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):  # NaN rows: failed steps
+            w, al = kin.link_rates(model, r.position, r.velocity, r.acceleration)
+        np.testing.assert_array_equal(r.link_angular_velocity, w)
+        np.testing.assert_array_equal(r.link_angular_acceleration, al)

@@ -20,8 +20,8 @@ from .plan import (DYADS_LEFT, METHODS, Method, Plan, Sweep, dyad_plan, dyad_swe
 from .start import OutOfReach, start_state, steps_out_of_reach, sweep_reach
 
 from .pivots import solve_pivot_variants  # noqa: E402
-from .angles import AngleCarry, link_angles_unwrapped  # noqa: E402
-from .rates import dense_chunk, dense_derivatives, derivatives, fd_derivatives, link_rates  # noqa: E402
+from .angles import AngleCarry, link_angles_unwrapped, link_rates  # noqa: E402
+from .rates import dense_chunk, dense_derivatives, derivatives, fd_derivatives  # noqa: E402
 from ..model.drive import internal_motion as driver_motion  # noqa: E402
 from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402

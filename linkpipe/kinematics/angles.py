@@ -1,5 +1,6 @@
 """Link angles along a sweep: each link's direction unwrapped across steps, gaps and segments,
-its whole turns taken from the drawing (or from the angle driver that turns it)."""
+its whole turns taken from the drawing (or from the angle driver that turns it); the links'
+angular velocities and accelerations (:func:`link_rates`)."""
 from __future__ import annotations
 
 import dataclasses
@@ -16,7 +17,7 @@ from .linalg import CHUNK
 
 def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
                           carry: "AngleCarry | None" = None, s: np.ndarray | None = None,
-                          drawings: np.ndarray | None = None):
+                          drawings: np.ndarray | None = None, raw: np.ndarray | None = None):
     """Return link angles (S, n_links) in radians, unwrapped along the sweep across NaN gaps.
 
     One vectorised pass: each gap is filled with the link's last angle before it (the first
@@ -39,13 +40,18 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     ``carry``: a sweep solved in segments of steps (:mod:`linkpipe.segments`): the
     :class:`AngleCarry` of the segments before (None for the first); then the return is
     ``(angles, carry for the next segment)``, and the segments' angles equal the whole sweep's
-    to the last bit (``tests/test_segments.py``)."""
-    ang = np.empty((X.shape[0], len(model.link_a)))
+    to the last bit (``tests/test_segments.py``).
 
-    def work(lo: int, hi: int) -> None:
-        ang[lo:hi] = model.link_angles(X[lo:hi])
+    ``raw`` (S, n_links): the links' directions in (-pi, pi] where the caller has them
+    (``model.link_angles(X)`` row by row: the closed-form dyads' own pass), else computed here."""
+    ang = raw
+    if ang is None:
+        ang = np.empty((X.shape[0], len(model.link_a)))
 
-    for_chunks(work, X.shape[0], CHUNK)
+        def work(lo: int, hi: int) -> None:
+            ang[lo:hi] = model.link_angles(X[lo:hi])
+
+        for_chunks(work, X.shape[0], CHUNK)
     drawn = drawn_link_angles(model) if drawings is None else model.link_angles(drawings)
     if carry is not None:
         out, after = unwrap_runs(ang, carry)
@@ -205,3 +211,41 @@ def _running_sums(corrections: np.ndarray) -> np.ndarray:
         sums = np.cumsum(np.concatenate([col[:1], col[rows]]))
         out[:, j] = np.repeat(sums, np.diff(np.concatenate([[0], rows, [S1]])))
     return out
+
+
+#: steps per chunk of :func:`link_rates`: a chunk's dozen (chunk,) columns fit in L2, and few
+#: enough chunks that two threads gain (8,192-step chunks were slower on two threads than one)
+RATES_CHUNK = 32768
+
+
+def link_rates(model: Model, X, V, A=None, chunk: int = RATES_CHUNK):
+    """Return angular velocity (S, n_links) and, with A, angular acceleration of every link,
+    link by link on each chunk's columns (the temporaries stay in cache; only the outputs are
+    whole), on the workers' threads (:func:`linkpipe.workers.for_chunks`)."""
+    S, n_links = X.shape[0], len(model.link_a)
+    w = np.empty((S, n_links))
+    al = np.empty((S, n_links)) if A is not None else None
+
+    def work(lo: int, hi: int) -> None:
+        link_rate_rows(model.link_a, model.link_b, X[lo:hi], V[lo:hi],
+                       A[lo:hi] if A is not None else None, w[lo:hi],
+                       al[lo:hi] if al is not None else None)
+
+    for_chunks(work, S, chunk)
+    return w, al
+
+
+def link_rate_rows(link_a, link_b, X, V, A, w, al) -> None:
+    """The links' angular velocities into ``w`` (n, n_links) and, with ``A``, accelerations
+    into ``al``, of the rows X, V, A (n, n_points, 2): the one formula, link by link on the
+    rows' columns (:func:`link_rates` over a sweep; the closed-form dyads on each chunk of
+    their own pass, while it is in cache: :func:`.dyads.solve_chain`)."""
+    for j, (a, b) in enumerate(zip(link_a, link_b)):
+        dx, dy = X[:, b, 0] - X[:, a, 0], X[:, b, 1] - X[:, a, 1]
+        dvx, dvy = V[:, b, 0] - V[:, a, 0], V[:, b, 1] - V[:, a, 1]
+        n2 = dx * dx + dy * dy
+        wj = (dx * dvy - dy * dvx) / n2
+        w[:, j] = wj
+        if A is not None:
+            dax, day = A[:, b, 0] - A[:, a, 0], A[:, b, 1] - A[:, a, 1]
+            al[:, j] = (dx * day - dy * dax) / n2 - 2 * wj * (dx * dvx + dy * dvy) / n2

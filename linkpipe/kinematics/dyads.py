@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 from .branches import BRANCH_MARGIN
 from .decompose import Dyad, DyadChain, Line
+from .angles import link_rate_rows
 from .linalg import CHUNK
 
 
@@ -310,12 +311,16 @@ class ChainSweep:
     ok: np.ndarray
     residual: np.ndarray | None = None
     gap: np.ndarray | None = None
+    #: with ``links``: each link's direction (S, n_links) and (angular velocity, angular
+    #: acceleration or None) (S, n_links), from the pass itself
+    link_angle: np.ndarray | None = None
+    link_rates: tuple | None = None
 
 
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
           order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK,
           fixed_position: np.ndarray | None = None, period: int = 0, rows=None,
-          carry: dict | None = None) -> ChainSweep:
+          carry: dict | None = None, links: bool = False) -> ChainSweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
@@ -335,6 +340,12 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     in segments of steps (:mod:`linkpipe.segments`): one dict kept across the calls (each dyad
     point's last step before), so the step pair across two segments counts in ``gap`` as it
     does within one call.
+
+    ``links``: also each link's direction (``model.link_angles``) and, with order >= 1, its
+    angular velocity (and acceleration: :func:`.angles.link_rate_rows`), from each chunk's
+    buffers while they are in cache: the same formulas, so the same numbers as the separate
+    passes over the whole arrays at every step whose points are all finite (the others are
+    the caller's to recompute from the final arrays).
     """
     model = plan.model
     S = s.shape[0]
@@ -352,6 +363,10 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     bufs[0][:, fixed] = X0[fixed]
     for rates in bufs[1:]:
         rates[:, fixed] = 0.0
+    L = len(model.link_a)
+    angle = np.empty((S, L)) if links else None
+    w = np.empty((S, L)) if links and order >= 1 else None
+    al = np.empty((S, L)) if links and order >= 2 else None
     ok = np.ones(S, dtype=bool)
     gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
     residual = np.empty(S) if max_abs_phi is not None else None
@@ -391,6 +406,12 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
                 ch.sdd = [c if isinstance(c, float) else c[lo:hi] for c in ddcols]
                 ch.ax, ch.ay = [None] * P, [None] * P
                 A[lo:hi] = _derivative_pass(part, ch, 2, moving, bufs[2], n)
+            if links:
+                angle[lo:hi] = model.link_angles(bufs[0][:n])
+            if w is not None:
+                link_rate_rows(model.link_a, model.link_b, bufs[0][:n], bufs[1][:n],
+                               bufs[2][:n] if al is not None else None, w[lo:hi],
+                               al[lo:hi] if al is not None else None)
     bad = ~ok
     if bad.any():
         X[np.ix_(bad, moving)] = np.nan
@@ -400,7 +421,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             A[np.ix_(bad, moving)] = np.nan
         if residual is not None:
             residual[bad] = np.nan
-    return ChainSweep(X, V, A, ok, residual, gap)
+    return ChainSweep(X, V, A, ok, residual, gap, angle, None if w is None else (w, al))
 
 
 def _position_pass(plan: DyadChain, ch: _Chunk, fixed_at: dict, lo: int, hi: int,

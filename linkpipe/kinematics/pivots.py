@@ -40,8 +40,8 @@ from .affine import same_pattern
 from .branches import BRANCH_MARGIN, branch_value
 from .decompose import DyadChain
 from .dyads import solve_chain
-from .angles import link_angles_unwrapped
-from .rates import derivatives, link_rates
+from .angles import link_angles_unwrapped, link_rates
+from .rates import derivatives
 from .sparse import engine
 from .start import carry_steps
 from .linalg import lin_solve

@@ -5,7 +5,7 @@ dyads where the scene decomposes and every dyad stays clear of its singular shap
 segment by segment: :func:`.dyads.branch_check`), else the general path (coarse continuation
 + batched Newton); "dyads" requires the fast path and keeps its own branches; "newton" is the
 general path. A :class:`Plan` holds that choice for one sweep and switches itself from the
-dyads to Newton where auto must leave them (:attr:`Plan.switched`): the pipeline's stage 1
+dyads to Newton where auto must leave them (:attr:`Plan.used`): the pipeline's stage 1
 (:class:`linkpipe.stage1.Stage1`), studies and the benchmarks' kernel (:func:`solve_sweep`)
 all ask a Plan for positions.
 """
@@ -43,6 +43,11 @@ class Sweep:
     note: str
     velocity: np.ndarray | None = None
     acceleration: np.ndarray | None = None
+    #: the dyads' own links' directions (S, n_links) and (angular velocity, acceleration or
+    #: None), from their pass (:func:`.dyads.solve_chain` with ``links``), or None; exact at
+    #: ok steps only (the others are recomputed from the final arrays: linkpipe.stage1)
+    link_angle: np.ndarray | None = None
+    link_rates: tuple | None = None
 
     def rows(self, rows: slice) -> "Sweep":
         """The steps ``rows`` of this sweep (positions and statuses; a general path's)."""
@@ -98,13 +103,14 @@ def dyad_plan(model: Model, s, forced: bool):
 
 
 def dyad_sweep(model: Model, chain, s, s_dot, s_ddot, order: int, forced: bool,
-               carry: dict | None = None) -> Sweep | None:
+               carry: dict | None = None, links: bool = False) -> Sweep | None:
     """The dyads' Sweep of the steps ``s`` (S, nd), or None where auto must leave them for
     Newton (a step fails :func:`branch_check`). ``carry``: kept across the segments of one
-    sweep (:func:`solve_chain`), so that segments give the whole sweep's rows and checks."""
+    sweep (:func:`solve_chain`), so that segments give the whole sweep's rows and checks;
+    ``links``: the links' directions and rates from the same pass."""
     tol_abs = model.tolerance()
     sw = solve_chain(chain, s, s_dot, s_ddot, order=order, gaps=not forced,
-                     max_abs_phi=max_abs_phi(model), carry=carry)
+                     max_abs_phi=max_abs_phi(model), carry=carry, links=links)
     if not (forced or branch_check(chain, sw)):
         return None
     bad = sw.ok & ~(sw.residual <= 10 * tol_abs)  # a redundant constraint not met
@@ -113,7 +119,8 @@ def dyad_sweep(model: Model, chain, s, s_dot, s_ddot, order: int, forced: bool,
             arr[np.ix_(bad, model.moving)] = np.nan
     status = np.where(sw.ok & ~bad, OK, NO_ASSEMBLY).astype(np.int8)
     return Sweep(sw.position, sw.residual, np.zeros(s.shape[0], dtype=np.int32), status,
-                 "dyads", chain.describe(), sw.velocity, sw.acceleration)
+                 "dyads", chain.describe(), sw.velocity, sw.acceleration, sw.link_angle,
+                 sw.link_rates)
 
 
 def start_branches(model: Model, chain, s: np.ndarray):
@@ -155,16 +162,15 @@ class Plan:
     and carried from segment to segment (:meth:`restart` starts again from the first step).
 
     :meth:`positions` gives the Sweep of any steps; where auto must leave the dyads it solves
-    the positions of the whole sweep by the general path itself and says so in
-    :attr:`switched` (the steps given before are then not those of the sweep's own path:
-    start again from the first segment)."""
+    the positions of the whole sweep by the general path itself and says so in :attr:`used`
+    (the steps given before are then not those of the sweep's own path: start again from the
+    first segment)."""
 
     def __init__(self, model: Model, s: np.ndarray):
         self.model, self.s = model, s
         self.method = METHODS[model.scene.solver.method]
         self.present = np.isfinite(s).all(axis=1)  # False where a logged value is missing
         self.solvable, self.unreached, self.reach_note = self.present, 0, ""
-        self.switched = False
         try:
             self._choose()
         except OutOfReach:
@@ -215,24 +221,24 @@ class Plan:
         return sweep
 
     def positions(self, rows: slice, s_dot: np.ndarray, s_ddot: np.ndarray,
-                  order: int) -> Sweep:
+                  order: int, links: bool = False) -> Sweep:
         """The Sweep of steps ``rows`` (``s_dot``, ``s_ddot``: the drivers' rates of those
-        rows; ``order``: the highest derivative the dyads compute on the way). Where auto
-        leaves the dyads here, :attr:`switched` turns True and the general path's rows come."""
+        rows; ``order``: the highest derivative the dyads compute on the way; ``links``: the
+        dyads give the links' directions and rates from the same pass too). Where auto leaves
+        the dyads here, :attr:`used` turns to "newton" and the general path's rows come."""
         if self.chain is not None:
-            sweep = self._dyad_rows(rows, s_dot, s_ddot, order)
+            sweep = self._dyad_rows(rows, s_dot, s_ddot, order, links)
             if sweep is not None:
                 return sweep
             self._use_newton()
-            self.switched = True
             self.restart()
         return self.newton.rows(rows)
 
-    def _dyad_rows(self, rows: slice, sd, sdd, order: int) -> Sweep | None:
+    def _dyad_rows(self, rows: slice, sd, sdd, order: int, links: bool) -> Sweep | None:
         model, chain, forced = self.model, self.chain, self.method.forced
         present, s = self.solvable[rows], self.s[rows]
         if present.all():
-            return dyad_sweep(model, chain, s, sd, sdd, order, forced, self.chain_carry)
+            return dyad_sweep(model, chain, s, sd, sdd, order, forced, self.chain_carry, links)
         idx = np.flatnonzero(present)
         sub = (dyad_sweep(model, chain, s[idx], sd[idx], sdd[idx], order, forced,
                           self.chain_carry) if len(idx) else None)

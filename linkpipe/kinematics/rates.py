@@ -1,6 +1,6 @@
 """Velocities, accelerations, condition numbers and the Jacobian's inverse of a solved sweep
-(the "jacobian" stage), on the sparse engine or densely; finite-difference derivatives; the
-links' rates (their angles: :mod:`.angles`)."""
+(the "jacobian" stage), on the sparse engine or densely; finite-difference derivatives (the
+links' angles and rates: :mod:`.angles`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -256,33 +256,3 @@ def fd_derivatives(X: np.ndarray, s: np.ndarray, s_dot: np.ndarray, s_ddot: np.n
     if A is not None:
         A[near] = np.nan
     return V, A
-
-
-#: steps per chunk of :func:`link_rates`: a chunk's dozen (chunk,) columns fit in L2, and few
-#: enough chunks that two threads gain (8,192-step chunks were slower on two threads than one)
-RATES_CHUNK = 32768
-
-
-def link_rates(model: Model, X, V, A=None, chunk: int = RATES_CHUNK):
-    """Return angular velocity (S, n_links) and, with A, angular acceleration of every link,
-    link by link on each chunk's columns (the temporaries stay in cache; only the outputs are
-    whole), on the workers' threads (:func:`linkpipe.workers.for_chunks`)."""
-    S, n_links = X.shape[0], len(model.link_a)
-    w = np.empty((S, n_links))
-    al = np.empty((S, n_links)) if A is not None else None
-
-    def work(lo: int, hi: int) -> None:  # link by link on the chunk's columns
-        Xc, Vc = X[lo:hi], V[lo:hi]
-        Ac = A[lo:hi] if A is not None else None
-        for j, (a, b) in enumerate(zip(model.link_a, model.link_b)):
-            dx, dy = Xc[:, b, 0] - Xc[:, a, 0], Xc[:, b, 1] - Xc[:, a, 1]
-            dvx, dvy = Vc[:, b, 0] - Vc[:, a, 0], Vc[:, b, 1] - Vc[:, a, 1]
-            n2 = dx * dx + dy * dy
-            wj = (dx * dvy - dy * dvx) / n2
-            w[lo:hi, j] = wj
-            if Ac is not None:
-                dax, day = Ac[:, b, 0] - Ac[:, a, 0], Ac[:, b, 1] - Ac[:, a, 1]
-                al[lo:hi, j] = (dx * day - dy * dax) / n2 - 2 * wj * (dx * dvx + dy * dvy) / n2
-
-    for_chunks(work, S, chunk)
-    return w, al
