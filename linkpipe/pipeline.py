@@ -38,7 +38,7 @@ class Stages:
         measured = {MEASURED_NEEDS.get(m.of[0]) for m in scene.measurements}  # their rates
         acc = ("inertia" in eff or "acceleration" in out.kinematics or vectors
                or "acceleration" in measured)
-        vel = (acc or "damping" in eff or "velocity" in out.kinematics or vectors
+        vel = (acc or "damping" in eff or "friction" in eff or "velocity" in out.kinematics or vectors
                or "velocity" in measured)
         return cls(velocity=vel, acceleration=acc, forces=bool(eff))
 
@@ -71,7 +71,7 @@ def bytes_per_step(scene: Scene) -> int:
         fixed = sum(p.fixed for p in scene.points)
         numbers += (n_q * nd + 2 * nd + len(scene.effects) + L + 2 * joints + 2 * fixed
                     + 5 * len(scene.springs) + 3 * len(scene.torsion_springs)
-                    + len(scene.sliders) + 1)
+                    + len(scene.sliders) + 1 + 2 * len(scene.friction))
     return 8 * (numbers + 2 * len(scene.measurements))
 
 
