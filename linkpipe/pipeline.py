@@ -10,6 +10,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import kinematics as kin
+from . import stroke
 from .model import build_model
 from .result import Result
 from .output_units import units_of
@@ -196,7 +197,8 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
                                 cache=k.force_cache if kinematics is not None and not lagrange
                                 else None)
         seconds["forces"] = _time.perf_counter() - t0
-    status = status_of(model, kinematic_status, k.sweep.residual, [], forces, finite=k.finite)
+    status = status_of(model, kinematic_status, k.sweep.residual, [], forces, finite=k.finite,
+                       stroke_margin=stroke_margin_of(scene, k))
     result = result_of(scene, model, k, forces, status, seconds)
     return _with_measurements(result) if scene.measurements else result
 
@@ -226,19 +228,28 @@ def result_of(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
         seconds=seconds, message=status_message(code_counts(status)),
         solver_method_used=k.sweep.method, solver_note=k.sweep.note,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
-        kinematics=k, step_numbers=step_numbers)
+        kinematics=k, step_numbers=step_numbers, stroke_margin=stroke_margin_of(scene, k))
+
+
+def stroke_margin_of(scene: Scene, k: Kinematics, extended_length=None):
+    """(S, n_strokes) each actuator's and gas spring's margin to its stroke's ends, or None
+    (:func:`linkpipe.stroke.margins`)."""
+    return stroke.margins(scene, k.drive.value, k.sweep.position, extended_length)
 
 
 def status_of(model, kinematic_status, residual, stored: list, forces, size=None,
-              finite: np.ndarray | None = None) -> np.ndarray:
+              finite: np.ndarray | None = None, stroke_margin=None) -> np.ndarray:
     """Every step's final status (S,): the stages' verdicts, the residual against the
     tolerance, and whether everything ``stored`` (kinematic arrays, step axis first, None
     where not computed) and the forces' arrays are finite (:func:`linkpipe.status.assign`).
     ``size``: the length scale of the tolerance, float or (S,) (default ``model.size``);
-    ``finite`` (S,): rows of arrays checked before (:attr:`Kinematics.finite`)."""
+    ``finite`` (S,): rows of arrays checked before (:attr:`Kinematics.finite`);
+    ``stroke_margin`` (S, n_strokes): out_of_stroke where one is outside (:mod:`.stroke`)."""
     if forces:
         stored = stored + forces.defined_arrays()
-    return assign([kinematic_status] + ([forces.status] if forces else []), residual,
+    strokes = stroke.status(model, stroke_margin, size)
+    return assign([kinematic_status] + ([forces.status] if forces else [])
+                  + ([strokes] if strokes is not None else []), residual,
                   model.tolerance(size=size),
                   [a for a in stored if a is not None], finite=finite)
 

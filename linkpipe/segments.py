@@ -32,7 +32,7 @@ from threadpoolctl import threadpool_limits
 
 from .model import build_model
 from .pipeline import (DEFAULT_THREADS, Stages, bytes_per_step, check_memory, result_of,
-                       solve, status_of)
+                       solve, status_of, stroke_margin_of)
 from .result import Result, Totals, combine_flags
 from .output_units import units_of
 from .scene import Scene
@@ -107,7 +107,8 @@ def segments(scene: Scene, segment: int, seconds: dict, progress=None):
             t0 = _time.perf_counter()
             forces = compute_forces(model, k.motion(), units_of(scene))
             seconds["forces"] = seconds.get("forces", 0.0) + _time.perf_counter() - t0
-        status = status_of(model, k.der["status"], k.sweep.residual, [], forces, finite=k.finite)
+        status = status_of(model, k.der["status"], k.sweep.residual, [], forces, finite=k.finite,
+                           stroke_margin=stroke_margin_of(scene, k))
         time, time_note = stage1.time_axis
         yield result_of(scene, model, k, forces, status, seconds,
                         (None if time is None else time[lo:hi], time_note), np.arange(lo, hi))

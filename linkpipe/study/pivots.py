@@ -40,6 +40,7 @@ from ..forces.constants import ForceConstants
 from ..kinematics.decompose import bodies_of, chain_at
 from ..model.build import build_model
 from ..model.rows import variant_rows
+from .. import stroke
 from ..pipeline import Stages, result_of, status_of
 from ..stage1 import Kinematics
 from ..result import Motion
@@ -167,7 +168,10 @@ def variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
         forces = compute_forces(model, motion, units_of(scene),
                                 ForceConstants(**per_row, pivots=True, model_rows=a["rows"]))
     stored = [a["position"], a["link_angle"], a["velocity"], a["acceleration"], *a["link_rates"]]
-    status = status_of(model, der["status"], a["residual"], stored, forces, per_row["size"])
+    status = status_of(model, der["status"], a["residual"], stored, forces, per_row["size"],
+                       stroke_margin=stroke.margins(scene, np.tile(k.drive.value, (V, 1)),
+                                                    a["position"],
+                                                    per_row.get("gas_extended_length")))
     drive = dataclasses.replace(k.drive, **{f.name: np.tile(v, (V,) + (1,) * (v.ndim - 1))
                                             for f in dataclasses.fields(k.drive)
                                             for v in [getattr(k.drive, f.name)] if v is not None})

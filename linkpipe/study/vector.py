@@ -33,6 +33,7 @@ from ..fit import scene_with
 from ..forces import compute_forces
 from ..forces.constants import ForceConstants
 from ..model.build import mechanism_size
+from .. import stroke
 from ..pipeline import solve, status_of
 from ..result import Motion
 from ..output_units import units_of
@@ -207,12 +208,15 @@ def _variant_arrays(study, slots, lo: int, hi: int) -> tuple[np.ndarray, dict]:
                     status=rows(k.der["status"]), influence=rows(k.der["influence"]),
                     link_angular_acceleration=rows(k.link_rates[1]), link_angle=rows(k.link_angle))
     forces = compute_forces(model, motion, units_of(study.scene), ForceConstants(**per_row))
+    margin = stroke.margins(study.scene, rows(k.drive.value), X, per_row.get("gas_extended_length"))
     status = status_of(model, motion.status, rows(k.sweep.residual),
                        [X, rows(k.link_angle), motion.velocity, motion.acceleration,
                         rows(k.link_rates[0]), motion.link_angular_acceleration], forces,
-                       per_row["size"])
+                       per_row["size"], stroke_margin=margin)
     stored = {v.name: v.data for v in base.variables() if v.dims[:1] == ("step",)}
     out = {name: rows(data) for name, data in stored.items()}
+    if margin is not None:
+        out["stroke_margin"] = margin
     out.update({name: data for name, (dims, data, _) in forces.variables.items()
                 if dims[:1] == ("step",)})
     out["position"], out["status"] = X, status
