@@ -6,7 +6,7 @@ Every law opposes a relative motion ``v`` with ``sign(v)`` regularised as ``tanh
 * an actuator's seal (``driver``): a force (torque) on the driver's own value,
   ``(coulomb + (peak - coulomb) exp(-(v / velocity)^2)) sign(v) + viscous v`` with ``v`` the
   driver's rate. It is a generalized force on the driver alone: in the mechanism's coordinates
-  ``Q = -(f / Phi_s) dPhi_d/dX`` at the driver's points, so it changes the actuator's force and
+  ``Q = (f / Phi_s) dPhi_d/dX`` at the driver's points, so it changes the actuator's force and
   nothing else (the multipliers of every other row stay as they were);
 * a slider (``slider``): ``mu |N| sign(v) + viscous v`` along the guide at the slider's point
   (and the opposite at the moving guide's first point), ``N`` the guide's normal force on the
@@ -113,7 +113,7 @@ class Layout:
 
 def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
     """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies)``, the
-    point forces ``-(f / Phi_s) dPhi_d/dX`` at each driver's points and, for a driver whose row
+    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``) and, for a driver whose row
     acts on bodies (an angle on one link, a relative angle), each body's part."""
     model, X = ctx.model, ctx.position
     scale = velocity_scale(model, ctx.constants.size)
@@ -130,17 +130,17 @@ def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
         signed[:, c] = seal_law(model.scene.friction[e], ctx.motion.s_dot[:, j], scale / size)
         r = model.n_constraints + j
         with np.errstate(invalid="ignore", divide="ignore"):
-            per = signed[:, c] / phi_s[:, j]  # the multiplier a unit of it takes off the driver
+            per = signed[:, c] / phi_s[:, j]  # Q = per dPhi_d/dX: virtual work -signed per ds
         per = np.where(np.isfinite(per), per, 0.0)
         s = ctx.motion.s[:, j]
         for _, p, gx, gy in eq.driver_jacobian_terms(rows[j], r, xy, np.cos(s), np.sin(s)):
-            points[:, p, 0] -= per * gx
-            points[:, p, 1] -= per * gy
+            points[:, p, 0] += per * gx
+            points[:, p, 1] += per * gy
             if model.drv_kind[j] == eq.ANGLE and row_link[r] >= 0:  # on that body: its -Q_k
                 body = bodies.setdefault(int(row_link[r]), {})
-                merge_bodies(body, {p: np.stack([per * gx, per * gy], axis=1)})
+                merge_bodies(body, {p: np.stack([-per * gx, -per * gy], axis=1)})
         if model.drv_kind[j] == eq.RELATIVE:
-            lam[:, r] = per
+            lam[:, r] = -per
     if (model.drv_kind == eq.RELATIVE).any() and lam.any():
         for li, body in motor_terms(model, X, ctx.motion.s, lam,
                                     ctx.constants.model_rows).items():
