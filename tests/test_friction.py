@@ -382,3 +382,44 @@ def test_compressed_length_not_below_extended_is_a_scene_error():
     with pytest.raises(SceneError) as err:
         parse_scene(bad, "hatch.toml")
     assert err.value.key == "compressed_length"
+
+
+def test_a_study_counts_out_of_stroke_variants_as_failed_and_flags_an_edge(tmp_path, capsys):
+    """The hatch's struts anchored lower or further out stretch past extended_length (0.55 m):
+    those variants, and only those, are out_of_stroke (7) by the closed form |B - A| with
+    A = u (cos t, sin t) on the tailgate; the best variant sits on its grid's edge, said so."""
+    import pathlib
+
+    from linkpipe.__main__ import main
+    from linkpipe.stores.study import read_arrays
+
+    root = pathlib.Path(__file__).resolve().parent.parent
+    path = tmp_path / "hatch.toml"
+    path.write_text(f'[study]\nbase = "{(root / "configs/hatch_gas_spring.toml").as_posix()}"\n'
+                    '[study.parameters]\n"points.B.y" = { from = -0.56, to = -0.44, steps = 7 }\n'
+                    '"links.tailgate.local.A.0" = { from = 0.15, to = 0.25, steps = 6 }\n')
+    assert main(["study", str(path), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    f = read_arrays(tmp_path / "hatch_study.h5")
+    t = np.radians(np.arange(-70.0, 15.0 + 1e-9, 0.5))
+    for v, (by, u) in enumerate(f["parameter_value"]):
+        A = u * np.stack([np.cos(t), np.sin(t)], axis=1)
+        longest = np.hypot(A[:, 0] - 0.16, A[:, 1] - by).max()
+        assert (f["worst_status"][v] == 7) == (longest > 0.55 + 1e-9), (v, longest)
+    assert (f["worst_status"] == 7).any() and (f["worst_status"] == 0).any()
+    assert "best on the edge: links.tailgate.local.A.0 = 0.15 is the lowest value" in out
+
+
+def test_stroke_margin_of_a_cylinder_against_its_stroke():
+    text = (SEAL.replace("FROM", "1.4").replace("TO", "2.4").replace("RATE", "0.1")
+            .replace("rate = 0.1", "rate = 0.1\nstroke = [1.5, 2.2]"))
+    r = linkpipe.solve(parse_scene(text))
+    s = r.driver_value[:, 0]
+    margin = np.minimum(s - 1.5, 2.2 - s)
+    assert np.allclose(r.stroke_margin[:, 0], margin, rtol=0, atol=1e-12)
+    outside = margin < -1e-9
+    assert np.array_equal(r.status == 7, outside) and outside.any()
+    assert np.isfinite(r.forces["input_force"][1][outside]).all()  # every value kept
+    names = {v.name: v for v in r.variables()}
+    assert names["stroke_margin"].dims == ("step", "stroke")
+    assert "out_of_stroke" in names["status"].attrs["flag_meanings"].split()
