@@ -423,3 +423,18 @@ def test_stroke_margin_of_a_cylinder_against_its_stroke():
     names = {v.name: v for v in r.variables()}
     assert names["stroke_margin"].dims == ("step", "stroke")
     assert "out_of_stroke" in names["status"].attrs["flag_meanings"].split()
+
+
+def test_the_raise_lower_demo_fit_recovers_mass_and_seal_friction(tmp_path):
+    """The README's demo: the fit of configs/logged/dump_truck_friction.toml lands within
+    three standard errors of the generator's truth (17,500 kg, 3000 N, 20000 N s/m)."""
+    import pathlib
+
+    from linkpipe.fit import fit
+
+    root = pathlib.Path(__file__).resolve().parent.parent
+    result = fit(linkpipe.load_scene(root / "configs/logged/dump_truck_friction.toml"))
+    truth = np.array([17500.0, 3000.0, 20000.0])
+    assert result.names == ["masses.body.mass", "friction.seal.coulomb", "friction.seal.viscous"]
+    assert np.all(np.abs(result.fitted - truth) < 3 * result.standard_error)
+    assert result.stage1_solves == 1

@@ -188,7 +188,8 @@ def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
         terms["friction"] = (influence.generalized(seal[1]), {}, {},
                              Effect(seal[1], bodies=seal[2]))
     if lagrange:
-        return _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout, seal)
+        return _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout, seal,
+                              None if cache is None else (cache, chunk_key))
     if layout is not None:
         _friction_term(ctx, influence, terms, layout, seal, None, None, Xz)
     variables, coords = _effect_variables(terms, motion, units)
@@ -319,7 +320,7 @@ def _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies, generaliz
 
 
 def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
-                   seal=None) -> Forces:
+                   seal=None, kept=None) -> Forces:
     """The Lagrange side: ``J^T lambda = Q - M qdd`` (an independent solve), the input force
     from it, internal forces and every pin's reaction; with pin or slider friction, the
     friction that makes them consistent (:func:`linkpipe.forces.friction.solve_magnitudes`)."""
@@ -330,7 +331,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
     extra_status = None
     if layout is not None:
         case, extra_status = _with_friction(model, ctx, motion, units, influence, terms, Xz,
-                                            layout, seal, base)
+                                            layout, seal, base, kept)
     else:
         case = base
     variables, coords = _effect_variables(terms, motion, units)
@@ -352,20 +353,27 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
     return Forces(variables=variables, coords=coords, status=status, undefined=undefined)
 
 
-def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal, base):
+def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal, base,
+                   kept=None):
     """Solve the pins' and sliders' friction with the forces they change: one load case per
     unknown, the magnitudes iterated per step; returns (the total case, status (S,) with
-    not_converged where the iteration did not converge)."""
+    not_converged where the iteration did not converge). ``kept``: (a fit's cache, chunk key):
+    the unit load cases depend on the kinematics alone and are solved once per stage 1."""
     rates = friction.Rates.of(ctx, layout, Xz)
     if not layout.coupled:
         _friction_term(ctx, influence, terms, layout, seal, None, rates, Xz)
         return base, None
     pin_index = {pair: k for k, pair in enumerate(joints(model))}
-    cases = []
-    for applied, bodies in friction.unit_loads(ctx, layout, Xz):
-        rhs = with_couples_as_pairs(model, applied.point_forces, applied.couples, Xz)
-        cases.append(_case(model, ctx, motion, units, influence, rhs, bodies,
-                           influence.generalized(applied), Xz))
+    key = None if kept is None else (kept[1], "friction_cases", repr(layout))
+    cases = kept[0].get(key) if kept is not None else None
+    if cases is None:
+        cases = []
+        for applied, bodies in friction.unit_loads(ctx, layout, Xz):
+            rhs = with_couples_as_pairs(model, applied.point_forces, applied.couples, Xz)
+            cases.append(_case(model, ctx, motion, units, influence, rhs, bodies,
+                               influence.generalized(applied), Xz))
+        if kept is not None:
+            kept[0][key] = cases
     stack = lambda f: np.stack([f(c) for c in cases])  # noqa: E731
     torque, force, couples, converged = friction.solve_magnitudes(
         ctx, layout, rates, friction.pair_forces(layout, pin_index, base.pins),
