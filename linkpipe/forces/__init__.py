@@ -170,6 +170,7 @@ def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
     """The force stage's computation on one chunk of steps, before failed steps are masked."""
     layout = (friction.Layout.of(model) if "friction" in model.scene.effects
               and model.scene.friction else None)
+    wanted = lagrange  # whether the Lagrange side's own variables are stored
     lagrange = lagrange or (layout is not None and layout.coupled)  # pins', sliders' friction
     ctx = Context.of(model, motion, units, constants, lagrange)
     n_steps = ctx.n_steps
@@ -189,7 +190,7 @@ def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
                              Effect(seal[1], bodies=seal[2]))
     if lagrange:
         return _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout, seal,
-                              None if cache is None else (cache, chunk_key))
+                              None if cache is None else (cache, chunk_key), wanted)
     if layout is not None:
         _friction_term(ctx, influence, terms, layout, seal, None, None, Xz)
     variables, coords = _effect_variables(terms, motion, units)
@@ -291,15 +292,17 @@ class _Case:
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
 
 
-def _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies, generalized, Xz) -> _Case:
+def _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies, generalized, Xz,
+          factors: dict | None = None, only=None) -> _Case:
     """Solve one load case: ``q_minus_m_qdd`` (S, P, 2), ``bodies`` {link: {point: (S, 2)}}
-    (changed: the pushes' body loads are added), ``generalized`` (S, nd) its virtual work."""
+    (changed: the pushes' body loads are added), ``generalized`` (S, nd) its virtual work;
+    ``factors``: the Jacobian's entries kept across cases (:func:`.lagrange.multipliers`)."""
     n_steps = ctx.n_steps
     ok = motion.status == OK
     input_force = -generalized
     lam, undetermined = multipliers(model, Xz, motion.s,
                                     q_minus_m_qdd[:, model.moving].reshape(n_steps, -1), ok,
-                                    ctx.constants.pivots, ctx.constants.model_rows)
+                                    ctx.constants.pivots, ctx.constants.model_rows, factors)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
                                           motion.status, units, Xz, ctx.constants.size)
@@ -310,28 +313,33 @@ def _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies, generaliz
         ok = status == OK  # where the push is known (not no_leverage)
         lam, undetermined = multipliers(model, Xz, motion.s,
                                         q_minus_m_qdd[:, model.moving].reshape(n_steps, -1), ok,
-                                        ctx.constants.pivots, ctx.constants.model_rows)
+                                        ctx.constants.pivots, ctx.constants.model_rows, factors)
         for li, body in on_bodies.items():  # part of the body's own Q_k
             merge_bodies(bodies.setdefault(li, {}), body, -1.0)
     ground, pins = reactions(model, lam, q_minus_m_qdd, bodies, Xz, motion.s, ok,
-                             ctx.constants.model_rows)
+                             ctx.constants.model_rows, only)
     return _Case(input_force, input_force_lagrange, lam, undetermined, status, unit, pins,
                  ground, ok, q_minus_m_qdd)
 
 
 def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
-                   seal=None, kept=None) -> Forces:
+                   seal=None, kept=None, wanted: bool = True) -> Forces:
     """The Lagrange side: ``J^T lambda = Q - M qdd`` (an independent solve), the input force
     from it, internal forces and every pin's reaction; with pin or slider friction, the
     friction that makes them consistent (:func:`linkpipe.forces.friction.solve_magnitudes`)."""
     bodies, q_minus_m_qdd = _lagrange_sides(model, ctx, terms, Xz)
+    factors = only = None  # with friction's load cases: one Jacobian's entries for all of them
+    if layout is not None and layout.coupled:
+        factors = {} if kept is None else kept[0].setdefault((kept[1], "factors"), {})
+        if not wanted:  # the pin forces friction needs, no more
+            only = {(b, p) for _, p, i, j in layout.pairs for b in (i, j) if b >= 0}
     base = _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies,
                  sum(t[0] for t in terms.values()) if terms
-                 else np.zeros((ctx.n_steps, model.n_drivers)), Xz)
+                 else np.zeros((ctx.n_steps, model.n_drivers)), Xz, factors, only)
     extra_status = None
     if layout is not None:
         case, extra_status = _with_friction(model, ctx, motion, units, influence, terms, Xz,
-                                            layout, seal, base, kept)
+                                            layout, seal, base, kept, factors)
     else:
         case = base
     variables, coords = _effect_variables(terms, motion, units)
@@ -341,6 +349,10 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
     if extra_status is not None:
         status = worst(status, extra_status)
     variables["input_force"] = (("step", "driver"), input_force, unit)
+    if not wanted:  # friction needed the multipliers; the caller wants none of what they give
+        if extra_status is not None:
+            failed_steps_as_nan(variables, extra_status)
+        return Forces(variables=variables, coords=coords, status=status)
     variables["input_force_lagrange"] = (("step", "driver"), case.input_force_lagrange, unit)
     internal, internal_coords, undefined = internal_forces(model, case.lam, case.undetermined, units)
     variables.update(internal)
@@ -354,7 +366,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
 
 
 def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal, base,
-                   kept=None):
+                   kept=None, factors=None):
     """Solve the pins' and sliders' friction with the forces they change: one load case per
     unknown, the magnitudes iterated per step; returns (the total case, status (S,) with
     not_converged where the iteration did not converge). ``kept``: (a fit's cache, chunk key):
@@ -371,7 +383,7 @@ def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal
         for applied, bodies in friction.unit_loads(ctx, layout, Xz):
             rhs = with_couples_as_pairs(model, applied.point_forces, applied.couples, Xz)
             cases.append(_case(model, ctx, motion, units, influence, rhs, bodies,
-                               influence.generalized(applied), Xz))
+                               influence.generalized(applied), Xz, factors))
         if kept is not None:
             kept[0][key] = cases
     stack = lambda f: np.stack([f(c) for c in cases])  # noqa: E731
