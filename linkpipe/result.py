@@ -15,7 +15,8 @@ from .scene import Scene
 from .status import (FLAG_MEANINGS, NON_FINITE, OK, code_counts, counts, finite_rows,
                      named_counts, not_finite_at)
 from .status import message as status_message
-from .output_units import common_unit, driver_units_of, input_force_units, units_of
+from .output_units import (common_unit, driver_units_of, friction_units, input_force_units,
+                           units_of)
 from .stroke import names as stroke_names
 from .stroke import units as stroke_units
 
@@ -386,9 +387,11 @@ class Result:
                                 self.link_angular_acceleration, f"rad/{T}^2"))
         if self.forces:
             per_driver = {"driver_units": ",".join(input_force_units(self.scene.drivers, u))}
+            per_friction = {"friction_units": ",".join(friction_units(self.scene, u))}
             for name, (dims, data, units) in self.forces.items():
                 out.append(Variable(name, dims, data, units,
-                                    dict(per_driver) if dims[1:2] == ("driver",) else {}))
+                                    dict(per_driver) if dims[1:2] == ("driver",) else
+                                    dict(per_friction) if name == "friction_force" else {}))
         if self.stroke_margin is not None:
             each = stroke_units(self.scene, L)
             out.append(Variable("stroke_margin", ("step", "stroke"), self.stroke_margin,

@@ -438,3 +438,68 @@ def test_the_raise_lower_demo_fit_recovers_mass_and_seal_friction(tmp_path):
     assert result.names == ["masses.body.mass", "friction.seal.coulomb", "friction.seal.viscous"]
     assert np.all(np.abs(result.fitted - truth) < 3 * result.standard_error)
     assert result.stage1_solves == 1
+
+
+SEAL_TIMED = """
+[scene]
+name = "seal_timed"
+units = { length = "m", mass = "kg", time = "s", force = "N" }
+[points]
+H = { x = 0.0, y = 0.0, fixed = true }
+F = { x = 5.2, y = 0.0 }
+P = { x = 4.9, y = 0.4 }
+C = { x = 4.6, y = -0.9, fixed = true }
+G = { x = 2.6, y = 0.85 }
+[[links]]
+name = "body"
+points = ["H", "F", "P", "G"]
+[time]
+from = 0.0
+to = 20.0
+steps = 401
+[[drivers]]
+name = "cyl"
+distance = ["C", "P"]
+from = 1.4
+to = 2.4
+law = "harmonic"
+[analysis]
+effects = ["gravity", "friction"]
+[gravity]
+g = [0.0, -9.81]
+[[masses]]
+link = "body"
+mass = 17500.0
+center = "G"
+[[friction]]
+name = "seal"
+driver = "cyl"
+coulomb = 800.0
+"""
+
+
+def test_the_accuracy_ladder_of_friction_velocity_scale_against_the_sign_law():
+    """Seal friction alone: the regularised input force differs from the exact sign law's by
+    coulomb (1 - tanh(|v| / scale)) at each step (v from the harmonic law, by hand); the
+    ladder's away-from-rest and near-rest errors are those maxima over the largest force."""
+    from linkpipe.accuracy import measure
+    from linkpipe.accuracy.references import NEAR_REST
+
+    scene = parse_scene(SEAL_TIMED, "seal_timed.toml")
+    ladder = measure(scene, quick=False, repeats=1, knobs=("friction_velocity_scale",))
+    rows = [r for r in ladder.rows if r.knob == "friction_velocity_scale"]
+    assert [r.value for r in rows] == ["1e-01", "1e-02", "1e-03", "1e-04", "1e-06", "1e-08"]
+    t = np.linspace(0.0, 20.0, 401)
+    v = 0.5 * np.pi / 20.0 * np.sin(np.pi * t / 20.0)  # harmonic: (1 - cos(pi t / T)) / 2
+    exact = linkpipe.solve(scene).forces["input_force"][1][:, 0]
+    top = np.abs(exact).max()
+    size = linkpipe.solve(scene).model.size
+    rest = v <= 1e-12 * v.max()
+    near = (v < NEAR_REST * v.max()) & ~rest
+    away = ~near & ~rest
+    for r in rows:
+        scale = float(r.value) * size
+        gap = 800.0 * (1.0 - np.tanh(v / scale)) / top
+        assert r.relative_error_away == pytest.approx(gap[away].max(), rel=1e-6, abs=1e-13)
+        assert r.relative_error_near == pytest.approx(gap[near].max(), rel=1e-6, abs=1e-13)
+        assert np.isfinite(r.seconds) and r.stage == "forces"

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..model import Model
 from ..model import equations as eq
+from ..output_units import common_unit, friction_units
 from .applied import Applied, couple_as_body, merge_bodies
 from .lagrange import body_rows, joints, motor_terms
 
@@ -315,9 +316,7 @@ def variables(ctx, layout: Layout, seal_signed, s_dot, rates: Rates, torque, for
         magnitude[:, e] += np.abs(force[:, c])
         power[:, e] -= force[:, c] * rates.slides[:, c]
     F, L, T = units["force"], units["length"], units["time"]
-    unit = [f"{F}*{L}" if fr.kind == "pins" or (fr.kind == "driver" and scene.drivers[
-        [d.name for d in scene.drivers].index(fr.driver)].is_angle) else F for fr in scene.friction]
-    common = unit[0] if len(set(unit)) == 1 else "mixed"
+    common = common_unit(friction_units(scene, units))
     return ({"friction_force": (("step", "friction"), magnitude, common),
              "friction_power": (("step", "friction"), power, f"{F}*{L}/{T}")},
             {"friction": [fr.name for fr in scene.friction]})
