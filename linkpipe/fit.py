@@ -37,7 +37,7 @@ from .output_units import measured_units
 from .scene import Scene
 from .scene.keys import TABLES, _suggest
 
-FORCE_TABLES = ("springs", "torsion_springs", "masses", "loads", "gravity")
+FORCE_TABLES = ("springs", "torsion_springs", "masses", "loads", "gravity", "friction")
 #: a singular value of the weighted Jacobian below this part of the largest: not identifiable
 IDENTIFIABLE_RCOND = 1e-8
 #: a trial step that failed counts as this many sigma

@@ -95,6 +95,15 @@ def entry_units(var) -> list[str]:
     return per.split(",") if per else [var.units] * var.data.shape[1]
 
 
+def friction_units(scene: Scene, units: dict) -> list[str]:
+    """Each ``[[friction]]`` entry's ``friction_force`` unit: a torque for pins and for an angle
+    driver's seal, else a force."""
+    torque = f"{units['force']}*{units['length']}"
+    angles = {d.name for d in scene.drivers if d.kind == "angle"}
+    return [torque if fr.kind == "pins" or fr.driver in angles else units["force"]
+            for fr in scene.friction]
+
+
 def units_of(scene: Scene) -> dict[str, str]:
     """Unit strings of a scene (free text), with neutral defaults: length, time, force, mass."""
     u = dict(scene.units)

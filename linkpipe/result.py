@@ -15,7 +15,10 @@ from .scene import Scene
 from .status import (FLAG_MEANINGS, NON_FINITE, OK, code_counts, counts, finite_rows,
                      named_counts, not_finite_at)
 from .status import message as status_message
-from .output_units import common_unit, driver_units_of, input_force_units, units_of
+from .output_units import (common_unit, driver_units_of, friction_units, input_force_units,
+                           units_of)
+from .stroke import names as stroke_names
+from .stroke import units as stroke_units
 
 
 
@@ -245,6 +248,9 @@ class Result:
     sweep_totals: Totals | None = None
     #: (stride, why) where the rows were taken at a uniform stride of the sweep's steps
     sampled: tuple | None = None
+    #: (S, n_strokes) each actuator's and gas spring's distance to its stroke's nearer end
+    #: (negative outside: linkpipe.stroke), None where the scene gives no stroke
+    stroke_margin: np.ndarray | None = None
 
     @property
     def totals(self) -> Totals:
@@ -255,7 +261,7 @@ class Result:
     PER_STEP = ("driver_value", "time", "position", "link_angle", "status", "residual",
                 "iterations", "condition", "velocity", "acceleration", "driver_velocity",
                 "driver_acceleration", "link_angular_velocity", "link_angular_acceleration",
-                "velocity_residual", "acceleration_residual")
+                "velocity_residual", "acceleration_residual", "stroke_margin")
 
     def strided(self, rows: np.ndarray) -> "Result":
         """The result at the steps ``rows`` only (the recording's view of a long sweep), each
@@ -341,6 +347,9 @@ class Result:
             coords.append(Variable("spring", ("spring",), np.array(self.spring_names, dtype=object), ""))
         for name, values in self.force_coords.items():
             coords.append(Variable(name, (name,), np.array(values, dtype=object), ""))
+        if self.stroke_margin is not None:
+            coords.append(Variable("stroke", ("stroke",), np.array(stroke_names(self.scene),
+                                                                   dtype=object), ""))
         if self.measurements:
             coords.append(Variable("measurement", ("measurement",),
                                    np.array(self.measurements["names"], dtype=object), ""))
@@ -378,9 +387,17 @@ class Result:
                                 self.link_angular_acceleration, f"rad/{T}^2"))
         if self.forces:
             per_driver = {"driver_units": ",".join(input_force_units(self.scene.drivers, u))}
+            per_friction = {"friction_units": ",".join(friction_units(self.scene, u))}
             for name, (dims, data, units) in self.forces.items():
                 out.append(Variable(name, dims, data, units,
-                                    dict(per_driver) if dims[1:2] == ("driver",) else {}))
+                                    dict(per_driver) if dims[1:2] == ("driver",) else
+                                    dict(per_friction) if name == "friction_force" else {}))
+        if self.stroke_margin is not None:
+            each = stroke_units(self.scene, L)
+            out.append(Variable("stroke_margin", ("step", "stroke"), self.stroke_margin,
+                                common_unit(each), {"stroke_units": ",".join(each),
+                                                    "long_name": "distance to the stroke's nearer "
+                                                                 "end, negative outside"}))
         if self.measurements:
             m = self.measurements
             units = common_unit(m["units"])

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kinematics as kin
+from . import stroke
 from .forces import LAGRANGE_VARIABLES, compute_forces
 from .forces.constants import ForceConstants
 from .output_units import units_of
@@ -44,8 +45,8 @@ class Stages:
         measured = {MEASURED_NEEDS.get(m.of[0]) for m in scene.measurements}  # their rates
         acc = ("inertia" in eff or "acceleration" in out.kinematics or vectors
                or "acceleration" in measured)
-        vel = (acc or "damping" in eff or "velocity" in out.kinematics or vectors
-               or "velocity" in measured)
+        vel = (acc or "damping" in eff or "friction" in eff or "velocity" in out.kinematics
+               or vectors or "velocity" in measured)
         return cls(velocity=vel, acceleration=acc, forces=bool(eff))
 
     @property
@@ -118,14 +119,20 @@ def finish(scene: Scene, model, motion: Kinematics, constants: ForceConstants | 
                                 lagrange=lagrange, cache=cache)
         seconds["forces"] = seconds.get("forces", 0.0) + _time.perf_counter() - t0
     size = None if constants is None else constants.size
-    status = assign([motion.der["status"]] + ([forces.status] if forces else []),
+    margin = stroke.margins(scene, motion.drive.value, motion.sweep.position,
+                            None if constants is None else constants.gas_extended_length)
+    strokes = stroke.status(model, margin, size)
+    status = assign([motion.der["status"]] + ([forces.status] if forces else [])
+                    + ([strokes] if strokes is not None else []),
                     motion.sweep.residual, model.tolerance(size=size),
                     forces.defined_arrays() if forces else [], finite=motion.finite)
-    return _result(scene, model, motion, forces, status, seconds, time_axis, step_numbers)
+    return _result(scene, model, motion, forces, status, seconds, time_axis, step_numbers,
+                   margin)
 
 
 def _result(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
-            time_axis: tuple | None, step_numbers: np.ndarray | None) -> Result:
+            time_axis: tuple | None, step_numbers: np.ndarray | None,
+            stroke_margin: np.ndarray | None = None) -> Result:
     """The Result of a solved stage 1 ``k``, its ``forces`` (or None) and final ``status``
     (S,): step-first arrays of any number of rows (a study's (variant, step) rows too)."""
     stages = Stages.of(scene)
@@ -147,4 +154,4 @@ def _result(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
         seconds=seconds, message=status_message(code_counts(status)),
         solver_method_used=k.sweep.method, solver_note=k.sweep.note,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
-        kinematics=k, step_numbers=step_numbers)
+        kinematics=k, step_numbers=step_numbers, stroke_margin=stroke_margin)

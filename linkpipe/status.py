@@ -23,24 +23,27 @@ class Status(IntEnum):
     NO_INPUT = 4  # a logged driver value is missing at this step (format v2): NaN as no_assembly
     NO_LEVERAGE = 5  # the input point does not move with its driver: NaN input force
     NON_FINITE = 6  # solved, but a stored quantity overflowed (inf or NaN): not to be trusted
+    OUT_OF_STROKE = 7  # solved, but an actuator or gas spring is outside its stroke (v3): values kept
 
 
-OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED, NO_INPUT, NO_LEVERAGE, NON_FINITE = (int(s) for s in Status)
+(OK, NO_ASSEMBLY, SINGULAR, NOT_CONVERGED, NO_INPUT, NO_LEVERAGE, NON_FINITE,
+ OUT_OF_STROKE) = (int(s) for s in Status)
 
 #: the HDF5 ``flag_meanings``, in code order
 FLAG_MEANINGS = tuple(s.name.lower() for s in Status)
 
 #: severity of each code (index = code): a step keeps the most severe verdict any stage gave
-_SEVERITY = np.array([0, 6, 3, 4, 5, 1, 2], dtype=np.int8)
+_SEVERITY = np.array([0, 7, 4, 5, 6, 1, 2, 3], dtype=np.int8)
 _BY_SEVERITY = np.argsort(_SEVERITY).astype(np.int8)
 
 
 def worst(*statuses: np.ndarray) -> np.ndarray:
     """Return, step by step, the most severe of the stages' statuses ``(S,)`` int8.
 
-    Severity, least to most: ok < no_leverage < non_finite < singular < not_converged <
-    no_input < no_assembly (a step that did not assemble cannot be singular; a singular step has
-    no leverage to test).
+    Severity, least to most: ok < no_leverage < non_finite < out_of_stroke < singular <
+    not_converged < no_input < no_assembly (a step that did not assemble cannot be singular; a
+    singular step has no leverage to test; a step the machine cannot reach as built is that
+    before any lack of leverage or overflow there).
     """
     rank = np.maximum.reduce([_SEVERITY[np.asarray(s, dtype=np.intp)] for s in statuses])
     return _BY_SEVERITY[rank]

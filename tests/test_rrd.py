@@ -16,6 +16,7 @@ from linkpipe import solve as solve_scene
 from linkpipe.stores import hdf5, rrd
 
 RERUN = pathlib.Path(sys.executable).with_name("rerun")
+ROOT = pathlib.Path(__file__).resolve().parent.parent
 ARCHETYPE = {"links": "LineStrips2D", "guides": "LineStrips2D", "trace": "LineStrips2D",
              "springs": "LineStrips2D", "points": "Points2D", "ground": "Points2D",
              "velocity": "Arrows2D", "acceleration": "Arrows2D", "forces": "Arrows2D",
@@ -121,6 +122,15 @@ def _expected_entities(result) -> set[str]:
             out |= {f"/mechanism/forces/weights/{m.link}" for m in sc.masses}
         out |= {f"/mechanism/forces/springs/{s}" for s in result.spring_names if sc.springs}
         out |= {f"/mechanism/forces/reactions/{p}" for p in result.force_coords.get("fixed_point", [])}
+    if "friction_force" in forces:  # version 3: each entry plotted; seals and sliders drawn
+        out |= {f"/plots/friction_force/{f.name}" for f in sc.friction}
+        out |= {f"/mechanism/forces/friction/{f.name}" for f in sc.friction
+                if f.kind == "slider" or (f.kind == "driver" and next(
+                    d for d in sc.drivers if d.name == f.driver).kind == "distance")}
+    if result.stroke_margin is not None:  # version 3: margins and the out-of-stroke markers
+        from linkpipe.stroke import names
+
+        out |= {f"/plots/stroke_margin/{n}" for n in names(sc)} | {"/plots/stroke_margin/out_of_stroke"}
     return out
 
 
@@ -299,6 +309,33 @@ from = 0.0
 to = 360.0
 steps = 37
 """
+
+
+def test_friction_and_stroke_in_the_recording(tmp_path):
+    """Version 3: friction plotted per entry (a torque for pins, a force for a seal) with the
+    stored values, seal friction drawn on the cylinder's pins in its own colour, the stroke
+    margin plotted and the steps outside the stroke marked at their margin."""
+    from linkpipe.scene.parse import parse_scene
+
+    text = (ROOT / "configs/logged/dump_truck_friction.toml").read_text()
+    text = text.replace("stroke = [1.30, 5.25]", "stroke = [1.30, 5.0]")
+    result = solve_scene(parse_scene(text, str(ROOT / "configs/logged/dump_truck_friction.toml")))
+    rec = Recording(_write(result, tmp_path))
+    assert rec.entities == _expected_entities(result)
+    seal = rec.steps("/plots/friction_force/seal")
+    assert np.allclose(np.concatenate(_column(seal, "/plots/friction_force/seal",
+                                              "Scalars:scalars").to_numpy()),
+                       result.forces["friction_force"][1][:, 0])
+    colours = rec.static("/mechanism/forces/friction/seal", "Arrows2D:colors")
+    inputs = rec.static("/mechanism/forces/input/tipping_cylinder", "Arrows2D:colors")
+    assert list(colours) != list(inputs)
+    marks = rec.steps("/plots/stroke_margin/out_of_stroke")
+    values = np.array([v[0] if v is not None and len(v) else np.nan for v in _column(
+        marks, "/plots/stroke_margin/out_of_stroke", "Scalars:scalars")], float)
+    outside = result.status == 7
+    assert outside.any() and (~outside).any()
+    assert np.allclose(values[outside], result.stroke_margin[outside, 0])
+    assert np.isnan(values[~outside]).all()
 
 
 def test_a_moving_guide_is_logged_per_step(tmp_path):

@@ -16,6 +16,7 @@ FULL = dict(
     max_iter=(1, 2, 3, 5, 25),
     fd_steps=(0.25, 0.5, 1, 2, 4),
     predictor_steps=(1 / 16, 0.25, 1, 4),
+    friction_velocity_scale=(1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8),
 )
 
 
@@ -24,8 +25,13 @@ QUICK = dict(
     max_iter=(2, 25),
     fd_steps=(1, 2),
     predictor_steps=(0.25, 1),
+    friction_velocity_scale=(1e-2, 1e-6),
 )
 
+
+#: friction's regularisation scale that is the exact sign law in float64 (tanh(v / 1e-300) is
+#: +-1 for every |v| above 1e-284 and 0 at rest): the reference friction is measured against
+EXACT_SIGN_SCALE = 1e-300
 
 #: the reference's settings (extended checks add one Newton refinement step)
 REFERENCE_SOLVER = dict(tol=1e-15, max_iter=50, jacobian="analytic", derivatives="linear",
@@ -75,7 +81,8 @@ def _all_orders(scene: Scene) -> Scene:
                                                 kinematics=("velocity", "acceleration")))
 
 
-KNOBS = ("tol", "max_iter", "jacobian", "linear_algebra", "derivatives", "predictor", "method", "log")
+KNOBS = ("tol", "max_iter", "jacobian", "linear_algebra", "derivatives", "predictor", "method", "log",
+         "friction_velocity_scale")
 
 #: the log knobs (a [time] scene driven by motion laws: each driver replaced by a log of its own
 #: law): keep every k-th sample; smoothing lam in units of h^3 (h: the mean sample spacing)
@@ -127,6 +134,13 @@ def settings(scene: Scene, quick: bool = False, knobs=KNOBS) -> list[tuple[str, 
             out.append(("method", method, _with_solver(base, method=method), "kinematics"))
     if "log" in knobs:
         out += log_settings(base, quick)
+    if "friction_velocity_scale" in knobs and "friction" in scene.effects and scene.friction:
+        from ..model import build_model
+
+        size = build_model(scene).size  # the scale is a speed: these fractions of size per s
+        for f in ladder["friction_velocity_scale"]:
+            out.append(("friction_velocity_scale", f"{f:.0e}",
+                        _with_solver(base, friction_velocity_scale=f * size), "forces"))
     return out
 
 

@@ -13,7 +13,7 @@ from .. import kinematics as kin
 from ..pipeline import solve
 from ..status import OK
 from ..scene import Scene
-from .knobs import REFERENCE_SOLVER, _all_orders, _with_solver, _with_steps
+from .knobs import EXACT_SIGN_SCALE, REFERENCE_SOLVER, _all_orders, _with_solver, _with_steps
 from .rows import BRANCH_FRACTION, QUANTITIES, Row
 
 
@@ -118,7 +118,8 @@ class References:
     def _build(self, scene: Scene, ext) -> Reference:
         values = {"position": ext.position, "velocity": ext.velocity,
                   "acceleration": ext.acceleration,
-                  "input_force": _input_force(ext) if self.has_forces else None}
+                  "input_force": _input_force(ext) if self.has_forces else None,
+                  "friction_speed": _friction_speed(ext)}
         if self.form is not None:
             X, V, A = self._closed(scene)
             values.update(position=X, velocity=V, acceleration=A)
@@ -126,6 +127,18 @@ class References:
         for name in ("position", "velocity", "acceleration"):
             values[name] = np.where(ok[:, None, None], values[name], np.nan)
         return Reference(values, self.size)
+
+    def exact_sign(self, steps: int) -> Reference:
+        """The reference at ``steps`` steps with friction's exact sign law (the regularisation
+        scale at :data:`.knobs.EXACT_SIGN_SCALE`): what ``friction_velocity_scale`` rows are
+        measured against."""
+        key = ("exact_sign", steps)
+        if key not in self._cache:
+            variant = _with_solver(_with_steps(self.scene, steps),
+                                   friction_velocity_scale=EXACT_SIGN_SCALE)
+            ext, _ = _extended(variant, steps, self.base_steps)
+            self._cache[key] = self._build(variant, ext)
+        return self._cache[key]
 
     def at(self, steps: int) -> Reference:
         if steps not in self._cache:
@@ -209,3 +222,50 @@ def _measure_errors(row: Row, result, ref: Reference, scales: dict[str, float]) 
         row.error[q] = err
         row.relative_error[q] = err / scales[q] if np.isfinite(scales[q]) else math.nan
     row.steps_failed = int(failed.sum())
+
+
+def _friction_speed(result):
+    """(S, n_friction) each friction's relative speed |power| / force (0 where it has no
+    force: at rest), or None without friction."""
+    forces = result.forces or {}
+    if "friction_force" not in forces:
+        return None
+    force, power = forces["friction_force"][1], forces["friction_power"][1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(force > 0, np.abs(power) / force, 0.0)
+
+
+#: a step is near rest where some friction's relative speed is below this part of its largest
+#: over the sweep (the reference's: the exact sign law's), else away from rest; below
+#: AT_REST (rounding) it is at rest, where the exact law has no value: not compared
+NEAR_REST, AT_REST = 1e-2, 1e-12
+
+
+def friction_errors(row: Row, result, ref: Reference, scales: dict[str, float]) -> None:
+    """A ``friction_velocity_scale`` row's input-force error against the exact sign law split
+    in two: ``relative_error_away`` at steps away from rest, ``relative_error_near`` at steps
+    near it (:data:`NEAR_REST`; each relative to the largest reference input force), also said
+    in its note; the row's own input force error then leaves out the steps at rest, where the
+    exact law has no value (static friction may be anything up to its limit there)."""
+    speed = ref.values.get("friction_speed")
+    a, b = _input_force(result), ref.values.get("input_force")
+    if speed is None or a is None or b is None:
+        return
+    top = np.nanmax(speed, axis=0, initial=0.0)
+    rest = (speed <= AT_REST * top).any(axis=1)
+    near = (speed < NEAR_REST * top).any(axis=1) & ~rest
+    scale = scales["input_force_per_driver"]
+    for name, steps in (("away", ~near & ~rest), ("near", near)):
+        both = steps & np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+        if both.any():
+            setattr(row, f"relative_error_{name}", float(np.nanmax(
+                np.abs(a - b)[both].max(axis=0) / scale)))
+    compared = ~rest & np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    if compared.any():  # the row's input force error: over the steps the exact law defines
+        per_driver = np.abs(a - b)[compared].max(axis=0)
+        row.error["input_force"] = float(per_driver.max())
+        row.relative_error["input_force"] = float(np.nanmax(per_driver / scale))
+    row.note = "; ".join(x for x in (row.note, f"vs exact sign: {row.relative_error_away:.1e} "
+                                     f"away from rest, {row.relative_error_near:.1e} near it "
+                                     f"({int(near.sum())} steps; {int(rest.sum())} at rest "
+                                     "not compared)") if x)

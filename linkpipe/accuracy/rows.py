@@ -53,6 +53,10 @@ class Row:
     #: finite-difference rows: log(e_prev / e) / log(h_prev / h) against the next coarser
     #: finite-difference row (h: the step in driver value), per quantity; NaN elsewhere
     observed_order: dict = field(default_factory=lambda: {q: math.nan for q in QUANTITIES})
+    #: friction_velocity_scale rows: the input force's relative error against the exact sign
+    #: law at steps away from rest and near it (:func:`.references.friction_errors`)
+    relative_error_away: float = math.nan
+    relative_error_near: float = math.nan
     path: str = ""  # the path the solve took: "dyads" (closed form) or "newton"
     linear_algebra: str = ""  # newton: its one-step solves' "dense ..." or "sparse LU ..." and why
     base: bool = False  # the scene's own settings
@@ -226,6 +230,12 @@ class Ladder:
                               float).reshape(len(rows), len(self.quantities)), "1",
                      {"long_name": "finite-difference rows: order of convergence against the "
                                    "next coarser finite-difference row"}),
+            col("relative_error_away_from_rest", [r.relative_error_away for r in rows], "1",
+                long_name="friction_velocity_scale rows: input force error against the exact "
+                          "sign law at steps away from rest, relative"),
+            col("relative_error_near_rest", [r.relative_error_near for r in rows], "1",
+                long_name="the same at steps near rest (a friction's speed below 1 % of its "
+                          "largest)"),
             col("iterations_mean", [r.iterations_mean for r in rows], "1",
                 long_name="Newton iterations per step, mean"),
             col("iterations_max", np.array([r.iterations_max for r in rows], dtype=np.int32), "1"),

@@ -16,7 +16,7 @@ from ..pipeline import solve
 from ..errors import LinkpipeError
 from ..scene import Scene, load_scene
 from .knobs import KNOBS, settings
-from .references import References, _measure_errors, _scales
+from .references import References, _measure_errors, _scales, friction_errors
 from .rows import Ladder, Row, _units, driver_force_units
 
 
@@ -159,11 +159,17 @@ def _measure(scene: Scene, quick: bool, repeats: int, tell, knobs) -> Ladder:
             med, row.solver["derivatives"] == "finite_difference")
         row.seconds = {"positions": row.seconds_positions,
                        "derivatives": row.seconds_derivatives,
-                       "kinematics": row.seconds_positions + row.seconds_derivatives}[row.stage]
+                       "kinematics": row.seconds_positions + row.seconds_derivatives,
+                       "forces": med.get("forces", math.nan)}[row.stage]
         it = np.asarray(result.iterations)
         row.iterations_mean = float(it.mean()) if it.size else 0.0
         row.iterations_max = int(it.max()) if it.size else 0
-        _measure_errors(row, result, refs.at(variant.n_steps), scales)
+        if row.knob == "friction_velocity_scale":  # against the exact sign law
+            exact = refs.exact_sign(variant.n_steps)
+            _measure_errors(row, result, exact, scales)
+            friction_errors(row, result, exact, scales)
+        else:
+            _measure_errors(row, result, refs.at(variant.n_steps), scales)
         if result.n_ok < result.n_steps:
             row.note = "; ".join(x for x in (row.note, result.message) if x)
     ladder = Ladder(scene=scene, rows=rows, reference=refs.kind, quantities=quantities,

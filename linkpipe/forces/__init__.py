@@ -20,10 +20,13 @@ import numpy as np
 
 from ..model import Model
 from ..result import Forces, Motion, combine_flags
-from ..status import NO_ASSEMBLY, NO_INPUT, NOT_CONVERGED, OK, SINGULAR
-from .applied import couple_as_body, merge_bodies, with_couples_as_pairs
+from dataclasses import dataclass
+
+from ..status import NO_ASSEMBLY, NO_INPUT, NOT_CONVERGED, OK, SINGULAR, worst
+from . import friction
+from .applied import Applied, couple_as_body, merge_bodies, with_couples_as_pairs
 from .constants import ForceConstants
-from .effects import EFFECTS, Context, applies
+from .effects import EFFECTS, Context, Effect, applies
 from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
 from .virtual_work import Influence, actuator_forces, along_input_directions
 
@@ -109,7 +112,7 @@ def _effect_terms(ctx: Context, influence: Influence, cache: dict | None, chunk_
     :data:`CACHED_VALUES` calls on the same chunk is taken from it, its Effect left out (None)."""
     scene, out = ctx.model.scene, {}
     for name, effect_of in EFFECTS.items():
-        if name not in ctx.effects or not applies(name, ctx):
+        if name not in ctx.effects or not applies(name, ctx) or effect_of is None:
             continue
         inputs = repr([getattr(scene, a) for a in EFFECT_INPUTS[name]])
         kept = cache.setdefault((chunk_key, name), {}) if cache is not None else None
@@ -165,6 +168,10 @@ def _forces_of(model: Model, motion: Motion, units: dict, constants=None, lagran
 def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
                      lagrange: bool = True, cache: dict | None = None, chunk_key=0) -> Forces:
     """The force stage's computation on one chunk of steps, before failed steps are masked."""
+    layout = (friction.Layout.of(model) if "friction" in model.scene.effects
+              and model.scene.friction else None)
+    wanted = lagrange  # whether the Lagrange side's own variables are stored
+    lagrange = lagrange or (layout is not None and layout.coupled)  # pins', sliders' friction
     ctx = Context.of(model, motion, units, constants, lagrange)
     n_steps = ctx.n_steps
     Xz = np.where(np.isfinite(motion.position), motion.position, 0.0)
@@ -176,38 +183,70 @@ def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
         if cache is not None:
             cache[(chunk_key, "influence")] = influence
     terms = _effect_terms(ctx, influence, None if lagrange else cache, chunk_key)
+    seal = None
+    if layout is not None:  # the seals now, pins and sliders with the forces they change
+        seal = friction.seal_loads(ctx, layout, influence.phi_s)
+        terms["friction"] = (influence.generalized(seal[1]), {}, {},
+                             Effect(seal[1], bodies=seal[2]))
+    if lagrange:
+        return _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout, seal,
+                              None if cache is None else (cache, chunk_key), wanted)
+    if layout is not None:
+        _friction_term(ctx, influence, terms, layout, seal, None, None, Xz)
+    variables, coords = _effect_variables(terms, motion, units)
+    input_force = _virtual_work(model, terms, n_steps)
+    status, unit = along_input_directions(model, influence, [input_force], motion.status,
+                                          units, Xz, ctx.constants.size)
+    variables["input_force"] = (("step", "driver"), input_force, unit)
+    return Forces(variables=variables, coords=coords, status=status)
+
+
+def _virtual_work(model: Model, terms: dict, n_steps: int) -> np.ndarray:
+    """F_j = -sum(Q . dq/ds_j) over every effect: the drivers' generalized forces (S, nd)."""
+    return (-sum(t[0] for t in terms.values()) if terms
+            else np.zeros((n_steps, model.n_drivers)))
+
+
+def _effect_variables(terms: dict, motion: Motion, units: dict) -> tuple[dict, dict]:
+    """The effects' own variables and labels, and ``power``: each effect's power per step."""
     variables: dict = {}
     coords: dict = {}
     for _, names, labels, _ in terms.values():
         variables.update(names)
         coords.update(labels)
-
-    # virtual work: F_j = -sum(Q . dq/ds_j), and each effect's power
-    input_force = (-sum(t[0] for t in terms.values()) if terms
-                   else np.zeros((n_steps, model.n_drivers)))
+    n_steps = motion.s.shape[0]
     variables["power"] = (("step", "effect"), np.stack(
         [(t[0] * motion.s_dot).sum(axis=1) for t in terms.values()], axis=1)
         if terms else np.zeros((n_steps, 0)), f"{units['force']}*{units['length']}/{units['time']}")
     coords["effect"] = list(terms)
-
-    if not lagrange:
-        status, unit = along_input_directions(model, influence, [input_force], motion.status,
-                                              units, Xz, ctx.constants.size)
-        variables["input_force"] = (("step", "driver"), input_force, unit)
-        return Forces(variables=variables, coords=coords, status=status)
-    return _with_lagrange(model, ctx, motion, units, influence, terms, input_force, variables,
-                          coords, Xz)
+    return variables, coords
 
 
-def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, variables, coords,
-                   Xz) -> Forces:
-    """The Lagrange side: ``J^T lambda = Q - M qdd`` (an independent solve), the input force
-    from it, internal forces and every pin's reaction."""
-    n_steps = ctx.n_steps
-    # each body's M_k Xdd - Q_k, and Q - M qdd (inertia enters through the mass matrix)
-    bodies, applied = {}, {name: t[3].applied for name, t in terms.items()}
+def _friction_term(ctx, influence, terms, layout, seal, solved, rates, Xz) -> None:
+    """Put the whole friction effect in ``terms``: the seals' loads plus, where ``solved``
+    (pair torques, slider forces, link couples), the pins' and sliders'."""
+    seal_signed, applied, bodies = seal
+    n_pairs, n_slides = len(layout.pairs), len(layout.slides)
+    torque = np.zeros((ctx.n_steps, n_pairs)) if solved is None else solved[0]
+    force = np.zeros((ctx.n_steps, n_slides)) if solved is None else solved[1]
+    if solved is not None:
+        more = friction.applied_of(ctx, layout, solved[2], force, Xz)
+        applied = Applied(applied.point_forces + more.point_forces, applied.couples + more.couples)
+    if rates is None:
+        rates = friction.Rates(np.zeros((ctx.n_steps, n_pairs)), np.zeros((ctx.n_steps, n_slides)))
+    names, labels = friction.variables(ctx, layout, seal_signed, ctx.motion.s_dot, rates,
+                                       torque, force)
+    terms["friction"] = (influence.generalized(applied), names, labels,
+                         Effect(applied, bodies=bodies))
+
+
+def _lagrange_sides(model, ctx, terms, Xz):
+    """Each body's ``M_k Xdd - Q_k`` ({link: {point: (S, 2)}}, link couples of ``loads`` and
+    the seals' body loads included) and ``Q - M qdd`` at every point (S, P, 2), couples as
+    force pairs (inertia enters through the mass matrix)."""
+    bodies = {}
     lagrange_points, lagrange_couples = ctx.zeros_points(), ctx.zeros_links()
-    for _, _, _, effect in terms.values():
+    for name, (_, _, _, effect) in terms.items():
         if effect.lagrange is None:
             lagrange_points += effect.applied.point_forces
             lagrange_couples += effect.applied.couples
@@ -215,17 +254,58 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
             lagrange_points = lagrange_points + effect.lagrange
         for li, body in effect.bodies.items():
             merge_bodies(bodies.setdefault(li, {}), body)
+        if name == "loads":  # a couple on a link acts on that body: part of its own -Q_k
+            for li in np.flatnonzero(np.any(effect.applied.couples != 0, axis=0)):
+                as_pairs = couple_as_body(model, effect.applied.couples[:, li], int(li), Xz)
+                merge_bodies(bodies.setdefault(int(li), {}), as_pairs, -1.0)
+    return bodies, with_couples_as_pairs(model, lagrange_points, lagrange_couples, Xz)
 
+
+@dataclass
+class _Case:
+    """One load case on the Lagrange side (linear in its loads: friction's unknowns are added
+    case by case). ``input_force`` by virtual work and ``input_force_lagrange`` (S, nd) along
+    the inputs' directions; ``lam`` the multipliers the reactions come from (with the pushes
+    of ``input`` as loads), ``pins`` (S, n_joints, 2), ``ground`` (S, n_fixed, 2)."""
+
+    input_force: np.ndarray
+    input_force_lagrange: np.ndarray
+    lam: np.ndarray
+    undetermined: np.ndarray
+    status: np.ndarray
+    unit: str
+    pins: np.ndarray
+    ground: np.ndarray
+    ok: np.ndarray
+    q_minus_m_qdd: np.ndarray
+
+    def plus(self, u: np.ndarray, cases: list) -> "_Case":
+        """This case plus ``u[:, k]`` (S,) times each of ``cases``."""
+        out = {}
+        for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
+            total = getattr(self, name).copy()
+            for k, case in enumerate(cases):
+                part = getattr(case, name)
+                total += u[:, k].reshape((-1,) + (1,) * (part.ndim - 1)) * part
+            out[name] = total
+        return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
+                     ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
+
+
+def _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies, generalized, Xz,
+          factors: dict | None = None, only=None) -> _Case:
+    """Solve one load case: ``q_minus_m_qdd`` (S, P, 2), ``bodies`` {link: {point: (S, 2)}}
+    (changed: the pushes' body loads are added), ``generalized`` (S, nd) its virtual work;
+    ``factors``: the Jacobian's entries kept across cases (:func:`.lagrange.multipliers`)."""
+    n_steps = ctx.n_steps
     ok = motion.status == OK
-    q_minus_m_qdd = with_couples_as_pairs(model, lagrange_points, lagrange_couples, Xz)
-    generalized_q = q_minus_m_qdd[:, model.moving].reshape(n_steps, -1)
-    lam, undetermined = multipliers(model, Xz, motion.s, generalized_q, ok, ctx.constants.pivots,
-                                    ctx.constants.model_rows)
+    input_force = -generalized
+    lam, undetermined = multipliers(model, Xz, motion.s,
+                                    q_minus_m_qdd[:, model.moving].reshape(n_steps, -1), ok,
+                                    ctx.constants.pivots, ctx.constants.model_rows, factors)
     input_force_lagrange = lam[:, model.driver_rows] * influence.phi_s
     status, unit = along_input_directions(model, influence, [input_force, input_force_lagrange],
                                           motion.status, units, Xz, ctx.constants.size)
-    variables["input_force"] = (("step", "driver"), input_force, unit)
-    variables["input_force_lagrange"] = (("step", "driver"), input_force_lagrange, unit)
     actuators = actuator_forces(model, input_force, Xz)
     if actuators is not None:  # the reactions of the actuators `input` describes (a push at
         pushes, on_bodies = actuators  # its point), not of a torque at the driver's pivot
@@ -233,30 +313,96 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, input_force, var
         ok = status == OK  # where the push is known (not no_leverage)
         lam, undetermined = multipliers(model, Xz, motion.s,
                                         q_minus_m_qdd[:, model.moving].reshape(n_steps, -1), ok,
-                                        ctx.constants.pivots, ctx.constants.model_rows)
+                                        ctx.constants.pivots, ctx.constants.model_rows, factors)
         for li, body in on_bodies.items():  # part of the body's own Q_k
             merge_bodies(bodies.setdefault(li, {}), body, -1.0)
-    internal, internal_coords, undefined = internal_forces(model, lam, undetermined, units)
+    ground, pins = reactions(model, lam, q_minus_m_qdd, bodies, Xz, motion.s, ok,
+                             ctx.constants.model_rows, only)
+    return _Case(input_force, input_force_lagrange, lam, undetermined, status, unit, pins,
+                 ground, ok, q_minus_m_qdd)
+
+
+def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
+                   seal=None, kept=None, wanted: bool = True) -> Forces:
+    """The Lagrange side: ``J^T lambda = Q - M qdd`` (an independent solve), the input force
+    from it, internal forces and every pin's reaction; with pin or slider friction, the
+    friction that makes them consistent (:func:`linkpipe.forces.friction.solve_magnitudes`)."""
+    bodies, q_minus_m_qdd = _lagrange_sides(model, ctx, terms, Xz)
+    factors = only = None  # with friction's load cases: one Jacobian's entries for all of them
+    if layout is not None and layout.coupled:
+        factors = {} if kept is None else kept[0].setdefault((kept[1], "factors"), {})
+        if not wanted:  # the pin forces friction needs, no more
+            only = {(b, p) for _, p, i, j in layout.pairs for b in (i, j) if b >= 0}
+    base = _case(model, ctx, motion, units, influence, q_minus_m_qdd, bodies,
+                 sum(t[0] for t in terms.values()) if terms
+                 else np.zeros((ctx.n_steps, model.n_drivers)), Xz, factors, only)
+    extra_status = None
+    if layout is not None:
+        case, extra_status = _with_friction(model, ctx, motion, units, influence, terms, Xz,
+                                            layout, seal, base, kept, factors)
+    else:
+        case = base
+    variables, coords = _effect_variables(terms, motion, units)
+    input_force = _virtual_work(model, terms, ctx.n_steps)
+    status, unit = along_input_directions(model, influence, [input_force], motion.status,
+                                          units, Xz, ctx.constants.size)
+    if extra_status is not None:
+        status = worst(status, extra_status)
+    variables["input_force"] = (("step", "driver"), input_force, unit)
+    if not wanted:  # friction needed the multipliers; the caller wants none of what they give
+        if extra_status is not None:
+            failed_steps_as_nan(variables, extra_status)
+        return Forces(variables=variables, coords=coords, status=status)
+    variables["input_force_lagrange"] = (("step", "driver"), case.input_force_lagrange, unit)
+    internal, internal_coords, undefined = internal_forces(model, case.lam, case.undetermined, units)
     variables.update(internal)
     coords.update(internal_coords)
-    pins, pin_coords = _reactions(model, ctx, lam, q_minus_m_qdd, bodies, Xz, ok, undetermined,
-                                  applied.get("loads"))
+    pins, pin_coords = _reactions(model, ctx, case, Xz)
     variables.update(pins)
     coords.update(pin_coords)
+    if extra_status is not None:  # friction that did not converge: no force there is known
+        failed_steps_as_nan(variables, extra_status)
     return Forces(variables=variables, coords=coords, status=status, undefined=undefined)
 
 
-def _reactions(model: Model, ctx: Context, lam, q_minus_m_qdd, bodies, Xz, ok, undetermined,
-               loads) -> tuple[dict, dict]:
+def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal, base,
+                   kept=None, factors=None):
+    """Solve the pins' and sliders' friction with the forces they change: one load case per
+    unknown, the magnitudes iterated per step; returns (the total case, status (S,) with
+    not_converged where the iteration did not converge). ``kept``: (a fit's cache, chunk key):
+    the unit load cases depend on the kinematics alone and are solved once per stage 1."""
+    rates = friction.Rates.of(ctx, layout, Xz)
+    if not layout.coupled:
+        _friction_term(ctx, influence, terms, layout, seal, None, rates, Xz)
+        return base, None
+    pin_index = {pair: k for k, pair in enumerate(joints(model))}
+    key = None if kept is None else (kept[1], "friction_cases", repr(layout))
+    cases = kept[0].get(key) if kept is not None else None
+    if cases is None:
+        cases = []
+        for applied, bodies in friction.unit_loads(ctx, layout, Xz):
+            rhs = with_couples_as_pairs(model, applied.point_forces, applied.couples, Xz)
+            cases.append(_case(model, ctx, motion, units, influence, rhs, bodies,
+                               influence.generalized(applied), Xz, factors))
+        if kept is not None:
+            kept[0][key] = cases
+    stack = lambda f: np.stack([f(c) for c in cases])  # noqa: E731
+    torque, force, couples, converged = friction.solve_magnitudes(
+        ctx, layout, rates, friction.pair_forces(layout, pin_index, base.pins),
+        friction.normal_forces(ctx, layout, base.lam, Xz),
+        stack(lambda c: friction.pair_forces(layout, pin_index, c.pins)),
+        stack(lambda c: friction.normal_forces(ctx, layout, c.lam, Xz)), base.ok)
+    _friction_term(ctx, influence, terms, layout, seal, (torque, force, couples), rates, Xz)
+    u = np.concatenate([couples, -force], axis=1)
+    status = np.where(base.ok & ~converged, NOT_CONVERGED, OK).astype(np.int8)
+    return base.plus(u, cases), status
+
+
+def _reactions(model: Model, ctx: Context, case: "_Case", Xz) -> tuple[dict, dict]:
     """``joint_force`` (and ``ground_reaction`` where there are fixed points), with the
     uniqueness flags a redundant scene needs."""
     scene, force_unit = model.scene, ctx.units["force"]
-    if loads is not None:  # a couple on a link acts on that body: part of its own -Q_k
-        for li in np.flatnonzero(np.any(loads.couples != 0, axis=0)):
-            as_pairs = couple_as_body(model, loads.couples[:, li], int(li), Xz)
-            merge_bodies(bodies.setdefault(int(li), {}), as_pairs, -1.0)
-    ground, pin_forces = reactions(model, lam, q_minus_m_qdd, bodies, Xz, ctx.motion.s, ok,
-                                   ctx.constants.model_rows)
+    ground, pin_forces, undetermined, ok = case.ground, case.pins, case.undetermined, case.ok
     pairs = joints(model)
     out = {"joint_force": (("step", "joint", "xy"), pin_forces, force_unit)}
     coords = {"joint": [f"{model.point_names[p]}@{scene.links[li].name}" for li, p in pairs]}

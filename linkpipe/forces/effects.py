@@ -178,9 +178,13 @@ def applies(name: str, ctx: Context) -> bool:
         return bool(scene.springs)
     if name in ("gravity", "inertia"):
         return bool(scene.masses)
+    if name == "friction":
+        return bool(scene.friction)
     return bool(scene.loads)
 
 
 #: the effects, in the order they are summed and reported (HDF5 ``effect`` dimension)
 EFFECTS = {"springs": springs, "damping": damping, "gravity": gravity, "loads": loads,
-           "inertia": inertia}
+           "inertia": inertia, "friction": None}
+# "friction" (linkpipe.forces.friction) depends on the forces the other effects make (a pin's
+# friction on its pin force): it is solved after them, with them (forces.compute_forces)

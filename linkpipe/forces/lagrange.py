@@ -13,13 +13,16 @@ from ..kinematics.linalg import CHUNK
 
 
 
-def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, rows=None):
+def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, rows=None,
+                factors: dict | None = None):
     """Return (λ (S, n_rows) NaN where not ok, undetermined (n_rows,) bool).
 
     Square Jacobians go through the sparse engine's transposed block solve; redundant scenes
     (more rows than unknowns) take the minimum-norm solution, and the rows a self-stress can
     change are flagged ``undetermined``. ``pivots``: the fixed points of Xz differ row by row,
-    ``rows``: the model's rows with per-row constants (:class:`.constants.ForceConstants`)."""
+    ``rows``: the model's rows with per-row constants (:class:`.constants.ForceConstants`).
+    ``factors``: a dict kept across solves with the same positions (friction's load cases, a
+    fit's trials): each chunk's Jacobian entries and block inverses are made once there."""
     n_steps = Xz.shape[0]
     lam = np.full((n_steps, model.n_rows), np.nan)
     undetermined = np.zeros(model.n_rows, dtype=bool)
@@ -30,10 +33,18 @@ def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, ro
         idx = np.flatnonzero(ok)
         for lo in range(0, len(idx), CHUNK):
             ii = idx[lo:lo + CHUNK]
-            E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
-                 if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
+            key = (len(Xz), lo, len(ii), hash(ok.tobytes()))
+            if factors is not None and key in factors:
+                E, inverses = factors[key]
+            else:
+                E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
+                     if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
+                inverses = None
+                if factors is not None:
+                    inverses = factors[key] = E, eng.block_inverses(E)
+                    inverses = inverses[1]
             rhs = list(np.ascontiguousarray(generalized_q[ii].T))
-            lam[ii] = np.stack(eng.solve_transpose(E, rhs), axis=1)
+            lam[ii] = np.stack(eng.solve_transpose(E, rhs, inverses), axis=1)
         return lam, undetermined
     J = model.jacobian(Xz[ok], s[ok], None if rows is None else rows.take(ok))
     JT = np.swapaxes(J, 1, 2)
@@ -100,7 +111,7 @@ def internal_forces(model: Model, lam, undetermined, units) -> tuple[dict, dict,
     return out, coords, undefined
 
 
-def reactions(model: Model, lam, point_forces, bodies, X, s, ok, rows=None):
+def reactions(model: Model, lam, point_forces, bodies, X, s, ok, rows=None, only=None):
     """Return ground reactions (S, n_fixed, 2) and pin forces on bodies (S, n_joints, 2).
 
     Ground: a fixed point is a coordinate held by one more constraint; its multiplier mu follows
@@ -109,12 +120,13 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok, rows=None):
     Pins: the force the pin at point P exerts on body k is ``(M_k Xdd - Q_k)_P + sum over the
     body's own rows of lambda_r dPhi_r/dX_P`` (``bodies``: {link: {point: M_k Xdd - Q_k (S, 2)}}),
     for the pairs of :func:`joints`. NaN at steps that are not ok. ``rows``: the model's rows
-    with per-row constants (:meth:`Model.jacobian_terms`).
+    with per-row constants (:meth:`Model.jacobian_terms`). ``only``: the (link, point) pairs
+    wanted (the others stay NaN; no ground reactions): what friction's magnitudes need alone.
     """
     fixed = np.flatnonzero(model.fixed)
-    fixed_slot = {int(p): k for k, p in enumerate(fixed)}
+    fixed_slot = {int(p): k for k, p in enumerate(fixed)} if only is None else {}
     pairs = joints(model)
-    pair_slot = {(li, p): k for k, (li, p) in enumerate(pairs)}
+    pair_slot = {(li, p): k for k, (li, p) in enumerate(pairs) if only is None or (li, p) in only}
     row_link = body_rows(model).tolist()
     S = X.shape[0]
     R = np.full((S, len(fixed), 2), np.nan)

@@ -36,6 +36,7 @@ TABLES = {
     "masses": "array",
     "loads": "array",
     "outputs": "table",
+    "friction": "array",
 }
 
 #: The allowed keys of every kind of table, each with an example value for hints. These dicts
@@ -56,7 +57,7 @@ KEYS: dict[str, dict[str, str]] = {
                 "rate": '0.0 (driver units per second, or with a unit: "120 rpm", "50 mm/s")',
                 "acceleration": '0.0 (or with a unit: "30 deg/s^2")', "input": '{ point = "H", direction = [0.0, 1.0] }',
                 "law": '"cycloidal"', "log": '"run3.boom_len"', "scale": "0.001",
-                "smoothing": "0.0"},
+                "smoothing": "0.0", "stroke": "[1.10, 1.70] (shortest, longest)"},
     "time": {"from": "0.0", "to": "4.0", "steps": "4001", "step": "0.001", "log": '"run3"'},
     "logs": {"name": '"run3"', "file": '"logs/run3.csv"', "time": '"t"',
              "time_scale": "0.001 (a time column in ms)", "skip_rows": "1 (a units row)"},
@@ -72,13 +73,14 @@ KEYS: dict[str, dict[str, str]] = {
     "solver": {"tol": "1e-12", "max_iter": "25", "jacobian": '"analytic"',
                "derivatives": '"linear"', "predictor": '"first"', "method": '"auto"',
                "singular_rcond": "1e-6", "linear_algebra": '"auto"',
-               "rate_residuals": "true"},
+               "rate_residuals": "true",
+               "friction_velocity_scale": "1e-6 (length units per second)"},
     "analysis": {"effects": '["springs", "gravity"]'},
     "gravity": {"g": "[0.0, -9.81]"},
     "springs": {"name": '"left"', "between": '["S1", "S2"]', "k": "4.0",
                 "free_length": "0.5", "preload": "10.0", "damping": "0.0",
                 "kind": '"linear"', "force_extended": "450.0", "extended_length": "0.50",
-                "dead_length": "0.20", "gamma": "1.0"},
+                "dead_length": "0.20", "gamma": "1.0", "compressed_length": "0.30"},
     "torsion_springs": {"name": '"hinge"', "links": '["boom", "arm"]', "k": "2.5",
                         "free_angle": "30.0"},
     "masses": {"link": '"coupler"', "mass": "1.0", "center": '"G" (or [u, v] in the link frame)',
@@ -87,6 +89,11 @@ KEYS: dict[str, dict[str, str]] = {
               "torque": "-2.0"},
     "outputs": {"kinematics": '["velocity", "acceleration"]', "trace": '["P"]',
                 "vectors": '["P"]'},
+    "friction": {"name": '"pins"', "joints": '["A", "B"]', "slider": '"guide"',
+                 "driver": '"boom_cylinder"', "mu": "0.12", "pin_radius": "0.008",
+                 "viscous": "0.0", "coulomb": "800.0",
+                 "stribeck": "{ peak = 1200.0, velocity = 0.01 }"},
+    "friction.stribeck": {"peak": "1200.0", "velocity": "0.01"},
 }
 
 #: What each effect needs in the file: effect -> the tables that must be present (a tuple
@@ -97,6 +104,7 @@ EFFECT_NEEDS = {
     "inertia": ("masses",),
     "loads": ("loads",),
     "damping": ("springs",),
+    "friction": ("friction",),
 }
 
 _REQUIRED = object()  # default of a key that must be given

@@ -78,7 +78,8 @@ class MotionTables:
         if kind == "distance" and fields.get("timed") != "log":
             self.check_distance_values(table, fields)
         return Driver(table.data["name"], kind, tuple(points), axis, **fields,
-                      input=self.driver_input(table), relative_to=relative_to, bodies=bodies)
+                      input=self.driver_input(table), relative_to=relative_to, bodies=bodies,
+                      stroke=_stroke(table, kind))
 
     def rate(self, table: _Table, key: str, kind: str, order: int) -> float:
         """A driver's rate (order 1) or acceleration (order 2): a number in driver units per
@@ -249,9 +250,15 @@ class MotionTables:
         if not 0 < rcond < 1:
             raise table.error("singular_rcond", f"must be between 0 and 1, got {rcond:g}",
                               "write e.g. singular_rcond = 1e-6")
+        scale = table.number("friction_velocity_scale", None)
+        if scale is not None and scale <= 0:
+            raise table.error("friction_velocity_scale", f"must be positive, got {scale:g}",
+                              "write a small speed in length units per second, e.g. "
+                              "friction_velocity_scale = 1e-6, or leave it out (1e-6 of the "
+                              "mechanism's size per second)")
         return Solver(tol, max_iter, singular_rcond=rcond,
                       rate_residuals=table.boolean("rate_residuals", Solver.rate_residuals),
-                      **choices)
+                      friction_velocity_scale=scale, **choices)
 
 
 
@@ -331,6 +338,20 @@ class EffectTables:
             for name in names:
                 self.point(table, key, name)
         return Outputs(kinematics, lists["trace"], lists["vectors"])
+
+
+def _stroke(table: _Table, kind: str) -> tuple[float, float] | None:
+    """``stroke = [shortest, longest]`` (driver units: degrees for an angle), or None."""
+    if not table.has("stroke"):
+        return None
+    lo, hi = table.pair("stroke", geometric=kind != "angle")
+    if not lo < hi:
+        raise table.error("stroke", f"the shortest value {lo:g} is not below the longest {hi:g}",
+                          "write stroke = [shortest, longest], e.g. stroke = [1.10, 1.70]")
+    if kind == "distance" and lo < 0:
+        raise table.error("stroke", f"a length cannot be negative, got {lo:g}",
+                          "write the cylinder's shortest and longest pin-to-pin length")
+    return (lo, hi)
 
 
 def _choices(table, key: str, allowed, what: str) -> tuple[str, ...]:

@@ -16,12 +16,13 @@ from .tables import Link, Point, Scene
 from .geometry import GeometryTables
 from .motion import EffectTables, MotionTables
 from .springs import SpringTables
+from .friction import FrictionTables
 from . import units
 from .timing import MeasurementTables, TimeTables
 
 
 class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTables,
-              MeasurementTables):
+              MeasurementTables, FrictionTables):
     """Read one scene; the table readers run in dependency order (names before their users)."""
 
     def __init__(self, data: dict, text: str, path: str):
@@ -124,6 +125,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
         torsion_springs = self.torsion_spring_tables()
         masses = self.mass_tables()
         loads = self.load_tables()
+        friction = self.friction_tables(drivers, sliders)
         effects = self.analysis_table()
         outputs = self.output_table()
         return Scene(path=self.path, text=self.text, **scene,
@@ -131,7 +133,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
                      outputs=outputs, torsion_springs=torsion_springs, time=self.time,
-                     logs=tuple(self.logs.values()), warnings=self.warnings(gravity, effects, drivers),
+                     logs=tuple(self.logs.values()), friction=friction, warnings=self.warnings(gravity, effects, drivers),
                      measurements=self.measurement_tables(drivers, springs, torsion_springs,
                                                           sliders, effects))
 

@@ -5,7 +5,7 @@ from .keys import _Table, _show, _suggest
 from .tables import GROUND, SPRING_KINDS, Spring, TorsionSpring
 
 #: the keys only a gas spring has, and the keys it must not have
-GAS_KEYS = ("force_extended", "extended_length", "dead_length", "gamma")
+GAS_KEYS = ("force_extended", "extended_length", "dead_length", "gamma", "compressed_length")
 NOT_GAS_KEYS = ("k", "free_length", "preload")
 
 
@@ -132,5 +132,15 @@ def _gas_law(table: _Table) -> dict:
     if gamma <= 0:
         raise table.error("gamma", f"must be positive, got {gamma:g}",
                           "write gamma = 1.0 (isothermal) or 1.4 (adiabatic)")
+    compressed = table.number("compressed_length", None, geometric=True)
+    if compressed is not None and compressed >= extended:
+        raise table.error("compressed_length", f"compressed_length = {compressed:g} is not below "
+                          f"extended_length = {extended:g}: the strut would have no stroke",
+                          "give the strut's shortest length, below extended_length (its longest)")
+    if compressed is not None and compressed <= dead:
+        raise table.error("compressed_length", f"compressed_length = {compressed:g} is not above "
+                          f"dead_length = {dead:g}: the gas volume would be gone before the "
+                          "strut is fully compressed",
+                          "give the strut's shortest length, above dead_length")
     return {"k": 0.0, "force_extended": force, "extended_length": extended,
-            "dead_length": dead, "gamma": gamma}
+            "dead_length": dead, "gamma": gamma, "compressed_length": compressed}

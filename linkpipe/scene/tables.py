@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-EFFECTS = ("springs", "gravity", "inertia", "damping", "loads")
+EFFECTS = ("springs", "gravity", "inertia", "damping", "loads", "friction")
 #: ``[[springs]] kind`` (first = default); "ground" as a torsion spring's second link
 SPRING_KINDS = ("linear", "tension_only", "compression_only", "gas")
 GROUND = "ground"
@@ -110,6 +110,8 @@ class Driver:
     scale: float = 1.0
     smoothing: float = 0.0
     timed: str | None = None  # in a [time] scene: "law", "log" or "rate"; None in a v1 sweep
+    #: (shortest, longest) value the actuator reaches, in the driver's units (version 3), or None
+    stroke: tuple[float, float] | None = None
 
     @property
     def is_angle(self) -> bool:
@@ -212,6 +214,9 @@ class Solver:
     singular_rcond: float = 1e-6
     linear_algebra: str = "auto"
     rate_residuals: bool = False
+    #: friction's sign(v) is tanh(v / scale): a speed in length units per second (angular rates
+    #: use it divided by the mechanism's size); None: 1e-6 of the mechanism's size per second
+    friction_velocity_scale: float | None = None
 
 
 @dataclass(frozen=True)
@@ -233,6 +238,29 @@ class Spring:
     extended_length: float | None = None
     dead_length: float | None = None
     gamma: float = 1.0
+    #: a gas spring's shortest length (version 3; its longest is extended_length), or None
+    compressed_length: float | None = None
+
+
+@dataclass(frozen=True)
+class Friction:
+    """One ``[[friction]]`` entry (version 3). ``kind``: ``"pins"`` (``joints``: point names;
+    a torque ``mu pin_radius |pin force| + viscous w_rel`` at every body pair meeting at each),
+    ``"slider"`` (``slider``: its name; ``mu |normal force| + viscous v``) or ``"driver"``
+    (``driver``: its name; seal friction ``coulomb`` (+ Stribeck ``stribeck_peak`` at
+    ``stribeck_velocity``) + ``viscous`` rate)."""
+
+    name: str
+    kind: str
+    joints: tuple[str, ...] = ()
+    slider: str | None = None
+    driver: str | None = None
+    mu: float = 0.0
+    pin_radius: float = 0.0
+    viscous: float = 0.0
+    coulomb: float = 0.0
+    stribeck_peak: float | None = None
+    stribeck_velocity: float | None = None
 
 
 @dataclass(frozen=True)
@@ -298,6 +326,7 @@ class Scene:
     time: TimeSweep | None = None
     logs: tuple[LogData, ...] = ()
     measurements: tuple["Measurement", ...] = ()
+    friction: tuple[Friction, ...] = ()
 
     @property
     def point_names(self) -> tuple[str, ...]:
@@ -316,6 +345,7 @@ class Scene:
             "inertia": bool(self.masses),
             "loads": bool(self.loads),
             "damping": any(s.damping for s in self.springs),
+            "friction": bool(self.friction),
         }
         return tuple(e for e in EFFECTS if present[e] and e not in self.effects)
 

@@ -80,4 +80,23 @@ def study_table(study, path, seconds: float | None = None) -> str:
             unit = force[0] if by_force else m_units.get(key_name, "")
             unit = f" {unit}" if unit else ""
             lines.append(f"    variant {v}: {key[v] + 0.0:.6g}{unit}" + (f" at {values}" if values else ""))
+        if len(order):
+            lines += on_the_edge(study, int(order[0]))
     return "\n".join(lines)
+
+
+def on_the_edge(study, v: int) -> list[str]:
+    """Lines saying which grid parameters the best variant ``v`` takes at an end of its range
+    (the optimum may lie beyond: widen that range), [] where none does."""
+    out = []
+    for j, p in enumerate(study.parameters):
+        if p.kind != "grid" or p.spec[2] < 2:
+            continue
+        lo, hi = min(p.spec[:2]), max(p.spec[:2])
+        value = study.values[v, j]
+        for end, name in ((lo, "lowest"), (hi, "highest")):
+            if abs(value - end) <= 1e-12 * max(1.0, abs(hi - lo)):
+                out.append(f"  best on the edge: {p.address} = {value:.6g} is the {name} value "
+                           f"of its range ({lo:.6g} .. {hi:.6g}); the optimum may lie beyond it: "
+                           "widen the range")
+    return out

@@ -172,3 +172,4 @@ def log_result(stream: rr.RecordingStream, result) -> None:
     mechanism.log_vectors(stream, send, result)
     forces.log_forces(stream, send, result)
     series.log_series(stream, send, result)
+    series.log_out_of_stroke(stream, send, result)

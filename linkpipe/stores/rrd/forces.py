@@ -19,6 +19,8 @@ values; the recording multiplies them by the one scale):
 * ``springs`` (yellow): each two-point spring's force (``spring_force``, damping included) on
   its two ends; a tension pulls them together.
 * ``reactions`` (cyan): ``ground_reaction``, the force the ground exerts at each fixed point.
+* ``friction`` (pink): a seal's friction on its cylinder's two pins, a slider's on its point
+  along the guide, opposing the motion (:func:`friction_arrows`; a pin's is a couple).
 
 The scale makes the longest arrow of the sweep at most :data:`FORCE_FRACTION` of the mechanism's
 size, rounded so that one length unit stands for 1, 2, 2.5 or 5 times a power of ten force
@@ -168,6 +170,38 @@ def reaction_arrows(result) -> list:
             for k, name in enumerate(result.force_coords["fixed_point"])]
 
 
+def friction_arrows(result) -> list:
+    """Seal friction on a cylinder's two pins (pulling them together while it extends) and a
+    slider's friction on its point along the guide, each opposing the motion (pins' friction is
+    a couple: plotted, not drawn)."""
+    X, idx = _points(result)
+    mag = result.forces["friction_force"][1]
+    out = []
+    for e, fr in enumerate(result.scene.friction):
+        if fr.kind == "driver":
+            j = [d.name for d in result.scene.drivers].index(fr.driver)
+            driver = result.scene.drivers[j]
+            if driver.kind != "distance" or result.driver_velocity is None:
+                continue
+            f = (mag[:, e] * np.sign(result.driver_velocity[:, j]))[:, None]
+            a, b = X[:, idx[driver.points[0]]], X[:, idx[driver.points[1]]]
+            u = _unit(b - a)
+            out.append((fr.name, np.stack([a, b], axis=1), np.stack([f * u, -(f * u)], axis=1)))
+        elif fr.kind == "slider" and result.velocity is not None:
+            sl = next(x for x in result.scene.sliders if x.name == fr.slider)
+            p = idx[sl.point]
+            if sl.moving:
+                d, e2 = idx[sl.line_points[0]], idx[sl.line_points[1]]
+                t, rel = _unit(X[:, e2] - X[:, d]), result.velocity[:, p] - result.velocity[:, d]
+            else:
+                t = np.broadcast_to(np.asarray(sl.direction, float) / np.hypot(*sl.direction),
+                                    (result.n_steps, 2))
+                rel = result.velocity[:, p]
+            sign = np.sign(rel[:, 0] * t[:, 0] + rel[:, 1] * t[:, 1])
+            out.append((fr.name, X[:, p][:, None], (-(mag[:, e] * sign)[:, None] * t)[:, None]))
+    return out
+
+
 #: the kinds of force arrows, drawn in this order; a new kind is one row (the loads are the
 #: scene's own constants: drawn whenever forces are computed, i.e. ``input_force`` is there)
 KINDS = (
@@ -176,6 +210,7 @@ KINDS = (
     ForceKind("weights", "gravity_energy", (190, 130, 255), "violet", weight_arrows, "W"),
     ForceKind("springs", "spring_force", (255, 230, 40), "yellow", spring_arrows, ""),
     ForceKind("reactions", "ground_reaction", (0, 220, 255), "cyan", reaction_arrows, "R"),
+    ForceKind("friction", "friction_force", (255, 90, 200), "pink", friction_arrows, "f"),
 )
 
 

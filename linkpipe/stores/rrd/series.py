@@ -8,9 +8,11 @@ import rerun as rr
 from . import style
 from .mechanism import path_of
 from ...output_units import entry_units
+from ...status import OUT_OF_STROKE
 
 #: per-step series plotted under ``plots/<name>/<label>`` (variable name -> its second dim)
-PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle")
+PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle",
+           "friction_force", "stroke_margin")
 SOLVER = ("residual", "iterations")
 
 
@@ -59,6 +61,22 @@ def log_series(stream, send, result) -> None:
         # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
         # out would be bridged by a straight segment that looks like data
         send(entity, rr.Scalars.columns(scalars=values))
+
+
+def log_out_of_stroke(stream, send, result) -> None:
+    """``plots/stroke_margin/out_of_stroke``: a red marker on the stroke-margin plot at each
+    step outside a stroke (its most negative margin), none elsewhere."""
+    if result.stroke_margin is None:
+        return
+    outside = result.status == OUT_OF_STROKE
+    with np.errstate(invalid="ignore"):
+        worst = np.nanmin(np.where(np.isfinite(result.stroke_margin), result.stroke_margin, np.nan),
+                          axis=1, initial=np.inf)
+    values = np.where(outside & np.isfinite(worst), worst, np.nan)
+    entity = path_of("plots", "stroke_margin", "out_of_stroke")
+    stream.log(entity, rr.SeriesPoints(names="out of stroke", colors=[[230, 30, 30]],
+                                       markers="cross", marker_sizes=4.0), static=True)
+    send(entity, rr.Scalars.columns(scalars=values))
 
 
 def log10_residual(result) -> tuple[np.ndarray, float]:
