@@ -8,7 +8,8 @@ exact first and second derivatives at each instant:
   :data:`LAWS` holds f, f' and f'' in closed form (the rates are ``(to - from) f'(tau) / T``
   and ``(to - from) f''(tau) / T^2``);
 - ``rate`` (and ``acceleration``): ``from + rate (t - t0) + acceleration (t - t0)^2 / 2``;
-- a log column (times ``scale``) through a cubic spline, :func:`log_spline`.
+- a log column (in the driver's units, times ``scale``, plus ``offset``) through a cubic
+  spline, :func:`log_spline`, at the instants on the log's true time (``t_logged - lag``).
 
 All of it is vectorised: arrays (S, n_drivers), S the number of instants.
 """
@@ -142,7 +143,9 @@ def driver_motion(scene: Scene) -> DriverMotion:
             log = logs[dr.log[0]]
             y = log.columns[dr.log[1]]
             spline = log_spline(log.t, y, dr.smoothing)
-            cols = tuple(dr.scale * spline(t, nu) for nu in range(3))
+            gain = dr.scale * dr.unit_factor
+            cols = tuple(gain * spline(t, nu) + (dr.offset if nu == 0 else 0.0)
+                         for nu in range(3))
             present &= ~missing_at(log.t, y, t)
         value[:, j], rate[:, j], acc[:, j] = cols
     for arr in (value, rate, acc):
