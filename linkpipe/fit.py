@@ -42,6 +42,8 @@ FORCE_TABLES = ("springs", "torsion_springs", "masses", "loads", "gravity")
 IDENTIFIABLE_RCOND = 1e-8
 #: a trial step that failed counts as this many sigma
 FAILED_STEP_SIGMAS = 1e3
+#: the solves a fit keeps, for trials that move only a measurement's offset or scale
+RECENT_SOLVES = 8
 #: ``[fit] loss``: scipy.optimize.least_squares' losses (all but "linear" robust to outliers)
 LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 FIT_KEYS = ("parameters", "bounds", "per_log", "loss", "f_scale")
@@ -317,9 +319,10 @@ class Problem:
     solved once at the start values (``before``), which fixes the residuals counted
     (``mask``: steps where measured and computed are both finite), the ``sigma`` per
     measurement and the ``penalty`` a failed step or a refused trial counts as. ``solves`` and
-    ``stage1`` count the solves of the scene."""
+    ``stage1`` count the solves of the scene. ``remember``: trials that move only measurements'
+    offsets or scales reuse a recent solve (False: every trial solves, a reference)."""
 
-    def __init__(self, scene: Scene, data: dict, params: list):
+    def __init__(self, scene: Scene, data: dict, params: list, remember: bool = True):
         self.scene, self.data, self.params = scene, data, params
         self.wanted = frozenset(m.of[0] for m in scene.measurements)  # trials read nothing else
         self.stage1 = self.solves = 0
@@ -337,6 +340,13 @@ class Problem:
         start = np.abs(self.before.measurements["residual"] / self.sigma)[self.mask]
         self.penalty = max(FAILED_STEP_SIGMAS, 10.0 * float(start.max()) if start.size else 0.0)
 
+        # a measurement's offset or scale moves the measured values alone: trials that change
+        # nothing else reuse the computed series of the last solve (no solve)
+        self.reading = [k for k, p in enumerate(params) if remember and p.path[0] ==
+                        "measurements" and len(p.path) > 2 and p.path[2] in ("offset", "scale")]
+        self.solving = [k for k in range(len(params)) if k not in self.reading]
+        self.recent: dict = {}  # the solving parameters' values -> computed (S, M), last few
+
     @property
     def size(self) -> int:
         """The number of residuals (measured steps over every measurement)."""
@@ -345,19 +355,48 @@ class Problem:
     def solve_at(self, x, reuse):
         self.stage1 += reuse is None
         self.solves += 1
+        # threads None: the BLAS pool is set once around the whole fit (blas_pool)
         return solve(scene_with(self.scene, self.data, self.params, x), kinematics=reuse,
-                     wanted=self.wanted)
+                     wanted=self.wanted, threads=None)
+
+    def measured(self, x) -> np.ndarray:
+        """The measured values (S, M) at ``x``: each measurement's ``parts @ scales + offset``
+        with the fitted offsets and scales in place."""
+        out = []
+        for i, m in enumerate(self.scene.measurements):
+            scales, offset = list(m.scales), m.offset
+            for k in self.reading:
+                path = self.params[k].path
+                if path[1] != i:
+                    continue
+                if path[2] == "offset":
+                    offset = x[k]
+                elif len(path) == 4:
+                    scales[path[3]] = x[k]
+                else:
+                    scales = [x[k]] * len(scales)
+            out.append(m.parts @ np.asarray(scales, float) + offset)
+        return np.stack(out, axis=1)
 
     def residuals(self, x) -> np.ndarray:
         """The weighted residuals (size,) at ``x``: ``(computed - measured) / sigma`` over the
         mask, ``penalty`` where a step fails or the scene refuses the values."""
-        try:
-            r = self.solve_at(x, self.reuse)
-        except MemoryRefused:
-            raise  # the scene's size, not this trial's values
-        except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
-            return np.full(self.size, self.penalty)
-        weighted = r.measurements["residual"] / self.sigma
+        key = tuple(np.asarray(x, float)[self.solving])
+        if key in self.recent:
+            computed = self.recent[key]
+        else:
+            try:
+                r = self.solve_at(x, self.reuse)
+            except MemoryRefused:
+                raise  # the scene's size, not this trial's values
+            except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
+                return np.full(self.size, self.penalty)
+            computed = r.measurements["measured"] + r.measurements["residual"]
+            if self.reading:  # a Jacobian's columns go back to the point differenced
+                self.recent[key] = computed
+                while len(self.recent) > RECENT_SOLVES:
+                    self.recent.pop(next(iter(self.recent)))
+        weighted = (computed - self.measured(x)) / self.sigma
         return np.where(np.isfinite(weighted), weighted, self.penalty)[self.mask]
 
     def after(self, x):
@@ -371,6 +410,16 @@ class Problem:
                              "give [fit] bounds that keep each parameter where the scene is "
                              f'valid, e.g. bounds = {{ "{self.params[0].address}" = [low, high] }}'
                              ) from None
+
+
+def blas_pool():
+    """The BLAS thread pool a fit's solves run in, set once for the whole fit (setting it per
+    solve costs milliseconds: threadpoolctl finds the libraries each time)."""
+    from threadpoolctl import threadpool_limits
+
+    from .pipeline import DEFAULT_THREADS
+
+    return threadpool_limits(limits=DEFAULT_THREADS, user_api="blas")
 
 
 def least_squares_options(options: FitOptions) -> dict:
@@ -387,6 +436,11 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
     params = fit_parameters(scene, data)
     options = fit_options(scene, data)
     x0 = np.array([p.initial for p in params])
+    with blas_pool():
+        return _fit(scene, data, params, options, x0, progress, max_evaluations)
+
+
+def _fit(scene, data, params, options, x0, progress, max_evaluations) -> FitResult:
     problem = Problem(scene, data, params)
     cost: list[float] = []  # the objective at the start, then at each iteration's point
 

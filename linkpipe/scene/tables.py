@@ -164,6 +164,8 @@ class Measurement:
     columns: tuple = ()
     scales: tuple = ()
     offset: float = 0.0
+    #: (S, n) each column in the scene's units at the steps: ``values = parts @ scales + offset``
+    parts: np.ndarray = field(default=None, compare=False, repr=False)
 
     @property
     def address(self) -> str:

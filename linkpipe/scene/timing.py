@@ -319,7 +319,7 @@ class MeasurementTables:
                                   "steps are then the log's rows, where it was measured",
                                   'add [time] with log = "<the log\'s name>"')
             of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
-            columns, scales, values = self.measured_columns(table, of)
+            columns, scales, values, parts = self.measured_columns(table, of)
             offset = table.number("offset", 0.0)
             values = values + offset
             sigma = table.number("sigma", None)
@@ -337,14 +337,15 @@ class MeasurementTables:
                                   '[analysis] effects = ["gravity"]')
             (log, column), scale = columns[0], scales[0]
             out.append(Measurement(table.data["name"], log, column, scale, of, sigma, values,
-                                   columns, scales, offset))
+                                   columns, scales, offset, parts))
         return tuple(out)
 
     def measured_columns(self, table: _Table, of: tuple) -> tuple:
         """``log`` = "<log>.<column>" or a list of them, ``scale`` a number or a list as long:
-        ((log, column), ...), (scale, ...) and the measured values (S,) at the steps,
-        ``sum(column_i x unit factor_i x scale_i)`` (a log other than [time]'s through its
-        cubic spline at the instants; NaN where a sample is missing)."""
+        ((log, column), ...), (scale, ...), the measured values (S,) at the steps,
+        ``sum(part_i x scale_i)``, and the parts (S, n): each column in the scene's units at
+        the steps (a log other than [time]'s through its cubic spline at the instants; NaN
+        where a sample is missing)."""
         from ..model.drive import log_spline, missing_at
 
         raw = table.data.get("log")
@@ -365,7 +366,7 @@ class MeasurementTables:
             scales = [table.number("scale", 1.0)] * len(texts)
         angle = "rad" if entry_unit_is_radians(of[0]) else "deg"
         instants = self.time.instants
-        columns, total = [], np.zeros(len(instants))
+        columns, parts, total = [], [], np.zeros(len(instants))
         for text, scale in zip(texts, scales):
             log_name, dot, column = text.partition(".")
             if not dot or not column:
@@ -379,7 +380,7 @@ class MeasurementTables:
             if column not in log.columns:
                 log.columns[column] = logfiles.numeric_column(frame, column, logfiles.Path(log.path),
                                                               table, "log")
-            y = log.columns[column] * (self.unit_factor(table, "log", log, column, angle) * scale)
+            y = log.columns[column] * self.unit_factor(table, "log", log, column, angle)
             if log.name != self.time.log:  # another logger: read at [time]'s instants
                 logfiles.check_spans(log, instants, table, "log")
                 if int(np.isfinite(y).sum()) < 2:
@@ -388,8 +389,9 @@ class MeasurementTables:
                 y = np.where(missing_at(log.t, y, instants), np.nan,
                              log_spline(log.t, y, 0.0)(instants))
             columns.append((log.name, column))
-            total = total + y
-        return tuple(columns), tuple(scales), total
+            parts.append(y)
+            total = total + y * scale
+        return tuple(columns), tuple(scales), total, np.stack(parts, axis=1)
 
     def measured_of(self, table, drivers, springs, torsion_springs, sliders) -> tuple:
         """``of = "<variable>.<name>[.x|.y]"`` checked against the scene's names."""
