@@ -359,11 +359,11 @@ class Problem:
         return solve(scene_with(self.scene, self.data, self.params, x), kinematics=reuse,
                      wanted=self.wanted, threads=None)
 
-    def measured(self, x) -> np.ndarray:
-        """The measured values (S, M) at ``x``: each measurement's ``parts @ scales + offset``
-        with the fitted offsets and scales in place."""
+    def measured(self, x, measurements) -> np.ndarray:
+        """The measured values (S, M) at ``x``: each of ``measurements``' (the trial scene's)
+        ``parts @ scales + offset`` with the fitted offsets and scales in place."""
         out = []
-        for i, m in enumerate(self.scene.measurements):
+        for i, m in enumerate(measurements):
             scales, offset = list(m.scales), m.offset
             for k in self.reading:
                 path = self.params[k].path
@@ -383,7 +383,7 @@ class Problem:
         mask, ``penalty`` where a step fails or the scene refuses the values."""
         key = tuple(np.asarray(x, float)[self.solving])
         if key in self.recent:
-            computed = self.recent[key]
+            computed, measurements = self.recent[key]
         else:
             try:
                 r = self.solve_at(x, self.reuse)
@@ -392,11 +392,12 @@ class Problem:
             except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
                 return np.full(self.size, self.penalty)
             computed = r.measurements["measured"] + r.measurements["residual"]
+            measurements = r.scene.measurements  # (a lag moves a second logger's parts)
             if self.reading:  # a Jacobian's columns go back to the point differenced
-                self.recent[key] = computed
+                self.recent[key] = computed, measurements
                 while len(self.recent) > RECENT_SOLVES:
                     self.recent.pop(next(iter(self.recent)))
-        weighted = (computed - self.measured(x)) / self.sigma
+        weighted = (computed - self.measured(x, measurements)) / self.sigma
         return np.where(np.isfinite(weighted), weighted, self.penalty)[self.mask]
 
     def after(self, x):

@@ -5,9 +5,14 @@ parameters`` not in ``per_log``) once, each ``per_log`` parameter once per log. 
 are ``x = [shared (s), log 0's per-log values (q), log 1's (q), ...]`` (s + L q); the
 residuals are each log's sigma-weighted residuals (:class:`linkpipe.fit.Problem`, the scene
 with that log's file) one after the other. A log's residuals depend on the shared values and
-its own per-log values only, so the Jacobian is block-sparse: ``least_squares(jac_sparsity=)``
-differences it in s + q evaluations of every log instead of s + L q (50 logs, 3 + 2
-parameters: 5 instead of 103). Standard errors and the correlation matrix come from the joint
+its own per-log values only, so the Jacobian is block-sparse: forward differences over
+groups of columns that share no rows (each shared column alone, the j-th per-log column of
+every log together: :func:`groups_of`) give it in s + q evaluations of every log instead of
+s + L q (50 logs, 3 + 2 parameters: 5 instead of 103), and a trial that moves only a
+measurement's offset or scale solves nothing. (scipy's own ``jac_sparsity`` does the same
+grouping but then forces its inexact ``lsmr`` trust-region solver, which on the rig's logs of
+configs/logged stopped 3 mm from the minimum; the Jacobian is handed to ``least_squares``
+instead, and its exact trust-region step taken on it.) Standard errors and the correlation matrix come from the joint
 Jacobian at the solution (:func:`linkpipe.fit.covariance`), for the loss used.
 """
 from __future__ import annotations
@@ -18,7 +23,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
 from .errors import SceneError
 from .fit import (FitOptions, Problem, _fit_warnings, blas_pool, correlation, covariance, fit_options,
@@ -69,17 +73,6 @@ def layout(n_shared: int, n_per_log: int, n_logs: int) -> np.ndarray:
     shared = np.broadcast_to(np.arange(n_shared), (n_logs, n_shared))
     own = n_shared + np.arange(n_logs * n_per_log).reshape(n_logs, n_per_log)
     return np.concatenate([shared, own], axis=1)
-
-
-def sparsity(sizes: list[int], index: np.ndarray, n_unknowns: int):
-    """The joint Jacobian's structure (N, s + L q), 1 where log i's residuals (``sizes[i]``
-    rows each) depend on an unknown: its row of ``index`` (:func:`layout`)."""
-    pattern = lil_matrix((int(sum(sizes)), n_unknowns), dtype=np.int8)
-    row = 0
-    for size, cols in zip(sizes, index):
-        pattern[row:row + size, cols] = 1
-        row += size
-    return pattern.tocsr()
 
 
 def groups_of(index: np.ndarray, n_shared: int) -> list[np.ndarray]:
