@@ -445,8 +445,12 @@ def _fleet(kind: str, args, scenes: list) -> int:
         scene = fleet_scene(scenes[0], args.logs, args.log_name)
         from .stores import output_folder
 
+        from .fleet import log_files
+
+        log_files(args.logs)  # a glob that matches nothing: said before anything is made
+        joint = kind == "fit" and _per_log(scene)  # (a bad [fit] table likewise)
         output_folder(args.out)  # before the fleet: a wrong --out is said at once
-        if kind == "fit" and _per_log(scene):
+        if joint:
             return _joint(scene, args, outcome)
         bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
         try:

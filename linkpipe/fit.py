@@ -271,6 +271,7 @@ def fit_parameters(scene: Scene, data: dict | None = None) -> list[Parameter]:
     ``data``: as :func:`fit`."""
     data = tomllib.loads(scene.text) if data is None else data
     params = parameters_of(scene, data)
+    fit_options(scene, data)  # loss, f_scale, per_log
     if not scene.measurements:
         raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "
                          "[[measurements]]", "add [[measurements]] with log, of and sigma")
