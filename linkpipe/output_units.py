@@ -79,7 +79,8 @@ def parameter_unit(scene: Scene, path: tuple) -> str:
         return {"lag": "s", "time_scale": "s"}.get(key, "")
     if table == "torsion_springs":
         return {"k": f"{F}*{L}/rad", "free_angle": "degree"}.get(key, "")
-    if table == "points" or "lengths" in keys or "local" in keys or "sides" in keys:
+    if (table == "points" or "lengths" in keys or "local" in keys or "sides" in keys
+            or "through" in keys):
         return L
     return {"k": f"{F}/{L}", "free_length": L, "extended_length": L, "dead_length": L,
             "preload": F, "force_extended": F, "force": F, "gamma": "1", "damping": f"{F}*{T}/{L}",

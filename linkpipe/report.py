@@ -130,6 +130,9 @@ def fit_table(result) -> str:
              f"  {len(result.cost) - 1} iterations, {result.n_evaluations} evaluations "
              f"({result.solves} solves of the scene with the start, the Jacobian's finite "
              f"differences and the fitted values), stage 1 solved {result.stage1_solves} time(s)"]
+    if getattr(result, "loss", "linear") != "linear":  # standard errors are the loss's
+        lines.append(f"  loss {result.loss} (f_scale {result.f_scale:g} sigma): standard errors "
+                     "for that loss")
     lines += [f"  warning: {w}" for w in result.warnings]
     width = max(len(n) for n in result.names)
     for k, p in enumerate(result.parameters):

@@ -519,3 +519,26 @@ def test_time_is_a_coordinate_and_the_recording_plots_on_time(tmp_path):
         frame = rec.store.reader(index="time", contents=entity).to_pandas()
         stamps = frame["time"].to_numpy().astype("timedelta64[ns]").astype(np.int64)
         np.testing.assert_array_equal(stamps, np.round(truth["t"] * 1e9).astype(np.int64))
+
+
+def test_the_demo_second_logger_gives_its_lag_within_its_standard_error():
+    """configs/logged/slider_crank_laser.toml: run 1 and the laser logger (6 ms late, noise
+    and glitches): the lag, the laser's zero and the geometry within 3 standard errors of the
+    generator's truth."""
+    result = fit(load_scene(str(LOGGED / "slider_crank_laser.toml")))
+    truth = rig.truth(1)
+    for p, v, se in zip(result.parameters, result.fitted, result.standard_error):
+        error = v - truth[p.address]
+        if p.address == "drivers.crank.offset":
+            error = (error + 180.0) % 360.0 - 180.0
+        assert abs(error) < 3 * se, (p.address, v, se)
+
+
+def test_the_shipped_rig_logs_are_what_their_script_writes(tmp_path):
+    import runpy
+    import shutil
+
+    shutil.copy(LOGGED / "make_slider_crank_logs.py", tmp_path)
+    runpy.run_path(str(tmp_path / "make_slider_crank_logs.py"), run_name="__main__")
+    for name in [f"rig/run{k}" for k in range(1, 7)] + ["rig_laser/run1.csv"]:
+        assert (tmp_path / name).read_text() == (LOGGED / name).read_text(), name

@@ -56,6 +56,8 @@ class TimeTables:
             if not (time_scale > 0 and np.isfinite(time_scale)):
                 raise table.error("time_scale", f"must be positive, got {time_scale:g}",
                                   "seconds per unit of the time column: 0.001 for ms, 60 for min")
+            if column not in frame.columns:  # the time column first: its message names it
+                logfiles.time_column(frame, column, path, table)
             column_units = self.column_units(table, frame, path)
             if column in column_units:
                 quantity, order, si = column_units[column]
