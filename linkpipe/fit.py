@@ -10,7 +10,9 @@ so every check of a scene applies to it. The objective is
 exist at the initial values (a step that fails at a trial value, or a trial the scene refuses,
 counts as 1000 sigma, or ten times the start's largest weighted residual where that is more:
 the optimiser is pushed back, never handed a NaN). ``scipy.optimize.least_squares`` (trust-region
-reflective, bounds from ``[fit] bounds``) minimises it.
+reflective, bounds from ``[fit] bounds``, ``[fit] loss`` and ``f_scale``: a robust loss on the
+sigma-weighted residuals) minimises it. ``[fit] per_log`` matters with ``fit --logs`` only: one
+joint fit over every log (:mod:`linkpipe.joint`), each log a :class:`Problem`.
 
 When every parameter is a force parameter (``springs``, ``torsion_springs``, ``masses``,
 ``loads``, ``gravity``), stage 1 is solved once and reused for every trial (only the force
@@ -19,7 +21,9 @@ stage runs again). Standard errors come from the Jacobian at the solution: the c
 ``cost / (N - p)`` when some measurement has no ``sigma`` (``cost``: the objective,
 the sum of the squared weighted residuals; scipy's own is half of it). A parameter the data cannot
 identify (a singular value of J below ``IDENTIFIABLE_RCOND`` of the largest, with the parameter
-in the null direction) is reported as not identifiable, with no standard error.
+in the null direction) is reported as not identifiable, with no standard error. With a robust
+loss J is scipy's loss-weighted Jacobian: the standard errors are those of the loss used. The
+correlation matrix of the parameters comes from the same covariance.
 """
 from __future__ import annotations
 

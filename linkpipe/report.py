@@ -118,6 +118,15 @@ def describe(scene, mob, warnings=(), fit_parameters=()) -> str:
         each = [f"{p.address} (from {p.initial:g}, bounds {p.bounds[0]:g} .. {p.bounds[1]:g})"
                 for p in fit_parameters]
         lines.append(f"  fit: {', '.join(each)} to {len(scene.measurements)} measurement(s)")
+        import tomllib
+
+        from .fit import fit_options
+
+        options = fit_options(scene, tomllib.loads(scene.text))
+        if options.per_log:
+            lines.append(f"  per log (with fit --logs: one joint fit): {', '.join(options.per_log)}")
+        if options.loss != "linear":
+            lines.append(f"  loss: {options.loss}, f_scale {options.f_scale:g} sigma")
     lines += [f"  warning: {w}" for w in warnings]
     return "\n".join(lines)
 
