@@ -420,7 +420,7 @@ def _fit(args) -> int:
     from tqdm import tqdm
 
     if args.logs:
-        return _fleet("fit", args, [args.scene])
+        return _fleet("fit", args, [args.scene])  # (with [fit] per_log: one joint fit)
     from .fit import fit
     from .scene import load_scene
     from .stores import fit as fit_store
@@ -466,7 +466,13 @@ def _fleet(kind: str, args, scenes: list) -> int:
         scene = fleet_scene(scenes[0], args.logs, args.log_name)
         from .stores import output_folder
 
+        from .fleet import log_files
+
+        log_files(args.logs)  # a glob that matches nothing: said before anything is made
+        joint = kind == "fit" and _per_log(scene)  # (a bad [fit] table likewise)
         output_folder(args.out)  # before the fleet: a wrong --out is said at once
+        if joint:
+            return _joint(scene, args, outcome)
         bar = tqdm(desc=f"{kind} {scene.name}", unit=" logs", disable=None, leave=False)
         try:
             paths, rows = run_fleet(kind, scene, args.logs, args.log_name,
@@ -479,6 +485,45 @@ def _fleet(kind: str, args, scenes: list) -> int:
         print(f"  wrote {path}")
         if all(len(r) == 1 for r in rows):  # no log could be taken: the scene's mistake
             outcome.code = 2
+    return outcome.code
+
+
+def _per_log(scene) -> bool:
+    """Whether the scene's [fit] names per_log parameters (checked): a joint fit over --logs."""
+    import tomllib
+
+    from .fit import fit_options, parameters_of
+
+    data = tomllib.loads(scene.text)
+    if "fit" not in data:
+        return False
+    parameters_of(scene, data)
+    return bool(fit_options(scene, data).per_log)
+
+
+def _joint(scene, args, outcome) -> int:
+    """``fit --logs`` with ``[fit] per_log``: one least squares over every log."""
+    import tomllib
+
+    from tqdm import tqdm
+
+    from .fit import parameters_of
+    from .joint import joint_fit, joint_table, write_joint
+    from .output_units import measured_units, parameter_units
+
+    bar = tqdm(desc=f"fit {scene.name} (joint)", unit=" evaluations", disable=None, leave=False)
+    try:
+        result = joint_fit(scene, args.logs, args.log_name,
+                           progress=lambda n, cost: bar.update(1))
+    finally:
+        bar.close()
+    path = write_joint(result, args.logs, pathlib.Path(args.out))
+    params = parameters_of(scene, tomllib.loads(scene.text))
+    order = {p.address: u for p, u in zip(params, parameter_units(scene, params))}
+    print(joint_table(result, {"parameter": [order[p.address] for p in
+                                             result.shared + result.per_log],
+                               "measurement": measured_units(scene)}))
+    print(f"  wrote {path}")
     return outcome.code
 
 

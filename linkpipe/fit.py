@@ -10,7 +10,9 @@ so every check of a scene applies to it. The objective is
 exist at the initial values (a step that fails at a trial value, or a trial the scene refuses,
 counts as 1000 sigma, or ten times the start's largest weighted residual where that is more:
 the optimiser is pushed back, never handed a NaN). ``scipy.optimize.least_squares`` (trust-region
-reflective, bounds from ``[fit] bounds``) minimises it.
+reflective, bounds from ``[fit] bounds``, ``[fit] loss`` and ``f_scale``: a robust loss on the
+sigma-weighted residuals) minimises it. ``[fit] per_log`` matters with ``fit --logs`` only: one
+joint fit over every log (:mod:`linkpipe.joint`), each log a :class:`Problem`.
 
 When every parameter is a force parameter (``springs``, ``torsion_springs``, ``masses``,
 ``loads``, ``gravity``), stage 1 is solved once and reused for every trial (only the force
@@ -19,7 +21,9 @@ stage runs again). Standard errors come from the Jacobian at the solution: the c
 ``cost / (N - p)`` when some measurement has no ``sigma`` (``cost``: the objective,
 the sum of the squared weighted residuals; scipy's own is half of it). A parameter the data cannot
 identify (a singular value of J below ``IDENTIFIABLE_RCOND`` of the largest, with the parameter
-in the null direction) is reported as not identifiable, with no standard error.
+in the null direction) is reported as not identifiable, with no standard error. With a robust
+loss J is scipy's loss-weighted Jacobian: the standard errors are those of the loss used. The
+correlation matrix of the parameters comes from the same covariance.
 """
 from __future__ import annotations
 
@@ -42,6 +46,14 @@ FORCE_TABLES = ("springs", "torsion_springs", "masses", "loads", "gravity", "fri
 IDENTIFIABLE_RCOND = 1e-8
 #: a trial step that failed counts as this many sigma
 FAILED_STEP_SIGMAS = 1e3
+#: the solves a fit keeps, for trials that move only a measurement's offset or scale
+RECENT_SOLVES = 8
+#: ``[fit] loss``: scipy.optimize.least_squares' losses (all but "linear" robust to outliers)
+LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+FIT_KEYS = ("parameters", "bounds", "per_log", "loss", "f_scale")
+#: keys a scene may leave out that a fit may still address: (table, key) -> their default
+ABSENT_DEFAULTS = {("drivers", "offset"): 0.0, ("measurements", "offset"): 0.0,
+                   ("logs", "lag"): 0.0}
 
 
 @dataclass(frozen=True)
@@ -83,6 +95,10 @@ class FitResult:
     #: what the fit warns of (:func:`sigma_warnings`)
     reduced_chi_square: float = math.nan
     warnings: tuple = ()
+    #: the parameters' correlation matrix (p, p) (NaN where not identifiable); the loss used
+    correlation: np.ndarray | None = None
+    loss: str = "linear"
+    f_scale: float = 1.0
 
     @property
     def names(self) -> list[str]:
@@ -96,10 +112,10 @@ def parameters_of(scene: Scene, data: dict) -> list[Parameter]:
     if not isinstance(raw, dict) or "parameters" not in raw:
         raise SceneError(where, "fit", "parameters", "missing: a fit needs [fit] parameters",
                          'add [fit] with parameters = ["springs.<name>.k", ...]')
-    unknown = set(raw) - {"parameters", "bounds"}
+    unknown = set(raw) - set(FIT_KEYS)
     if unknown:
         key = sorted(unknown)[0]
-        raise SceneError(where, "fit", key, "unknown key", _suggest(key, ["parameters", "bounds"]))
+        raise SceneError(where, "fit", key, "unknown key", _suggest(key, FIT_KEYS))
     names = raw["parameters"]
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         raise SceneError(where, "fit", "parameters", "expected a non-empty array of strings",
@@ -123,6 +139,45 @@ def parameters_of(scene: Scene, data: dict) -> list[Parameter]:
             raise SceneError(where, "fit.bounds", name, "is not one of [fit] parameters",
                              _suggest(name, names))
     return out
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """``[fit] loss`` and ``f_scale`` (the residual, in sigmas, where a robust loss turns), and
+    ``per_log``: the parameters a fit over several logs takes once per log."""
+
+    loss: str = "linear"
+    f_scale: float = 1.0
+    per_log: tuple[str, ...] = ()
+
+
+def fit_options(scene: Scene, data: dict) -> FitOptions:
+    """The ``[fit]`` table's loss, f_scale and per_log, checked (after :func:`parameters_of`)."""
+    raw = data.get("fit") or {}
+    where = scene.path
+    loss = raw.get("loss", "linear")
+    if loss not in LOSSES:
+        raise SceneError(where, "fit", "loss", f"unknown loss {loss!r}",
+                         _suggest(str(loss), LOSSES) + " (linear: least squares; the others "
+                         "weigh down residuals beyond f_scale sigmas)")
+    f_scale = raw.get("f_scale", 1.0)
+    if isinstance(f_scale, bool) or not isinstance(f_scale, (int, float)) or not (
+            0 < f_scale < math.inf):
+        raise SceneError(where, "fit", "f_scale", f"expected a positive number, got {f_scale!r}",
+                         "the residual in sigmas where a robust loss turns, e.g. f_scale = 3.0")
+    per_log = raw.get("per_log", [])
+    names = raw.get("parameters", [])
+    if not isinstance(per_log, list) or not all(isinstance(n, str) for n in per_log):
+        raise SceneError(where, "fit", "per_log", "expected an array of parameter addresses",
+                         'write e.g. per_log = ["drivers.crank.offset"]')
+    for name in per_log:
+        if name not in names:
+            raise SceneError(where, "fit", "per_log", f'"{name}" is not one of [fit] parameters',
+                             _suggest(name, names) + "; a per-log parameter is also listed in "
+                             "parameters")
+    if len(set(per_log)) != len(per_log):
+        raise SceneError(where, "fit", "per_log", "a parameter is named twice", "name each once")
+    return FitOptions(loss, float(f_scale), tuple(per_log))
 
 
 def _bounds_of(scene, bounds, name, value):
@@ -177,9 +232,12 @@ def locate(scene: Scene, data: dict, address: str, where=None):
                        f'{".".join(rest) or "mass"}" .. "masses.{parts[1]}.{len(matches)}.'
                        f'{".".join(rest) or "mass"}"')
         node, path = node[matches[0]], path + [matches[0]]
-    for part in rest:
+    for i, part in enumerate(rest):
         if isinstance(node, dict) and part in node:
             node, path = node[part], path + [part]
+        elif (isinstance(node, dict) and i == len(rest) - 1 and len(path) == 2
+              and (table, part) in ABSENT_DEFAULTS):  # a key left at its default
+            node, path = ABSENT_DEFAULTS[table, part], path + [part]
         elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
             node, path = node[int(part)], path + [int(part)]
         else:
@@ -217,6 +275,7 @@ def fit_parameters(scene: Scene, data: dict | None = None) -> list[Parameter]:
     ``data``: as :func:`fit`."""
     data = tomllib.loads(scene.text) if data is None else data
     params = parameters_of(scene, data)
+    fit_options(scene, data)  # loss, f_scale, per_log
     if not scene.measurements:
         raise SceneError(scene.path, "fit", "parameters", "nothing to fit to: the scene has no "
                          "[[measurements]]", "add [[measurements]] with log, of and sigma")
@@ -260,52 +319,144 @@ def _nothing_to_fit(scene: Scene, before, k: int, m) -> SceneError:
                       "(python -m linkpipe run) to see its steps' statuses")
 
 
+class Problem:
+    """One scene's sigma-weighted residuals as a function of its fit parameters' values:
+    solved once at the start values (``before``), which fixes the residuals counted
+    (``mask``: steps where measured and computed are both finite), the ``sigma`` per
+    measurement and the ``penalty`` a failed step or a refused trial counts as. ``solves`` and
+    ``stage1`` count the solves of the scene. ``remember``: trials that move only measurements'
+    offsets or scales reuse a recent solve (False: every trial solves, a reference)."""
+
+    def __init__(self, scene: Scene, data: dict, params: list, remember: bool = True):
+        self.scene, self.data, self.params = scene, data, params
+        self.wanted = frozenset(m.of[0] for m in scene.measurements)  # trials read nothing else
+        self.stage1 = self.solves = 0
+        self.before = self.solve_at(np.array([p.initial for p in params]), None)
+        self.reuse = self.before.kinematics if all(p.force_only for p in params) else None
+        self.mask = np.isfinite(self.before.measurements["residual"])
+        for k, m in enumerate(scene.measurements):
+            if not self.mask[:, k].any():  # nothing to fit to: not a success with the start values
+                raise _nothing_to_fit(scene, self.before, k, m)
+        self.sigma = np.array([m.sigma if m.sigma is not None else 1.0
+                               for m in scene.measurements])
+        self.sigma_given = all(m.sigma is not None for m in scene.measurements)
+        # a failed step, or a trial the scene cannot take, counts as FAILED_STEP_SIGMAS, or as
+        # ten times the start's largest weighted residual where that is larger: never a way down
+        start = np.abs(self.before.measurements["residual"] / self.sigma)[self.mask]
+        self.penalty = max(FAILED_STEP_SIGMAS, 10.0 * float(start.max()) if start.size else 0.0)
+
+        # a measurement's offset or scale moves the measured values alone: trials that change
+        # nothing else reuse the computed series of the last solve (no solve)
+        self.reading = [k for k, p in enumerate(params) if remember and p.path[0] ==
+                        "measurements" and len(p.path) > 2 and p.path[2] in ("offset", "scale")]
+        self.solving = [k for k in range(len(params)) if k not in self.reading]
+        self.recent: dict = {}  # the solving parameters' values -> computed (S, M), last few
+
+    @property
+    def size(self) -> int:
+        """The number of residuals (measured steps over every measurement)."""
+        return int(self.mask.sum())
+
+    def solve_at(self, x, reuse):
+        self.stage1 += reuse is None
+        self.solves += 1
+        # threads None: the BLAS pool is set once around the whole fit (blas_pool)
+        return solve(scene_with(self.scene, self.data, self.params, x), kinematics=reuse,
+                     wanted=self.wanted, threads=None)
+
+    def measured(self, x, measurements) -> np.ndarray:
+        """The measured values (S, M) at ``x``: each of ``measurements``' (the trial scene's)
+        ``parts @ scales + offset`` with the fitted offsets and scales in place."""
+        out = []
+        for i, m in enumerate(measurements):
+            scales, offset = list(m.scales), m.offset
+            for k in self.reading:
+                path = self.params[k].path
+                if path[1] != i:
+                    continue
+                if path[2] == "offset":
+                    offset = x[k]
+                elif len(path) == 4:
+                    scales[path[3]] = x[k]
+                else:
+                    scales = [x[k]] * len(scales)
+            out.append(m.parts @ np.asarray(scales, float) + offset)
+        return np.stack(out, axis=1)
+
+    def residuals(self, x) -> np.ndarray:
+        """The weighted residuals (size,) at ``x``: ``(computed - measured) / sigma`` over the
+        mask, ``penalty`` where a step fails or the scene refuses the values."""
+        key = tuple(np.asarray(x, float)[self.solving])
+        if key in self.recent:
+            computed, measurements = self.recent[key]
+        else:
+            try:
+                r = self.solve_at(x, self.reuse)
+            except MemoryRefused:
+                raise  # the scene's size, not this trial's values
+            except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
+                return np.full(self.size, self.penalty)
+            computed = r.measurements["measured"] + r.measurements["residual"]
+            measurements = r.scene.measurements  # (a lag moves a second logger's parts)
+            if self.reading:  # a Jacobian's columns go back to the point differenced
+                self.recent[key] = computed, measurements
+                while len(self.recent) > RECENT_SOLVES:
+                    self.recent.pop(next(iter(self.recent)))
+        weighted = (computed - self.measured(x, measurements)) / self.sigma
+        return np.where(np.isfinite(weighted), weighted, self.penalty)[self.mask]
+
+    def after(self, x):
+        """The Result at the fitted values ``x``; a SceneError naming them if the scene refuses."""
+        try:
+            return self.solve_at(x, self.reuse)
+        except SceneError as exc:  # the optimiser stopped where the scene cannot go
+            values = ", ".join(f"{p.address} = {v:.6g}" for p, v in zip(self.params, x))
+            raise SceneError(self.scene.path, "fit", "bounds", f"the fit ended at {values}, "
+                             f"which the scene refuses ([{exc.table}] {exc.key}: {exc.message})",
+                             "give [fit] bounds that keep each parameter where the scene is "
+                             f'valid, e.g. bounds = {{ "{self.params[0].address}" = [low, high] }}'
+                             ) from None
+
+
+def blas_pool():
+    """The BLAS thread pool a fit's solves run in, set once for the whole fit (setting it per
+    solve costs milliseconds: threadpoolctl finds the libraries each time)."""
+    from threadpoolctl import threadpool_limits
+
+    from .pipeline import DEFAULT_THREADS
+
+    return threadpool_limits(limits=DEFAULT_THREADS, user_api="blas")
+
+
+def least_squares_options(options: FitOptions) -> dict:
+    """The settings every fit passes to scipy.optimize.least_squares (trust-region
+    reflective; forward differences of relative step 1e-7; the loss)."""
+    return dict(method="trf", x_scale="jac", diff_step=1e-7, xtol=1e-12, ftol=1e-12,
+                gtol=1e-12, loss=options.loss, f_scale=options.f_scale)
+
+
 def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | None = None) -> FitResult:
     """Fit ``scene``'s ``[fit] parameters`` to its measurements; see the module doc.
     ``data``: the scene's TOML data when it differs from its text (a fleet's log file)."""
     data = tomllib.loads(scene.text) if data is None else data
     params = fit_parameters(scene, data)
+    options = fit_options(scene, data)
     x0 = np.array([p.initial for p in params])
-    force_only = all(p.force_only for p in params)
-    wanted = frozenset(m.of[0] for m in scene.measurements)  # trials read nothing else
-    stage1 = 0
+    with blas_pool():
+        return _fit(scene, data, params, options, x0, progress, max_evaluations)
 
-    def solve_at(x, reuse):
-        nonlocal stage1
-        stage1 += reuse is None
-        return solve(scene_with(scene, data, params, x), kinematics=reuse, wanted=wanted)
 
-    before = solve_at(x0, None)
-    reuse = before.kinematics if force_only else None
-    mask = np.isfinite(before.measurements["residual"])
-    for k, m in enumerate(scene.measurements):
-        if not mask[:, k].any():  # nothing to fit to: not a success with the start values
-            raise _nothing_to_fit(scene, before, k, m)
-    sigma = np.array([m.sigma if m.sigma is not None else 1.0 for m in scene.measurements])
-    # a failed step, or a trial the scene cannot take, counts as FAILED_STEP_SIGMAS, or as ten
-    # times the start's largest weighted residual where that is larger: never a way down
-    start = np.abs(before.measurements["residual"] / sigma)[mask]
-    penalty = max(FAILED_STEP_SIGMAS, 10.0 * float(start.max()) if start.size else 0.0)
+def _fit(scene, data, params, options, x0, progress, max_evaluations) -> FitResult:
+    problem = Problem(scene, data, params)
     cost: list[float] = []  # the objective at the start, then at each iteration's point
-    solves = 1  # every solve of the scene: at the start values (above), each evaluation, the
-    #             Jacobian's finite differences' included, and at the fitted values (below)
 
     def residuals(x):
-        nonlocal solves
-        solves += 1
-        try:
-            r = solve_at(x, reuse)
-        except MemoryRefused:
-            raise  # the scene's size, not this trial's values
-        except SceneError:  # a trial the scene cannot take (e.g. a triangle that cannot close)
-            return np.full(int(mask.sum()), penalty)
-        weighted = r.measurements["residual"] / sigma
-        out = np.where(np.isfinite(weighted), weighted, penalty)[mask]
+        out = problem.residuals(x)
         objective = float(out @ out)  # sum(((computed - measured) / sigma)^2)
         if not cost:  # the optimiser's first evaluation is at the start values
             cost.append(objective)
         if progress is not None:
-            progress(solves, objective)
+            progress(problem.solves, objective)
         return out
 
     def per_iteration(intermediate_result):  # scipy's iterate after each iteration (the name
@@ -313,37 +464,38 @@ def fit(scene: Scene, progress=None, max_evaluations: int = 200, data: dict | No
         cost.append(float(f @ f))
 
     lower, upper = zip(*(p.bounds for p in params))
-    sol = least_squares(residuals, x0, bounds=(lower, upper), method="trf", x_scale="jac",
-                        diff_step=1e-7, xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                        max_nfev=max_evaluations, callback=per_iteration)
-    sigma_given = all(m.sigma is not None for m in scene.measurements)
-    se, identifiable = standard_errors(sol.jac, sol.fun, sigma_given)
-    failing = sol.fun == penalty  # steps that fail at the fitted values (counted as penalty)
-    real = sol.fun[~failing]
-    dof = real.size - len(params)
+    sol = least_squares(residuals, x0, bounds=(lower, upper), max_nfev=max_evaluations,
+                        callback=per_iteration, **least_squares_options(options))
+    cov, identifiable = covariance(sol.jac, sol.fun, problem.sigma_given)
+    se = np.where(identifiable, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.nan)
+    chi2, warnings = _fit_warnings(sol.fun, problem.penalty, len(params), se,
+                                   problem.sigma_given, options)
+    after = problem.after(sol.x)
+    fitted_data = copy.deepcopy(data)
+    for p, v in zip(params, sol.x):
+        _set(fitted_data, p.path, v)
+    return FitResult(scene, params, sol.x, se, identifiable, cost, problem.before, after,
+                     fitted_data, problem.stage1, sol.message, sol.nfev, solves=problem.solves,
+                     reduced_chi_square=chi2, warnings=warnings,
+                     correlation=correlation(cov, identifiable), loss=options.loss,
+                     f_scale=options.f_scale)
+
+
+def _fit_warnings(fun: np.ndarray, penalty: float, n_params: int, se: np.ndarray,
+                  sigma_given: bool, options: FitOptions) -> tuple[float, tuple]:
+    """(reduced chi-square over the steps that do not fail, what the fit warns of)."""
+    failing = fun == penalty  # steps that fail at the fitted values (counted as penalty)
+    real = fun[~failing]
+    dof = real.size - n_params
     chi2 = float(real @ real) / dof if dof > 0 else math.nan
     warnings = ((f"{int(failing.sum())} of the {failing.size} measured steps fail at the fitted "
                  f"values (each counted as {penalty:.4g} sigma in the cost; "
                  "reduced_chi_square leaves them out): the fit ended beside a region the "
                  "scene cannot reach; give [fit] bounds that keep it out",) if failing.any()
                 else ())
-    if sigma_given:
+    if sigma_given and options.loss == "linear":  # a robust loss expects outliers beyond sigma
         warnings += sigma_warnings(float(real @ real), dof, se)
-    try:
-        solves += 1
-        after = solve_at(sol.x, reuse)
-    except SceneError as exc:  # the optimiser stopped where the scene cannot go
-        values = ", ".join(f"{p.address} = {v:.6g}" for p, v in zip(params, sol.x))
-        raise SceneError(scene.path, "fit", "bounds", f"the fit ended at {values}, which the "
-                         f"scene refuses ([{exc.table}] {exc.key}: {exc.message})",
-                         "give [fit] bounds that keep each parameter where the scene is valid, "
-                         f'e.g. bounds = {{ "{params[0].address}" = [low, high] }}') from None
-    fitted_data = copy.deepcopy(data)
-    for p, v in zip(params, sol.x):
-        _set(fitted_data, p.path, v)
-    return FitResult(scene, params, sol.x, se, identifiable, cost, before, after, fitted_data,
-                     stage1, sol.message, sol.nfev, solves=solves, reduced_chi_square=chi2,
-                     warnings=warnings)
+    return chi2, warnings
 
 
 #: a fit whose final cost is this improbable under the sigmas (either tail of chi-square with
@@ -380,8 +532,14 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
     return ()
 
 
-def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):
-    """Return (standard errors (p,), identifiable (p,) bool) from the weighted Jacobian."""
+def covariance(J, residual: np.ndarray, sigma_given: bool):
+    """Return (covariance (p, p), identifiable (p,) bool) of the parameters from the weighted
+    Jacobian ``J`` (n, p; dense or scipy.sparse) at the solution: ``pinv(J^T J)`` over the
+    identifiable directions, times ``cost / (N - p)`` when no sigma is given. With a robust
+    loss ``J`` is scipy's loss-weighted Jacobian (``J^T J`` the Gauss-Newton Hessian of the
+    robust cost): the standard errors are those of the loss used."""
+    if hasattr(J, "toarray"):
+        J = J.toarray()
     n, p = J.shape
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     small = sv < IDENTIFIABLE_RCOND * (sv[0] if len(sv) and sv[0] > 0 else 1.0)
@@ -393,5 +551,23 @@ def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):
     if not sigma_given:
         dof = max(n - p, 1)
         cov = cov * (float(residual @ residual) / dof)
+    return cov, identifiable
+
+
+def correlation(cov: np.ndarray, identifiable: np.ndarray) -> np.ndarray:
+    """The parameters' correlation matrix (p, p) from their covariance; NaN in the rows and
+    columns of a parameter that is not identifiable."""
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = cov / np.outer(se, se)
+    ok = identifiable & (se > 0)
+    out[~ok, :] = np.nan
+    out[:, ~ok] = np.nan
+    return out
+
+
+def standard_errors(J: np.ndarray, residual: np.ndarray, sigma_given: bool):
+    """Return (standard errors (p,), identifiable (p,) bool) from the weighted Jacobian."""
+    cov, identifiable = covariance(J, residual, sigma_given)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     return np.where(identifiable, se, np.nan), identifiable

@@ -71,10 +71,16 @@ def parameter_unit(scene: Scene, path: tuple) -> str:
     if table == "drivers" and isinstance(path[1], int):
         d = driver_units_of(scene)[path[1]] if path[1] < len(scene.drivers) else ""
         return {"from": d, "to": d, "step": d, "rate": f"{d}/{T}",
-                "acceleration": f"{d}/{T}^2"}.get(key, "")
+                "acceleration": f"{d}/{T}^2", "offset": d}.get(key, "")
+    if table == "measurements" and isinstance(path[1], int):
+        m = measured_units(scene)[path[1]] if path[1] < len(scene.measurements) else ""
+        return {"offset": m, "sigma": m}.get(key, "")
+    if table == "logs":
+        return {"lag": "s", "time_scale": "s"}.get(key, "")
     if table == "torsion_springs":
         return {"k": f"{F}*{L}/rad", "free_angle": "degree"}.get(key, "")
-    if table == "points" or "lengths" in keys or "local" in keys or "sides" in keys:
+    if (table == "points" or "lengths" in keys or "local" in keys or "sides" in keys
+            or "through" in keys):
         return L
     return {"k": f"{F}/{L}", "free_length": L, "extended_length": L, "dead_length": L,
             "preload": F, "force_extended": F, "force": F, "gamma": "1", "damping": f"{F}*{T}/{L}",

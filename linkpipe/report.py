@@ -118,6 +118,15 @@ def describe(scene, mob, warnings=(), fit_parameters=()) -> str:
         each = [f"{p.address} (from {p.initial:g}, bounds {p.bounds[0]:g} .. {p.bounds[1]:g})"
                 for p in fit_parameters]
         lines.append(f"  fit: {', '.join(each)} to {len(scene.measurements)} measurement(s)")
+        import tomllib
+
+        from .fit import fit_options
+
+        options = fit_options(scene, tomllib.loads(scene.text))
+        if options.per_log:
+            lines.append(f"  per log (with fit --logs: one joint fit): {', '.join(options.per_log)}")
+        if options.loss != "linear":
+            lines.append(f"  loss: {options.loss}, f_scale {options.f_scale:g} sigma")
     lines += [f"  warning: {w}" for w in warnings]
     return "\n".join(lines)
 
@@ -130,6 +139,9 @@ def fit_table(result) -> str:
              f"  {len(result.cost) - 1} iterations, {result.n_evaluations} evaluations "
              f"({result.solves} solves of the scene with the start, the Jacobian's finite "
              f"differences and the fitted values), stage 1 solved {result.stage1_solves} time(s)"]
+    if getattr(result, "loss", "linear") != "linear":  # standard errors are the loss's
+        lines.append(f"  loss {result.loss} (f_scale {result.f_scale:g} sigma): standard errors "
+                     "for that loss")
     lines += [f"  warning: {w}" for w in result.warnings]
     width = max(len(n) for n in result.names)
     for k, p in enumerate(result.parameters):

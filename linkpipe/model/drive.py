@@ -8,7 +8,8 @@ exact first and second derivatives at each instant:
   :data:`LAWS` holds f, f' and f'' in closed form (the rates are ``(to - from) f'(tau) / T``
   and ``(to - from) f''(tau) / T^2``);
 - ``rate`` (and ``acceleration``): ``from + rate (t - t0) + acceleration (t - t0)^2 / 2``;
-- a log column (times ``scale``) through a cubic spline, :func:`log_spline`.
+- a log column (in the driver's units, times ``scale``, plus ``offset``) through a cubic
+  spline, :func:`log_spline`, at the instants on the log's true time (``t_logged - lag``).
 
 All of it is vectorised: arrays (S, n_drivers), S the number of instants.
 """
@@ -96,6 +97,35 @@ def log_spline(t: np.ndarray, y: np.ndarray, smoothing: float):
     return CubicSpline(tk, yk, bc_type="not-a-knot")
 
 
+#: splines' values at instants, by the bytes of (samples, values, instants) and smoothing: a
+#: fit's trials that move a log driver's offset or scale, or anything but the log, read the
+#: same spline again (bounded to MAX_SPLINE_BYTES: the oldest go)
+_SPLINE_VALUES: dict = {}
+MAX_SPLINE_BYTES = 128 * 2 ** 20
+
+
+def spline_values(t: np.ndarray, y: np.ndarray, smoothing: float, instants: np.ndarray):
+    """The log spline's value, first and second derivative (each (S,)) at ``instants``
+    (:func:`log_spline`), kept for the same samples and instants."""
+    import hashlib
+
+    digest = hashlib.blake2b(digest_size=16)
+    for arr in (t, y, instants):
+        digest.update(np.ascontiguousarray(arr, dtype=float).tobytes())
+    key = (digest.digest(), float(smoothing), len(t), len(instants))
+    if key in _SPLINE_VALUES:
+        return _SPLINE_VALUES[key]
+    spline = log_spline(t, y, smoothing)
+    values = tuple(spline(instants, nu) for nu in range(3))
+    if 3 * 8 * len(instants) <= MAX_SPLINE_BYTES // 8:  # (a long sweep is not kept)
+        for v in values:
+            v.setflags(write=False)
+        _SPLINE_VALUES[key] = values
+        while sum(3 * v[0].nbytes for v in _SPLINE_VALUES.values()) > MAX_SPLINE_BYTES:
+            _SPLINE_VALUES.pop(next(iter(_SPLINE_VALUES)))
+    return values
+
+
 def missing_at(t_log: np.ndarray, y: np.ndarray, instants: np.ndarray) -> np.ndarray:
     """(S,) True at the instants a missing sample leaves without a value: those strictly between
     the finite samples on either side of a missing row (with [time] log: exactly the missing
@@ -141,8 +171,9 @@ def driver_motion(scene: Scene) -> DriverMotion:
         else:
             log = logs[dr.log[0]]
             y = log.columns[dr.log[1]]
-            spline = log_spline(log.t, y, dr.smoothing)
-            cols = tuple(dr.scale * spline(t, nu) for nu in range(3))
+            gain = dr.scale * dr.unit_factor
+            cols = tuple(gain * v + (dr.offset if nu == 0 else 0.0)
+                         for nu, v in enumerate(spline_values(log.t, y, dr.smoothing, t)))
             present &= ~missing_at(log.t, y, t)
         value[:, j], rate[:, j], acc[:, j] = cols
     for arr in (value, rate, acc):

@@ -13,8 +13,21 @@ import numpy as np
 
 from .keys import _Table, _show
 
-#: the file kinds a log may be, by suffix
-LOG_SUFFIXES = (".csv", ".parquet")
+#: the formats a log may be (``[[logs]] format``; default from the suffix: .parquet, else csv)
+LOG_FORMATS = ("csv", "parquet")
+#: delimiters worth suggesting when the one given leaves a single column (as written in TOML)
+COMMON_DELIMITERS = {"\t": '"\\t"', ",": '","', ";": '";"', "|": '"|"', " ": '" "'}
+#: the logs kept read, up to this many bytes (a joint fit re-reads each of its logs' scenes at
+#: every trial; the newest is always kept)
+MAX_FRAME_BYTES = 256 * 2 ** 20
+
+
+def format_of(path: Path, fmt: str | None) -> str:
+    """The log's format: ``fmt`` as given, else "parquet" for a .parquet file, else "csv"
+    (delimited text of any name)."""
+    if fmt is not None:
+        return fmt
+    return "parquet" if path.suffix.lower() == ".parquet" else "csv"
 
 
 def resolve(scene_path: str, file: str) -> Path:
@@ -23,30 +36,60 @@ def resolve(scene_path: str, file: str) -> Path:
     return (base / file) if not Path(file).is_absolute() else Path(file)
 
 
-def read_frame(table: _Table, path: Path, skip_rows: int = 0):
-    """The log's table (a pandas DataFrame): one SceneError when the file is missing, of
-    another kind, or unreadable. ``skip_rows``: a CSV's rows right after its header that are
-    not samples (a units row), left out (the frame's ``attrs["skipped_rows"]``)."""
+def _first_long_line(path: Path, sep: str, skip_rows: int) -> tuple[int, int, int]:
+    """(line, its fields, the header's fields) of the first line with more fields than the
+    header (a plain split: on the error path only); (0, 0, 0) if none is found."""
+    def split(line: str) -> list:
+        return line.split() if sep == r"\s+" else line.split(sep)
+
+    with open(path, encoding="utf-8", errors="replace") as f:
+        header = len(split(f.readline().rstrip("\r\n")))
+        for number, line in enumerate(f, start=2):
+            if number <= 1 + skip_rows or not line.strip():
+                continue
+            n = len(split(line.rstrip("\r\n")))
+            if n > header:
+                return number, n, header
+    return 0, 0, 0
+
+
+def read_frame(table: _Table, path: Path, skip_rows: int = 0, fmt: str | None = None,
+               delimiter: str = ","):
+    """The log's table (a pandas DataFrame): one SceneError when the file is missing or
+    unreadable, naming the file, line and column where it can. ``fmt``: "csv" (delimited text,
+    any file name) or "parquet" (default: :func:`format_of`); ``delimiter`` a csv's field
+    separator (" ": runs of spaces), read by pandas' C parser. ``skip_rows``: a CSV's rows
+    right after its header that are not samples (a units row), left out (the frame's
+    ``attrs["skipped_rows"]``). The header is taken as written (a leading ``%`` or ``#`` is
+    part of the first name); a header with more fields than the rows gives the extra names
+    empty columns; a row with more fields than the header is an error naming its line."""
+    import warnings
+
     import pandas as pd
 
-    if path.suffix.lower() not in LOG_SUFFIXES:
-        raise table.error("file", f'"{path}" is neither .csv nor .parquet',
-                          "convert the log to CSV (a header row, then one row per sample) "
-                          "or Parquet")
+    fmt = format_of(path, fmt)
     if not path.is_file():
         raise table.error("file", f'no such log file "{path}"',
                           "check the path (a relative path is read from the scene file's folder)")
-    if skip_rows and path.suffix.lower() != ".csv":
+    if skip_rows and fmt != "csv":
         raise table.error("skip_rows", f"skip_rows = {skip_rows} is for a CSV's rows under its "
                           f'header; "{path}" is Parquet, whose rows are all samples',
                           "remove skip_rows")
     stat = path.stat()
-    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size, skip_rows)
+    key = (str(path.resolve()), stat.st_mtime_ns, stat.st_size, skip_rows, fmt, delimiter)
     if key in _FRAMES:  # the same file, unchanged: a fit reads its scene again at every trial
         return _FRAMES[key]
+    sep = r"\s+" if delimiter == " " else delimiter
     try:
-        if path.suffix.lower() == ".csv":
-            frame = pd.read_csv(path, skipinitialspace=True, skiprows=range(1, 1 + skip_rows))
+        if fmt == "csv":
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                frame = pd.read_csv(path, sep=sep, skipinitialspace=sep != r"\s+",
+                                    skiprows=range(1, 1 + skip_rows), index_col=False,
+                                    engine="c")
+            if any("Length of header" in str(w.message) for w in caught):
+                line, saw, want = _first_long_line(path, sep, skip_rows)
+                raise ValueError(f"Expected {want} fields in line {line}, saw {saw}")
         else:
             frame = pd.read_parquet(path)
     except Exception as exc:  # pandas raises many kinds (parser, arrow, empty, encoding)
@@ -55,13 +98,27 @@ def read_frame(table: _Table, path: Path, skip_rows: int = 0):
         if ragged:
             want, line, saw = ragged.groups()
             raise table.error("file", f'cannot read "{path}": line {line} has {saw} fields, '
-                              f"the header {want}", "give every row the header's columns "
-                              "(a comma inside a value needs quotes)") from None
-        raise table.error("file", f'cannot read "{path}": {type(exc).__name__}: {text}',
-                          "write the log as CSV with a header row, or as Parquet") from None
+                              f"the header {want}", "give every row the header's columns (a "
+                              + {",": "comma", "\t": "tab", ";": "semicolon", " ": "space"}.get(
+                                  delimiter, f"delimiter {_show(delimiter)}")
+                              + " inside a value needs quotes)") from None
+        raise table.error("file", f'cannot read "{path}" as {fmt}: {type(exc).__name__}: {text}',
+                          "write the log as delimited text with a header row (format = "
+                          '"csv" and its delimiter), or as Parquet (format = "parquet")') from None
+    if fmt == "csv" and len(frame.columns) == 1:
+        header = str(frame.columns[0])
+        found = [shown for d, shown in COMMON_DELIMITERS.items() if d != delimiter and d in header]
+        raise table.error("delimiter", f'"{path}" line 1: delimiter {_show(delimiter)} leaves '
+                          f"the header {_show(header)} one column",
+                          (f"the header holds {found[0]}: write delimiter = {found[0]}" if found
+                           else 'give the delimiter the file uses ("\\t" for tabs, " " for runs '
+                           "of spaces)"))
     frame.attrs["skipped_rows"] = skip_rows
-    _FRAMES.clear()  # keep one file's table: bounded memory
+    frame.attrs["format"] = fmt
     _FRAMES[key] = frame
+    while len(_FRAMES) > 1 and sum(int(f.memory_usage(deep=False).sum())
+                                   for f in _FRAMES.values()) > MAX_FRAME_BYTES:
+        _FRAMES.pop(next(iter(_FRAMES)))  # bounded: the oldest read goes
     return frame
 
 
@@ -70,9 +127,9 @@ _FRAMES: dict = {}
 
 
 def row_label(path: Path, i: int, skipped: int = 0) -> str:
-    """Data row ``i`` (0-based) as a user finds it: 1-based, and the CSV line (header = 1,
-    then ``skipped`` rows that are not samples)."""
-    if path.suffix.lower() == ".csv":
+    """Data row ``i`` (0-based) as a user finds it: 1-based, and the text file's line (header
+    = 1, then ``skipped`` rows that are not samples; a Parquet file has rows only)."""
+    if path.suffix.lower() != ".parquet":
         return f"row {i + 1} (line {i + 2 + skipped} of the file)"
     return f"row {i + 1}"
 
@@ -108,7 +165,7 @@ def numeric_column(frame, column: str, path: Path, table: _Table, key: str) -> n
         bad = np.flatnonzero(~blank.to_numpy() & np.isnan(values))
         if len(bad):
             i = int(bad[0])
-            units_row = i == 0 and path.suffix.lower() == ".csv" and not skipped_rows(frame)
+            units_row = i == 0 and frame.attrs.get("format") == "csv" and not skipped_rows(frame)
             raise table.error(key, f'"{path}" {row_label(path, i, skipped_rows(frame))}, column "{column}": '
                               f"{_show(str(raw.iloc[i]))} is not a number",
                               "fix that value (leave the cell empty where a sample is missing)"
@@ -221,9 +278,13 @@ def check_spans(log, instants: np.ndarray, table: _Table, key: str) -> None:
     first, last = float(instants[0]), float(instants[-1])
     tiny = 1e-12 * max(1.0, abs(lo), abs(hi))
     if first < lo - tiny or last > hi + tiny:
+        lag = getattr(log, "lag", 0.0)
+        shifted = f" (its stamps less lag = {lag:g} s)" if lag else ""
         raise table.error(key, f'[time] runs from {first:g} s to {last:g} s but log '
-                          f'"{log.name}" ("{log.path}") covers only {lo:g} s to {hi:g} s',
-                          f"shorten [time] to lie within {lo:g} .. {hi:g} s, or use "
+                          f'"{log.name}" ("{log.path}") covers only {lo:g} s to {hi:g} s'
+                          + shifted, (f"a lag of at most {lag - max(lo - first, last - hi):g} s "
+                                      "keeps it on [time], or " if lag else "")
+                          + f"shorten [time] to lie within {lo:g} .. {hi:g} s, or use "
                           f'[time] log = "{log.name}" (the log\'s own rows); a log is never '
                           "extrapolated")
 

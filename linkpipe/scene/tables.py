@@ -112,6 +112,10 @@ class Driver:
     timed: str | None = None  # in a [time] scene: "law", "log" or "rate"; None in a v1 sweep
     #: (shortest, longest) value the actuator reaches, in the driver's units (version 3), or None
     stroke: tuple[float, float] | None = None
+    #: a log driver's value is ``column x unit_factor x scale + offset`` (``unit_factor``: the
+    #: column's ``[[logs]] units`` in the driver's units, 1 without)
+    offset: float = 0.0
+    unit_factor: float = 1.0
 
     @property
     def is_angle(self) -> bool:
@@ -137,12 +141,18 @@ class LogData:
     t: np.ndarray = field(compare=False, repr=False)
     columns: dict[str, np.ndarray] = field(compare=False, repr=False)
     names: tuple[str, ...] = ()
+    #: ``t`` is the true instants, ``t_logged - lag`` (s); ``units`` {column: (quantity, order,
+    #: SI value of its unit)} from ``[[logs]] units`` (:func:`~.units.column_unit`)
+    lag: float = 0.0
+    units: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
 class Measurement:
-    """A logged signal beside its computed counterpart: ``values`` (S,) the log's column times
-    ``scale`` at the scene's steps (NaN where the log has none); ``of`` the computed series
+    """A logged signal beside its computed counterpart: ``values`` (S,) at the scene's steps,
+    ``sum(column_i x scale_i) + offset`` over ``columns`` ((log, column), ...) after their
+    units (NaN where a log has none; a log other than [time]'s read through its spline at the
+    instants); ``log``, ``column``, ``scale`` the first column's; ``of`` the computed series
     ``(variable, name, axis)`` (axis 0/1 for an xy variable, else None); ``sigma`` its standard
     deviation (None: not given)."""
 
@@ -153,6 +163,11 @@ class Measurement:
     of: tuple
     sigma: float | None = None
     values: np.ndarray = field(default=None, compare=False, repr=False)
+    columns: tuple = ()
+    scales: tuple = ()
+    offset: float = 0.0
+    #: (S, n) each column in the scene's units at the steps: ``values = parts @ scales + offset``
+    parts: np.ndarray = field(default=None, compare=False, repr=False)
 
     @property
     def address(self) -> str:

@@ -7,13 +7,14 @@ from __future__ import annotations
 import numpy as np
 
 from . import logs as logfiles
+from . import units
 from .keys import _Table, _show, _suggest
 from .tables import LAWS, LogData, Measurement, TimeSweep
 
 #: the keys that say how a driver of a [time] scene moves (exactly one of them)
 TIMED_KEYS = ("log", "law", "rate")
 #: the driver keys that only a [time] scene gives a meaning
-TIME_ONLY_KEYS = ("law", "log", "scale", "smoothing")
+TIME_ONLY_KEYS = ("law", "log", "scale", "smoothing", "offset")
 #: a rate driver's ``to``, when given, must be its value at the last instant within this
 #: part of the motion (relative)
 TO_AGREES = 1e-9
@@ -36,17 +37,89 @@ class TimeTables:
                 raise table.error("skip_rows", f"must be >= 0, got {skip}",
                                   "the rows right under the header that are not samples, e.g. "
                                   "skip_rows = 1 for a units row")
-            frame = logfiles.read_frame(table, path, skip)
+            fmt = table.string("format", None)
+            if fmt is not None and fmt not in logfiles.LOG_FORMATS:
+                raise table.error("format", f"unknown format {_show(fmt)}",
+                                  'write format = "csv" (delimited text, any file name) or '
+                                  'format = "parquet"')
+            delimiter = table.string("delimiter", ",")
+            if not delimiter or delimiter in ('"', "\n", "\r"):
+                raise table.error("delimiter", f"{_show(delimiter)} cannot separate fields",
+                                  'write the character between fields: "," ";" "\\t" or " " '
+                                  "(runs of spaces)")
+            if table.has("delimiter") and logfiles.format_of(path, fmt) != "csv":
+                raise table.error("delimiter", "a Parquet log has no delimiter",
+                                  'remove delimiter, or say format = "csv"')
+            frame = logfiles.read_frame(table, path, skip, fmt, delimiter)
             column = table.string("time")
             time_scale = table.number("time_scale", 1.0)
             if not (time_scale > 0 and np.isfinite(time_scale)):
                 raise table.error("time_scale", f"must be positive, got {time_scale:g}",
                                   "seconds per unit of the time column: 0.001 for ms, 60 for min")
-            t = logfiles.time_column(frame, column, path, table, time_scale)
+            if column not in frame.columns:  # the time column first: its message names it
+                logfiles.time_column(frame, column, path, table)
+            column_units = self.column_units(table, frame, path)
+            if column in column_units:
+                quantity, order, si = column_units[column]
+                if (quantity, order) != ("time", 0):
+                    raise table.error("units", f'the time column "{column}" is in '
+                                      f'"{table.data["units"][column]}", not a time',
+                                      'give it a time unit ("s", "ms", "min") or none (seconds)')
+                time_scale *= si
+            lag = table.number("lag", 0.0)
+            if not np.isfinite(lag):
+                raise table.error("lag", f"must be finite, got {lag:g}",
+                                  "the seconds the log's stamps are late by (negative: early)")
+            t = logfiles.time_column(frame, column, path, table, time_scale) - lag
             self.frames[name] = frame
             logs[name] = LogData(name, file, str(path), column, t, {},
-                                 tuple(str(c) for c in frame.columns))
+                                 tuple(str(c) for c in frame.columns), lag, column_units)
         return logs
+
+    def column_units(self, table: _Table, frame, path) -> dict:
+        """``[[logs]] units`` = {column: unit}: each column's (quantity, order, SI value),
+        checked against the file's columns and the scene's ``[scene].units`` it converts to."""
+        if not table.has("units"):
+            return {}
+        given = table.data["units"]
+        if not isinstance(given, dict):
+            raise table.wrong_type("units", "a table of column = unit")
+        out = {}
+        for column, unit in given.items():
+            if column not in frame.columns:
+                raise table.error("units", f'"{path}" has no column "{column}"',
+                                  logfiles.nearest_columns(column, frame.columns))
+            if not isinstance(unit, str):
+                raise table.error("units", f'column "{column}": expected a unit string, got '
+                                  f"{_show(unit)}", f'write e.g. {column} = "mm"')
+            try:
+                out[column] = units.column_unit(unit)
+                quantity, order, _ = out[column]
+                if quantity != "angle":  # angles convert to degrees or radians: always known
+                    units.scene_unit_si(quantity, order, self.units)
+            except ValueError as exc:
+                raise table.error("units", f'column "{column}": {exc}',
+                                  "give the column a unit linkpipe knows, and [scene].units "
+                                  '(e.g. units = { length = "m", mass = "kg", time = "s", '
+                                  'force = "N" }) for it to convert to') from None
+        return out
+
+    def unit_factor(self, table: _Table, key: str, log: LogData, column: str,
+                    angle: str = "deg", expect: str | None = None) -> float:
+        """The factor taking ``column`` of ``log`` to the scene's units (1 when it has no
+        unit); ``expect`` a quantity it must be ("angle", "length": a driver's)."""
+        if column not in log.units:
+            return 1.0
+        quantity, order, si = log.units[column]
+        if expect is not None and (quantity, order) != (expect, 0):
+            raise table.error(key, f'column "{column}" of log "{log.name}" is in '
+                              f'"{self.data_units(log, column)}", not {"an" if expect[0] in "aeiou" else "a"} {expect}',
+                              f"drive it by a column of {expect}s, or correct [[logs]] units")
+        return si / units.scene_unit_si(quantity, order, self.units, angle)
+
+    def data_units(self, log: LogData, column: str) -> str:
+        entry = next(t for t in self.entries("logs") if t.data.get("name") == log.name)
+        return str(entry.data["units"][column])
 
     def time_table(self, logs: dict[str, LogData]) -> TimeSweep | None:
         if self.top("time") is None:
@@ -91,7 +164,7 @@ class TimeTables:
                                   "driver's", f"remove {key} (the sweep is set by [time])")
         how = table.exactly_one(TIMED_KEYS)
         if how != "log":
-            for key in ("scale", "smoothing"):
+            for key in ("scale", "smoothing", "offset"):
                 if table.has(key):
                     raise table.error(key, f"{key} belongs to a log driver",
                                       f'remove {key}, or drive by log = "<log>.<column>"')
@@ -160,6 +233,9 @@ class TimeTables:
         if scale == 0:
             raise table.error("scale", "is 0: every value would be 0",
                               "write the factor from the column's unit, e.g. scale = 0.001")
+        offset = table.number("offset", 0.0)
+        factor = self.unit_factor(table, "log", log, column,
+                                  expect="angle" if kind == "angle" else "length")
         smoothing = table.number("smoothing", 0.0)
         if smoothing < 0:
             raise table.error("smoothing", f"must be >= 0, got {smoothing:g}",
@@ -176,14 +252,16 @@ class TimeTables:
                               + (", or set smoothing = 0" if smoothing > 0 and finite >= 2 else ""))
         logfiles.check_spans(log, time.instants, self.table("time"),
                              "log" if time.log else "to")
-        low, high = logfiles.finite_values(values * scale)
+        driven = values * (factor * scale) + offset
+        low, high = logfiles.finite_values(driven)
         if kind == "distance" and not low > 0:
-            i = int(np.flatnonzero(np.isfinite(values) & ~(values * scale > 0))[0])
+            i = int(np.flatnonzero(np.isfinite(values) & ~(driven > 0))[0])
             raise table.error("log", f'"{log.path}" {logfiles.row_label(path, i, logfiles.skipped_rows(frame))}, column '
-                              f'"{column}": a cylinder length of {values[i] * scale:g}',
-                              "a cylinder's length must be positive: check the column and scale")
+                              f'"{column}": a cylinder length of {driven[i]:g}',
+                              "a cylinder's length must be positive: check the column, its "
+                              "units, scale and offset")
         return dict(log=(log.name, column), scale=scale, smoothing=smoothing,
-                    from_value=low, to_value=high)
+                    from_value=low, to_value=high, offset=offset, unit_factor=factor)
 
 
 def check_not_timed(table: _Table) -> None:
@@ -226,6 +304,12 @@ MEASURED_NEEDS = {
 }
 
 
+def entry_unit_is_radians(variable: str) -> bool:
+    """Whether a measured variable is stored in radians (link and torsion-spring angles and
+    their rates), where a column in angle units converts to radians (degrees elsewhere)."""
+    return variable.startswith(("link_angle", "link_angular", "torsion_spring_angle"))
+
+
 class MeasurementTables:
     """The ``[[measurements]]`` reader of :class:`~.parse._Parser` (after logs and [time])."""
 
@@ -236,29 +320,14 @@ class MeasurementTables:
                 raise table.error("log", "a measurement needs [time] log = <its log>: the "
                                   "steps are then the log's rows, where it was measured",
                                   'add [time] with log = "<the log\'s name>"')
-            text = table.string("log")
-            log_name, dot, column = text.partition(".")
-            if not dot or not column:
-                raise table.error("log", f"{_show(text)} is not <log>.<column>",
-                                  'write e.g. log = "run3.p_force"')
-            log = self.log_named(table, "log", log_name, self.logs)
-            if log.name != self.time.log:
-                raise table.error("log", f'log "{log.name}" is not [time]\'s log '
-                                  f'"{self.time.log}": its rows are not the steps',
-                                  f'measure from "{self.time.log}", or make [time] log = "{log.name}"')
-            frame = self.frames[log.name]
-            if column not in frame.columns or column == log.time:
-                raise table.error("log", f'log "{log.name}" ("{log.path}") has no data column '
-                                  f'"{column}"', logfiles.nearest_columns(column, log.names))
-            if column not in log.columns:
-                log.columns[column] = logfiles.numeric_column(frame, column, logfiles.Path(log.path),
-                                                              table, "log")
-            scale = table.number("scale", 1.0)
+            of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
+            columns, scales, values, parts = self.measured_columns(table, of)
+            offset = table.number("offset", 0.0)
+            values = values + offset
             sigma = table.number("sigma", None)
             if sigma is not None and not sigma > 0:
                 raise table.error("sigma", f"must be positive, got {sigma:g}",
                                   "the measurement's standard deviation, in its scaled unit")
-            of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
             need = MEASURED_NEEDS.get(of[0])
             if need == "forces" and not effects or need == "springs" and "springs" not in effects:
                 what = ('"springs" in [analysis] effects' if need == "springs" else
@@ -268,9 +337,63 @@ class MeasurementTables:
                                   'add it, e.g. [analysis] effects = ["springs"]' if need ==
                                   "springs" else 'add the effects the machine has, e.g. '
                                   '[analysis] effects = ["gravity"]')
-            out.append(Measurement(table.data["name"], log.name, column, scale, of, sigma,
-                                   log.columns[column] * scale))
+            (log, column), scale = columns[0], scales[0]
+            out.append(Measurement(table.data["name"], log, column, scale, of, sigma, values,
+                                   columns, scales, offset, parts))
         return tuple(out)
+
+    def measured_columns(self, table: _Table, of: tuple) -> tuple:
+        """``log`` = "<log>.<column>" or a list of them, ``scale`` a number or a list as long:
+        ((log, column), ...), (scale, ...), the measured values (S,) at the steps,
+        ``sum(part_i x scale_i)``, and the parts (S, n): each column in the scene's units at
+        the steps (a log other than [time]'s through its cubic spline at the instants; NaN
+        where a sample is missing)."""
+        from ..model.drive import log_spline, missing_at
+
+        raw = table.data.get("log")
+        many = isinstance(raw, list)
+        texts = [table.string("log")] if not many else raw
+        if many and (not texts or not all(isinstance(x, str) for x in texts)):
+            raise table.error("log", f"expected a string or a non-empty array of strings, got "
+                              f"{_show(raw)}", 'write log = ["run3.p_cap", "run3.p_rod"]')
+        if isinstance(table.data.get("scale"), list):
+            scales = table.data["scale"]
+            if (len(scales) != len(texts) or not all(isinstance(v, (int, float)) and not
+                                                     isinstance(v, bool) for v in scales)):
+                raise table.error("scale", f"expected {len(texts)} number(s), one per column "
+                                  f"of log, got {_show(scales)}",
+                                  f"give one factor per column: scale = [{', '.join(['1.0'] * len(texts))}]")
+            scales = [float(v) for v in scales]
+        else:
+            scales = [table.number("scale", 1.0)] * len(texts)
+        angle = "rad" if entry_unit_is_radians(of[0]) else "deg"
+        instants = self.time.instants
+        columns, parts, total = [], [], np.zeros(len(instants))
+        for text, scale in zip(texts, scales):
+            log_name, dot, column = text.partition(".")
+            if not dot or not column:
+                raise table.error("log", f"{_show(text)} is not <log>.<column>",
+                                  'write e.g. log = "run3.p_force"')
+            log = self.log_named(table, "log", log_name, self.logs)
+            frame = self.frames[log.name]
+            if column not in frame.columns or column == log.time:
+                raise table.error("log", f'log "{log.name}" ("{log.path}") has no data column '
+                                  f'"{column}"', logfiles.nearest_columns(column, log.names))
+            if column not in log.columns:
+                log.columns[column] = logfiles.numeric_column(frame, column, logfiles.Path(log.path),
+                                                              table, "log")
+            y = log.columns[column] * self.unit_factor(table, "log", log, column, angle)
+            if log.name != self.time.log:  # another logger: read at [time]'s instants
+                logfiles.check_spans(log, instants, table, "log")
+                if int(np.isfinite(y).sum()) < 2:
+                    raise table.error("log", f'column "{column}" of "{log.path}" has fewer '
+                                      "than two values", "give the log its samples")
+                y = np.where(missing_at(log.t, y, instants), np.nan,
+                             log_spline(log.t, y, 0.0)(instants))
+            columns.append((log.name, column))
+            parts.append(y)
+            total = total + y * scale
+        return tuple(columns), tuple(scales), total, np.stack(parts, axis=1)
 
     def measured_of(self, table, drivers, springs, torsion_springs, sliders) -> tuple:
         """``of = "<variable>.<name>[.x|.y]"`` checked against the scene's names."""

@@ -114,3 +114,63 @@ def gravity_warning(g: tuple[float, float], length_unit: str | None) -> str:
                     f"{expected:.6g} (the weights come out {magnitude / expected:.3g} times "
                     f"Earth's)")
     return ""
+
+
+#: a log column's units (``[[logs]] units``): quantity and SI value of one unit (radians for
+#: angles, pascals for pressures); each of them also per s and per s^2 (``"mm/s"``, ``"deg/s^2"``)
+COLUMN_UNITS = {
+    **{u: ("length", m) for u, m in (("m", 1.0), ("cm", 1e-2), ("mm", 1e-3), ("um", 1e-6),
+                                      ("µm", 1e-6), ("km", 1e3), ("in", 0.0254), ("ft", 0.3048))},
+    "deg": ("angle", math.pi / 180.0), "rad": ("angle", 1.0), "rev": ("angle", 2.0 * math.pi),
+    "s": ("time", 1.0), "ms": ("time", 1e-3), "min": ("time", 60.0),
+    "N": ("force", 1.0), "kN": ("force", 1e3), "mN": ("force", 1e-3),
+    "lbf": ("force", FORCE_N["lbf"]),
+    "Pa": ("pressure", 1.0), "kPa": ("pressure", 1e3), "MPa": ("pressure", 1e6),
+    "bar": ("pressure", 1e5), "psi": ("pressure", 6894.757293168361),
+}
+#: rates written as one word
+COLUMN_RATES = {"rpm": ("angle", 1, 2.0 * math.pi / 60.0)}
+
+
+def column_unit(text: str) -> tuple[str, int, float]:
+    """``(quantity, order, SI value)`` of a log column's unit: "mm" -> ("length", 0, 1e-3),
+    "deg/s" -> ("angle", 1, pi/180), "bar" -> ("pressure", 0, 1e5). ValueError naming the
+    known units otherwise."""
+    unit = _normal(str(text))
+    if unit in COLUMN_RATES:
+        return COLUMN_RATES[unit]
+    base, order = unit, 0
+    for suffix, n in (("/s^2", 2), ("/s", 1)):
+        if unit.endswith(suffix) and unit[:-len(suffix)] in COLUMN_UNITS:
+            base, order = unit[:-len(suffix)], n
+            break
+    if base not in COLUMN_UNITS or (order and COLUMN_UNITS[base][0] == "time"):
+        known = ", ".join(list(COLUMN_UNITS)[:-1])
+        raise ValueError(f'unknown unit "{text}" (known: {known}, psi, rpm; each of them per s '
+                         'and per s^2, e.g. "mm/s", "deg/s^2")')
+    quantity, si = COLUMN_UNITS[base]
+    return quantity, order, si
+
+
+def scene_unit_si(quantity: str, order: int, scene_units: dict, angle: str = "deg") -> float:
+    """The SI value of one scene unit of ``quantity`` per time^``order`` (the scene's
+    ``[scene].units``; angles in ``angle``, "deg" or "rad"; a pressure in force per length^2).
+    ValueError naming the ``[scene].units`` key it needs but does not have or know."""
+    def need(key: str, table: dict) -> float:
+        unit = scene_units.get(key, "s" if key == "time" else None)
+        if unit not in table:
+            raise ValueError(f"[scene].units.{key} is {_quote(unit)}, not a unit linkpipe can "
+                             f"convert to (known: {', '.join(table)})")
+        return table[unit]
+
+    if quantity == "length":
+        base = need("length", LENGTH_M)
+    elif quantity == "angle":
+        base = math.pi / 180.0 if angle == "deg" else 1.0
+    elif quantity == "time":
+        base = need("time", TIME_S)
+    elif quantity == "force":
+        base = need("force", FORCE_N)
+    else:  # pressure: the scene's force per its length squared
+        base = need("force", FORCE_N) / need("length", LENGTH_M) ** 2
+    return base / need("time", TIME_S) ** order if order else base

@@ -43,6 +43,7 @@ def write_h5(fit, path: str | os.PathLike) -> None:
     p_units = parameter_units(fit.scene, fit.parameters)
     p_unit, p_per = common_unit(p_units), {"parameter_units": ",".join(p_units)}
     coords = [Variable("parameter", ("parameter",), names, ""),
+              Variable("parameter_2", ("parameter_2",), names, ""),
               Variable("measurement", ("measurement",), np.array(before["names"], dtype=object), ""),
               Variable("step", ("step",), np.arange(len(before["residual"])), "1"),
               Variable("iteration", ("iteration",), np.arange(len(fit.cost)), "1")]
@@ -53,6 +54,11 @@ def write_h5(fit, path: str | os.PathLike) -> None:
         Variable("standard_error", ("parameter",), np.asarray(fit.standard_error, float), p_unit,
                  {**p_per, "long_name": "one standard error; NaN where the data cannot identify it"}),
         Variable("identifiable", ("parameter",), fit.identifiable.astype(np.int8), "1"),
+        Variable("correlation", ("parameter", "parameter_2"),
+                 np.asarray(fit.correlation if fit.correlation is not None
+                            else np.full((len(names),) * 2, np.nan), float), "1",
+                 {"long_name": "the parameters' correlation matrix from the Jacobian at the "
+                  "solution; NaN where not identifiable"}),
         Variable("cost", ("iteration",), np.asarray(fit.cost, float), "1",
                  {"long_name": "sum(((computed - measured) / sigma)^2), the objective: at the start "
                   "values (iteration 0), then at each iteration's point"}),
@@ -65,5 +71,6 @@ def write_h5(fit, path: str | os.PathLike) -> None:
              "evaluations": int(fit.n_evaluations), "solves": int(fit.solves),
              "stage1_solves": int(fit.stage1_solves),
              "reduced_chi_square": float(fit.reduced_chi_square),
-             "warnings": "\n".join(fit.warnings)}
+             "warnings": "\n".join(fit.warnings), "loss": str(fit.loss),
+             "f_scale": float(fit.f_scale)}
     hdf5.write_layout(path, attrs, coords, variables)

@@ -140,9 +140,12 @@ class SweepWriter:
                 self._scales["step"] = self._datasets["step"] = ds
             else:
                 self._scales[c.name] = _write_coordinate(f, c)
+        timed = any(v.name == "time" and v.dims == ("step",) for v in variables)
         for var in variables:
             shape = ((self.n_steps,) + var.data.shape[1:] if var.dims[:1] == ("step",)
                      else None)
+            if timed and shape is not None and var.name != "time":
+                var = time_coordinate(var)
             self._datasets[var.name] = _write_variable(f, var, self._scales, shape)
 
     def add(self, part) -> None:
@@ -248,6 +251,14 @@ def write_layout(path: str | os.PathLike, attributes: dict, coordinates, variabl
                 _write_variable(f, var, scales)
 
 
+def time_coordinate(var):
+    """``var`` (step first) with the netCDF/CF attribute ``coordinates = "time"``: xarray and
+    other CF readers open ``time`` as a coordinate of ``step`` beside it (not a data variable)."""
+    import dataclasses
+
+    return dataclasses.replace(var, attrs={**var.attrs, "coordinates": "time"})
+
+
 def _array(data) -> np.ndarray:
     """Return ``data`` as an array h5py stores natively (strings as variable-length UTF-8)."""
     arr = np.asarray(data)
@@ -315,8 +326,9 @@ def read(path: str | os.PathLike, form: str = "dataset"):
 
     ``form="dataframe"``: a tidy ``pandas.DataFrame`` indexed by ``step`` with one column per
     scalar series: ``position.P.x``, ``link_angle.crank``, ``input_force.crank``, ``status``...
-    (the variable name, then its non-step coordinate labels, joined by dots). Needs only h5py
-    and pandas.
+    (the variable name, then its non-step coordinate labels, joined by dots). Each column's
+    unit is in ``df.attrs["units"]`` ({column: unit}, an entry's own unit where a variable's
+    entries differ: ``driver_units``, ``measurement_units``). Needs only h5py and pandas.
     """
     if form == "dataframe":
         return _read_dataframe(path)
@@ -347,6 +359,7 @@ def _read_dataframe(path):
     import pandas as pd
 
     columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
     with h5py.File(path, "r") as f:
         step = f["step"][()]
         labels = {name: _decoded(ds[()]) for name, ds in f.items()
@@ -356,15 +369,25 @@ def _read_dataframe(path):
             if ds.is_scale or not dims or dims[0] != "step":
                 continue
             data = ds[()]
+            unit = _text(ds.attrs.get("units", ""))
             if data.ndim == 1:
-                columns[name] = data
+                columns[name], units[name] = data, unit
                 continue
             rest = [labels.get(d, np.arange(n).astype(str)) for d, n in zip(dims[1:], data.shape[1:])]
+            per = _text(ds.attrs.get(f"{dims[1]}_units", ""))  # each entry's own unit
+            per = per.split(",") if per else []
             flat = data.reshape(len(step), -1)
             for j, idx in enumerate(np.ndindex(*data.shape[1:])):
                 key = ".".join([name, *(str(rest[k][i]) for k, i in enumerate(idx))])
                 columns[key] = flat[:, j]
-    return pd.DataFrame(columns, index=pd.Index(step, name="step"))
+                units[key] = per[idx[0]] if len(per) == data.shape[1] else unit
+    frame = pd.DataFrame(columns, index=pd.Index(step, name="step"))
+    frame.attrs["units"] = units
+    return frame
+
+
+def _text(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def root_attributes(result) -> dict[str, Any]:
