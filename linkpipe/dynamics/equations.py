@@ -1,0 +1,191 @@
+"""The equations of motion of a scene, reduced to its drivers' coordinates.
+
+Natural coordinates ``q`` (the moving points' x, y) with the scene's constraints
+``Phi(q, s) = 0`` (:mod:`linkpipe.model.equations`, through :class:`~linkpipe.model.Model`):
+with every driver row included, ``Phi_q`` is square where the drivers are the mechanism's
+degrees of freedom, so the drivers' values ``s`` are independent coordinates and ``q(s)`` the
+dependent ones (coordinate partitioning with the drivers as the partition: Wehage & Haug 1982;
+García de Jalón & Bayo 1994, ch. 5). Differentiating the constraints,
+
+    qd  = K sd,                K = dq/ds = -Phi_q^-1 Phi_s      (influence coefficients)
+    qdd = K sdd + qdd_0,       qdd_0 = Phi_q^-1 gamma(sdd = 0)  (kinematics.derivatives)
+
+and projecting the natural-coordinate equations ``M qdd + Phi_q^T lambda = Q`` on the
+admissible motions ``dq = K ds`` (virtual power) gives the drivers' equations of motion
+
+    K^T M K sdd = K^T Q - K^T M qdd_0 + F                        (nd x nd)
+
+``M``: the constant natural-coordinate mass matrix, read once off the inertia effect
+(:func:`linkpipe.forces.effects.inertia`'s Lagrange side); ``K^T Q``: every other effect's
+generalized force, by virtual work (:func:`linkpipe.forces.compute_forces`, whose input force is
+``-K^T Q``); ``F``: the drivers' own forces (:mod:`.forcing`). Nothing here writes a constraint
+row, a force law or a mass matrix of its own.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .. import kinematics as kin
+from ..forces import compute_forces
+from ..forces.effects import Context, inertia
+from ..model import Model, build_model
+from ..output_units import units_of
+from ..result import Motion
+from ..status import OK
+
+
+class NoAssembly(Exception):
+    """The mechanism has no assembled, non-singular position at these driver values."""
+
+
+def mass_matrix(model: Model) -> np.ndarray:
+    """The natural-coordinate mass matrix ``M`` (n_q, n_q) of the moving coordinates: column i
+    is the inertia effect's ``M qdd`` for ``qdd = e_i`` (constant: bodies of two basic points)."""
+    n_q, P = model.n_q, model.n_points
+    X = np.broadcast_to(model.start_position, (n_q, P, 2)).copy()
+    A = np.zeros((n_q, P, 2))
+    A[:, model.moving] = np.eye(n_q).reshape(n_q, -1, 2)
+    zeros = np.zeros((n_q, model.n_drivers))
+    motion = Motion(zeros, zeros, zeros, X, np.zeros_like(A), A, np.full(n_q, OK, np.int8),
+                    np.zeros((n_q, n_q, model.n_drivers)), np.zeros((n_q, len(model.link_a))),
+                    model.link_angles(X))
+    effect = inertia(Context.of(model, motion, units_of(model.scene)))
+    M = -effect.lagrange[:, model.moving].reshape(n_q, n_q)  # row i: M e_i
+    return 0.5 * (M + M.T)
+
+
+def without_inputs(scene):
+    """The scene with each driver's ``input`` left out and inertia off: the drivers' forces are
+    generalized forces (torques, axial forces) and the mass matrix enters separately."""
+    drivers = tuple(dataclasses.replace(d, input=None) for d in scene.drivers)
+    effects = tuple(e for e in scene.effects if e != "inertia")
+    return dataclasses.replace(scene, drivers=drivers, effects=effects)
+
+
+@dataclasses.dataclass
+class State:
+    """The mechanism at driver values ``s`` (B, nd) and rates ``sd`` (B, nd): positions X
+    (B, P, 2), velocities V, the acceleration at ``sdd = 0`` A0, influence K (B, n_q, nd), link
+    angles (B, n_links) and the forces of every effect but inertia (``forces``: Forces)."""
+
+    s: np.ndarray
+    sd: np.ndarray
+    X: np.ndarray
+    V: np.ndarray
+    A0: np.ndarray
+    K: np.ndarray
+    link_angle: np.ndarray
+    forces: object
+
+
+class MotionEquations:
+    """The drivers' equations of motion of one scene (see the module's docstring).
+
+    ``positions`` keeps the last solved position as the next Newton guess (a first-order
+    predictor along K), so successive evaluations along a trajectory take one or two
+    iterations; positions meet the constraints to ``[solver] tol`` at every evaluation, so
+    nothing drifts off them however long the run (there is nothing to project back)."""
+
+    def __init__(self, scene, model: Model | None = None):
+        self.scene = scene
+        self.model = model if model is not None else build_model(scene)
+        self.effects_model = build_model(without_inputs(scene))
+        self.units = units_of(scene)
+        self.M = mass_matrix(self.model)
+        self.tol = float(self.model.tolerance())
+        self.rcond = scene.solver.singular_rcond
+        self._last = None  # (s, q, K) of the last solved position
+
+    def start(self, s0: np.ndarray) -> np.ndarray:
+        """Assemble the drawing at ``s0`` (nd,) (the scene's start, as stage 1 does); q (n_q,)."""
+        q0, _ = kin.start_state(self.model, s0, self.tol, self.scene.solver.max_iter)
+        self._last = (np.array(s0, float), np.array(q0, float), None)
+        return q0
+
+    def positions(self, s: np.ndarray) -> np.ndarray:
+        """X (1, P, 2) at driver values ``s`` (nd,) by Newton from the last solution; raises
+        NoAssembly where Newton finds none."""
+        s_last, q_last, K_last = self._last
+        guess = q_last if K_last is None else q_last + K_last @ (s - s_last)
+        q, res, _, ok = kin.newton(self.model, guess[None], s[None], self.tol,
+                                   self.scene.solver.max_iter)
+        if not ok[0] or not np.isfinite(q).all():
+            raise NoAssembly(float(res[0]))
+        X = self.model.positions(q)
+        return X
+
+    def state(self, s: np.ndarray, sd: np.ndarray) -> State:
+        """The mechanism at one state ``s``, ``sd`` (nd,): positions, rates, influence and the
+        effects' forces (raises NoAssembly at no position or a singular one)."""
+        model = self.model
+        s2, sd2 = s[None], sd[None]
+        X = self.positions(s)
+        status = np.full(1, OK, np.int8)
+        der = kin.derivatives(model, X, s2, sd2, np.zeros_like(s2), status, True,
+                              need_influence=True)
+        if der["status"][0] != OK:
+            raise NoAssembly(np.inf)
+        K = der["influence"]
+        self._last = (s.copy(), model.q_of(X)[0], K[0])
+        link_angle = kin.link_angles_unwrapped(model, X, s=s2)
+        V, A0 = der["velocity"], der["acceleration"]
+        motion = Motion(s2, sd2, np.zeros_like(s2), X, V, A0, status, K, None, link_angle)
+        forces = compute_forces(self.effects_model, motion, self.units, lagrange=False)
+        return State(s2, sd2, X, V, A0, K, link_angle, forces)
+
+    def reduced(self, st: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M_r (B, nd, nd), K^T M qdd_0 (B, nd), K^T Q (B, nd)) of a state."""
+        model = self.model
+        K = st.K
+        qdd0 = model.q_of(st.A0)
+        MK = np.einsum("ij,bjd->bid", self.M, K)
+        Mr = np.einsum("bie,bid->bed", K, MK)
+        bias = np.einsum("bid,bi->bd", MK, qdd0)
+        generalized = -st.forces.variables["input_force"][1]
+        return Mr, bias, generalized
+
+    def accelerations(self, st: State, F: np.ndarray) -> np.ndarray:
+        """sdd (B, nd) under the drivers' forces ``F`` (B, nd)."""
+        Mr, bias, generalized = self.reduced(st)
+        rhs = generalized - bias + F
+        if Mr.shape[1] == 1:
+            return rhs / Mr[:, :, 0]
+        return np.linalg.solve(Mr, rhs[..., None])[..., 0]
+
+    def kinetic_energy(self, st: State) -> np.ndarray:
+        """(B,) ½ qd^T M qd."""
+        qd = self.model.q_of(st.V)
+        return 0.5 * np.einsum("bi,ij,bj->b", qd, self.M, qd)
+
+    def potential_energy(self, st: State) -> np.ndarray:
+        """(B,) the springs', torsion springs' and gravity's stored energy (what the force
+        stage stores)."""
+        return potential_of(st.forces.variables, st.X.shape[0])
+
+    def nonconservative_power(self, st: State) -> np.ndarray:
+        """(B,) the power of the effects with no stored energy (damping, loads)."""
+        return power_without_energy(st.forces.variables, st.forces.coords)
+
+
+#: the effects whose work is stored as an energy (the others' power is integrated)
+STORED = ("springs", "gravity")
+
+
+def potential_of(variables: dict, n: int) -> np.ndarray:
+    """(S,) the stored energy of the force stage's variables: springs, torsion springs, gravity."""
+    total = np.zeros(n)
+    for name in ("spring_energy", "torsion_spring_energy"):
+        if name in variables:
+            total += variables[name][1].sum(axis=1)
+    if "gravity_energy" in variables:
+        total += variables["gravity_energy"][1]
+    return total
+
+
+def power_without_energy(variables: dict, coords: dict) -> np.ndarray:
+    """(S,) the summed power of the effects that store no energy (damping, loads, friction)."""
+    power = variables["power"][1]
+    keep = [i for i, name in enumerate(coords.get("effect", [])) if name not in STORED]
+    return power[:, keep].sum(axis=1) if keep else np.zeros(power.shape[0])
