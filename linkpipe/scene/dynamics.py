@@ -61,7 +61,7 @@ class DynamicsTables:
             raise table.error("method", f"unknown integrator {_show(method)}",
                               _suggest(method, DYNAMICS_METHODS))
         n = math.floor(count) + 1
-        return Dynamics(to, step, rtol, method, np.arange(n, dtype=float) * step)
+        return Dynamics(to, step, rtol, method, np.minimum(np.arange(n, dtype=float) * step, to))
 
     def dynamic_driver(self, table: _Table, kind: str, dynamics: Dynamics) -> dict:
         """The Driver fields of a driver of a [dynamics] scene: a degree of freedom from
