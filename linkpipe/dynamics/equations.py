@@ -33,6 +33,7 @@ from ..forces.effects import Context, inertia
 from ..model import Model, build_model
 from ..output_units import units_of
 from ..result import Motion
+from ..kinematics.linalg import condition_and_inverse, is_singular
 from ..status import OK
 
 
@@ -97,6 +98,9 @@ class MotionEquations:
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
         self._last = None  # (s, q, K) of the last solved position
+        #: one step's rates by the dense inverse (a few microseconds for a small mechanism)
+        #: or, from kinematics.SPARSE_FROM unknowns, by the sparse engine
+        self.dense = self.model.n_q < kin.SPARSE_FROM
 
     def start(self, s0: np.ndarray) -> np.ndarray:
         """Assemble the drawing at ``s0`` (nd,) (the scene's start, as stage 1 does); q (n_q,)."""
@@ -123,17 +127,37 @@ class MotionEquations:
         s2, sd2 = s[None], sd[None]
         X = self.positions(s)
         status = np.full(1, OK, np.int8)
-        der = kin.derivatives(model, X, s2, sd2, np.zeros_like(s2), status, True,
-                              need_influence=True)
-        if der["status"][0] != OK:
+        if self.dense:
+            V, A0, K, singular = self.rates(X, s2, sd2)
+        else:
+            der = kin.derivatives(model, X, s2, sd2, np.zeros_like(s2), status, True,
+                                  need_influence=True)
+            V, A0, K, singular = (der["velocity"], der["acceleration"], der["influence"],
+                                  der["status"] != OK)
+        if singular[0]:
             raise NoAssembly(np.inf)
-        K = der["influence"]
         self._last = (s.copy(), model.q_of(X)[0], K[0])
-        link_angle = kin.link_angles_unwrapped(model, X, s=s2)
-        V, A0 = der["velocity"], der["acceleration"]
+        # whole turns matter to torsion springs alone (their angle is the links' difference)
+        link_angle = (kin.link_angles_unwrapped(model, X, s=s2) if self.scene.torsion_springs
+                      else model.link_angles(X))
         motion = Motion(s2, sd2, np.zeros_like(s2), X, V, A0, status, K, None, link_angle)
         forces = compute_forces(self.effects_model, motion, self.units, lagrange=False)
         return State(s2, sd2, X, V, A0, K, link_angle, forces)
+
+    def rates(self, X: np.ndarray, s: np.ndarray, sd: np.ndarray):
+        """(V, A0 (B, P, 2), K (B, n_q, nd), singular (B,)) at positions X (B, P, 2), driver
+        values and rates (B, nd): Phi_q's dense inverse (one LU per row; its 1-norm condition
+        against ``[solver] singular_rcond``, the test every path uses), ``K = -Phi_q^-1
+        Phi_s``, ``qd = K sd``, ``qdd_0 = Phi_q^-1 gamma(sdd = 0)`` (:func:`kinematics.derivatives`
+        does the same with its sparse engine; this is its one-row form, 10x lighter)."""
+        model = self.model
+        J = model.jacobian(X, s)
+        cond, inv = condition_and_inverse(J)
+        singular = is_singular(cond, self.rcond)
+        K = -inv[:, :, model.driver_rows] * model.phi_s(X, s)[:, None, :]
+        V = model.velocities(np.einsum("bid,bd->bi", K, sd))
+        qdd0 = np.einsum("bij,bj->bi", inv, model.gamma(X, V, s, sd, np.zeros_like(sd)))
+        return V, model.velocities(qdd0), K, singular
 
     def reduced(self, st: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(M_r (B, nd, nd), K^T M qdd_0 (B, nd), K^T Q (B, nd)) of a state."""

@@ -95,10 +95,10 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     end = float(sol.t[-1])
     event = ""
     if sol.status == -1:
-        event = (f"no assembled, non-singular position beyond t = {end:.12g} s "
-                 f"(s = {', '.join(f'{v:.9g}' for v in sol.y[:nd, -1] / scale)} driver units)"
-                 if failed and max(failed) >= end else f"the integrator stopped at t = "
-                 f"{end:.12g} s: {sol.message}")
+        at = ", ".join(f"{d.name} {v:.9g} {'deg' if d.kind == 'angle' else 'length units'}"
+                       for d, v in zip(scene.drivers, sol.y[:nd, -1] / scale))
+        event = (f"out of assembly (no assembled, non-singular position beyond it; {at})"
+                 if failed and max(failed) >= end else f"the integrator stopped: {sol.message}")
     solved = instants <= end * (1 + 1e-15) if event else np.ones(len(instants), bool)
     Y = np.full((len(instants), len(y0)), np.nan)
     if solved.any():
