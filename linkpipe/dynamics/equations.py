@@ -37,6 +37,10 @@ from ..kinematics.linalg import condition_and_inverse, is_singular
 from ..status import OK
 
 
+#: the most unknowns whose one-state rates use Phi_q's dense inverse
+DENSE_UP_TO = 400
+
+
 class NoAssembly(Exception):
     """The mechanism has no assembled, non-singular position at these driver values."""
 
@@ -98,9 +102,10 @@ class MotionEquations:
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
         self._last = None  # (s, q, K) of the last solved position
-        #: one step's rates by the dense inverse (a few microseconds for a small mechanism)
-        #: or, from kinematics.SPARSE_FROM unknowns, by the sparse engine
-        self.dense = self.model.n_q < kin.SPARSE_FROM
+        #: one state's rates by the dense inverse (microseconds for a small mechanism, 0.2 ms
+        #: at 82 unknowns), or beyond DENSE_UP_TO unknowns by the sparse engine (built for
+        #: whole sweeps: one row through it costs ~1 ms per 20 unknowns)
+        self.dense = self.model.n_q <= DENSE_UP_TO
 
     def start(self, s0: np.ndarray) -> np.ndarray:
         """Assemble the drawing at ``s0`` (nd,) (the scene's start, as stage 1 does); q (n_q,)."""
