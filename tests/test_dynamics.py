@@ -284,3 +284,42 @@ def test_dynamics_keys_outside_dynamics_are_errors():
     with pytest.raises(SceneError) as err:
         parse_scene(text, "x.toml")
     assert err.value.key == "force" and "[dynamics]" in err.value.message
+
+
+# -- study and accuracy ---------------------------------------------------------------------
+
+def test_a_study_of_dynamics_scenes_gives_each_variants_closing_time(tmp_path):
+    """configs/studies/hatch_closing.toml: each variant integrated on its own; the 300 N
+    variant's closing time is the scene's own run's last ok instant, and a weaker strut closes
+    the tailgate sooner (gravity's torque is the same, the strut's smaller)."""
+    from linkpipe.stores.study import read_arrays
+
+    study_file = ROOT / "configs" / "studies" / "hatch_closing.toml"
+    assert main(["study", str(study_file), "--out", str(tmp_path)]) == 0
+    f = read_arrays(tmp_path / "hatch_closing_study.h5")
+    own = linkpipe.solve(DYN / "hatch_closing.toml")
+    assert f["closing_time"][-1] == own.time[own.status == OK].max()
+    assert np.all(np.diff(f["closing_time"]) > 0)
+    ended = float(own.time_note.split("ended at t = ")[1].split(" s")[0])
+    assert 0 <= ended - f["closing_time"][-1] < 0.001  # within one output step
+
+
+def test_accuracy_ladders_rtol_on_a_dynamics_scene(tmp_path):
+    """`accuracy` on a dynamics scene: one row per integrator and rtol, each against DOP853 at
+    rtol 1e-13; DOP853's position error falls as rtol does and stays within 100 x rtol of the
+    mechanism's size (the global error of an adaptive method is a few times its local rtol)."""
+    text = text_of("spring_mass_slider").replace("to = 3.0", "to = 0.3")
+    path = tmp_path / "spring_mass_slider.toml"
+    path.write_text(text)
+    assert main(["accuracy", str(path), "--quick", "--repeats", "1", "--out", str(tmp_path)]) == 0
+    with h5py.File(tmp_path / "spring_mass_slider_accuracy.h5") as f:
+        knob = f["knob"][:].astype(str)
+        value = f["value"][:].astype(float)
+        path_ = f["path"][:].astype(str)
+        q = list(f["quantity"][:].astype(str))
+        err = f["relative_error"][:, q.index("position")]
+    assert set(knob) == {"rtol"} and set(path_) == {"DOP853", "Radau"}
+    dop = path_ == "DOP853"
+    order = np.argsort(-value[dop])
+    assert np.all(np.diff(err[dop][order]) < 0)
+    assert np.all(err[dop] < 100 * value[dop])
