@@ -28,8 +28,8 @@ import dataclasses
 import numpy as np
 
 from .. import kinematics as kin
-from ..forces import compute_forces
-from ..forces.effects import Context, inertia
+from ..forces.effects import EFFECTS, Context, applies, inertia
+from ..forces.virtual_work import Influence
 from ..model import Model, build_model
 from ..output_units import units_of
 from ..result import Motion
@@ -61,6 +61,21 @@ def mass_matrix(model: Model) -> np.ndarray:
     return 0.5 * (M + M.T)
 
 
+def gravity_loads(model: Model) -> np.ndarray | None:
+    """Gravity's loads on the moving coordinates (n_q,), constant in natural coordinates (the
+    gravity effect's point forces at the drawing), or None without gravity."""
+    if "gravity" not in model.scene.effects or not model.scene.masses:
+        return None
+    n, nd = model.n_points, model.n_drivers
+    X = model.start_position[None]
+    zeros = np.zeros((1, nd))
+    motion = Motion(zeros, zeros, zeros, X, np.zeros_like(X), np.zeros_like(X),
+                    np.full(1, OK, np.int8), np.zeros((1, model.n_q, nd)), None,
+                    model.link_angles(X))
+    applied = EFFECTS["gravity"](Context.of(model, motion, units_of(model.scene))).applied
+    return applied.point_forces[0, model.moving].reshape(-1)
+
+
 def without_inputs(scene):
     """The scene with each driver's ``input`` left out and inertia off: the drivers' forces are
     generalized forces (torques, axial forces) and the mass matrix enters separately."""
@@ -73,7 +88,8 @@ def without_inputs(scene):
 class State:
     """The mechanism at driver values ``s`` (B, nd) and rates ``sd`` (B, nd): positions X
     (B, P, 2), velocities V, the acceleration at ``sdd = 0`` A0, influence K (B, n_q, nd), link
-    angles (B, n_links) and the forces of every effect but inertia (``forces``: Forces)."""
+    angles (B, n_links), every effect's generalized force but inertia's ``K^T Q`` (B, nd) and
+    the power of those that store no energy (damping, loads) ``power_other`` (B,)."""
 
     s: np.ndarray
     sd: np.ndarray
@@ -82,7 +98,8 @@ class State:
     A0: np.ndarray
     K: np.ndarray
     link_angle: np.ndarray
-    forces: object
+    generalized: np.ndarray
+    power_other: np.ndarray
 
 
 class MotionEquations:
@@ -99,6 +116,10 @@ class MotionEquations:
         self.effects_model = build_model(without_inputs(scene))
         self.units = units_of(scene)
         self.M = mass_matrix(self.model)
+        # gravity's loads on the natural coordinates are constant (each weight lands on its
+        # body's basic points with constant shares): read once off the gravity effect
+        self.Q_gravity = gravity_loads(self.effects_model)
+        self.varying = tuple(e for e in self.effects_model.scene.effects if e != "gravity")
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
         self._last = None  # (s, q, K) of the last solved position
@@ -145,9 +166,37 @@ class MotionEquations:
         # whole turns matter to torsion springs alone (their angle is the links' difference)
         link_angle = (kin.link_angles_unwrapped(model, X, s=s2) if self.scene.torsion_springs
                       else model.link_angles(X))
-        motion = Motion(s2, sd2, np.zeros_like(s2), X, V, A0, status, K, None, link_angle)
-        forces = compute_forces(self.effects_model, motion, self.units, lagrange=False)
-        return State(s2, sd2, X, V, A0, K, link_angle, forces)
+        return self.state_of(X, s2, sd2, V, A0, K, link_angle)
+
+    def state_of(self, X, s, sd, V, A0, K, link_angle) -> State:
+        """A State from solved kinematics (B rows): the effects' generalized forces added."""
+        generalized, power = self.generalized_forces(X, s, sd, V, A0, K, link_angle)
+        return State(s, sd, X, V, A0, K, link_angle, generalized, power)
+
+    def generalized_forces(self, X, s, sd, V, A0, K, link_angle):
+        """(K^T Q (B, nd), the power of the effects that store no energy (B,)) of every
+        effect but inertia: gravity's from its constant loads, the others' (springs,
+        damping, loads) from :data:`linkpipe.forces.effects.EFFECTS` by virtual work
+        (:meth:`Influence.generalized`, as the force stage computes the input force)."""
+        B = X.shape[0]
+        generalized = np.einsum("bid,i->bd", K, self.Q_gravity) if self.Q_gravity is not None \
+            else np.zeros((B, self.model.n_drivers))
+        power = np.zeros(B)
+        if not self.varying:
+            return generalized, power
+        model = self.effects_model
+        status = np.full(B, OK, np.int8)
+        motion = Motion(s, sd, np.zeros_like(s), X, V, A0, status, K, None, link_angle)
+        ctx = Context.of(model, motion, self.units, lagrange=False)
+        influence = Influence.of(model, X, X, s, K)
+        for name in self.varying:
+            if not applies(name, ctx):
+                continue
+            g = influence.generalized(EFFECTS[name](ctx).applied)
+            generalized = generalized + g
+            if name not in STORED:
+                power += (g * sd).sum(axis=1)
+        return generalized, power
 
     def rates(self, X: np.ndarray, s: np.ndarray, sd: np.ndarray):
         """(V, A0 (B, P, 2), K (B, n_q, nd), singular (B,)) at positions X (B, P, 2), driver
@@ -172,8 +221,7 @@ class MotionEquations:
         MK = np.einsum("ij,bjd->bid", self.M, K)
         Mr = np.einsum("bie,bid->bed", K, MK)
         bias = np.einsum("bid,bi->bd", MK, qdd0)
-        generalized = -st.forces.variables["input_force"][1]
-        return Mr, bias, generalized
+        return Mr, bias, st.generalized
 
     def accelerations(self, st: State, F: np.ndarray) -> np.ndarray:
         """sdd (B, nd) under the drivers' forces ``F`` (B, nd)."""
@@ -188,14 +236,9 @@ class MotionEquations:
         qd = self.model.q_of(st.V)
         return 0.5 * np.einsum("bi,ij,bj->b", qd, self.M, qd)
 
-    def potential_energy(self, st: State) -> np.ndarray:
-        """(B,) the springs', torsion springs' and gravity's stored energy (what the force
-        stage stores)."""
-        return potential_of(st.forces.variables, st.X.shape[0])
-
     def nonconservative_power(self, st: State) -> np.ndarray:
         """(B,) the power of the effects with no stored energy (damping, loads)."""
-        return power_without_energy(st.forces.variables, st.forces.coords)
+        return st.power_other
 
 
 #: the effects whose work is stored as an energy (the others' power is integrated)
@@ -211,10 +254,3 @@ def potential_of(variables: dict, n: int) -> np.ndarray:
     if "gravity_energy" in variables:
         total += variables["gravity_energy"][1]
     return total
-
-
-def power_without_energy(variables: dict, coords: dict) -> np.ndarray:
-    """(S,) the summed power of the effects that store no energy (damping, loads, friction)."""
-    power = variables["power"][1]
-    keep = [i for i, name in enumerate(coords.get("effect", [])) if name not in STORED]
-    return power[:, keep].sum(axis=1) if keep else np.zeros(power.shape[0])

@@ -16,7 +16,6 @@ from .. import kinematics as kin
 from ..forces import compute_forces
 from ..model.drive import DriverMotion
 from ..output_units import units_of
-from ..result import Motion
 from ..stage1 import Kinematics, mobility_of
 from ..status import NO_ASSEMBLY, OK
 from .equations import MotionEquations, State, potential_of
@@ -49,11 +48,8 @@ def kinematics_of(eqs: MotionEquations, traj: Trajectory, mobility) -> tuple[Kin
     der = kin.derivatives(model, Xz, sz, sdz, np.zeros_like(sz), status, True, need_influence=True)
     link_angle = kin.link_angles_unwrapped(model, X, s=s)
     F = Forcing(scene).over(traj.t)
-    motion0 = Motion(sz, sdz, np.zeros_like(sz), X, der["velocity"], der["acceleration"],
-                     der["status"], der["influence"], None, link_angle)
-    effects = compute_forces(eqs.effects_model, motion0, eqs.units, lagrange=False)
-    state = State(sz, sdz, X, der["velocity"], der["acceleration"], der["influence"],
-                  link_angle, effects)
+    state = eqs.state_of(X, sz, sdz, der["velocity"], der["acceleration"], der["influence"],
+                         link_angle)
     sdd = eqs.accelerations(state, F)
     K = np.nan_to_num(der["influence"])
     A = der["acceleration"].copy()
@@ -68,10 +64,12 @@ def kinematics_of(eqs: MotionEquations, traj: Trajectory, mobility) -> tuple[Kin
     return k, F, state
 
 
-def energy_error(eqs: MotionEquations, state: State, traj: Trajectory) -> np.ndarray:
-    """(S,) kinetic + stored energy - their start values - the drivers' work - the work of the
-    effects that store none (damping, loads): zero for the exact motion."""
-    E = eqs.kinetic_energy(state) + potential_of(state.forces.variables, len(traj.t))
+def energy_error(eqs: MotionEquations, state: State, traj: Trajectory,
+                 variables: dict) -> np.ndarray:
+    """(S,) kinetic + stored energy (the force stage's ``variables``: springs, torsion springs,
+    gravity) - their start values - the drivers' work - the work of the effects that store none
+    (damping, loads): zero for the exact motion."""
+    E = eqs.kinetic_energy(state) + potential_of(variables, len(traj.t))
     return E - E[0] - traj.work_drivers - traj.work_other
 
 
@@ -84,7 +82,8 @@ def forces_of(eqs: MotionEquations, k: Kinematics, F: np.ndarray, state: State,
     applied = np.where(k.der["status"][:, None] == OK, F, np.nan)
     forces.variables["input_force"] = (("step", "driver"), applied, unit)
     units = units_of(eqs.scene)
-    err = np.where(k.der["status"] == OK, energy_error(eqs, state, traj), np.nan)
+    err = np.where(k.der["status"] == OK, energy_error(eqs, state, traj, forces.variables),
+                   np.nan)
     forces.variables["energy_error"] = (("step",), err, f"{units['force']}*{units['length']}")
     return forces
 
