@@ -33,7 +33,9 @@ from ..forces.virtual_work import Influence
 from ..model import Model, build_model
 from ..output_units import units_of
 from ..result import Motion
-from ..kinematics.linalg import condition_and_inverse, is_singular
+from ..kinematics.linalg import condition_and_inverse, condition_and_inverse_one, is_singular
+from ..kinematics.step import _step_kernels
+from ..model import equations as eq
 from ..status import OK
 
 
@@ -120,6 +122,7 @@ class MotionEquations:
         # body's basic points with constant shares): read once off the gravity effect
         self.Q_gravity = gravity_loads(self.effects_model)
         self.varying = tuple(e for e in self.effects_model.scene.effects if e != "gravity")
+        self._context = None
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
         self._last = None  # (s, q, K) of the last solved position
@@ -127,6 +130,9 @@ class MotionEquations:
         #: at 82 unknowns), or beyond DENSE_UP_TO unknowns by the sparse engine (built for
         #: whole sweeps: one row through it costs ~1 ms per 20 unknowns)
         self.dense = self.model.n_q <= DENSE_UP_TO
+        #: no redundant constraint: one state's rates on Python floats (:meth:`rates_one`)
+        self.square = self.dense and self.model.n_rows == self.model.n_q
+        self.kernels = _step_kernels(self.model)
 
     def start(self, s0: np.ndarray) -> np.ndarray:
         """Assemble the drawing at ``s0`` (nd,) (the scene's start, as stage 1 does); q (n_q,)."""
@@ -153,7 +159,9 @@ class MotionEquations:
         s2, sd2 = s[None], sd[None]
         X = self.positions(s)
         status = np.full(1, OK, np.int8)
-        if self.dense:
+        if self.square:
+            V, A0, K, singular = self.rates_one(model.q_of(X)[0], s, sd)
+        elif self.dense:
             V, A0, K, singular = self.rates(X, s2, sd2)
         else:
             der = kin.derivatives(model, X, s2, sd2, np.zeros_like(s2), status, True,
@@ -165,7 +173,7 @@ class MotionEquations:
         self._last = (s.copy(), model.q_of(X)[0], K[0])
         # whole turns matter to torsion springs alone (their angle is the links' difference)
         link_angle = (kin.link_angles_unwrapped(model, X, s=s2) if self.scene.torsion_springs
-                      else model.link_angles(X))
+                      else None)
         return self.state_of(X, s2, sd2, V, A0, K, link_angle)
 
     def state_of(self, X, s, sd, V, A0, K, link_angle) -> State:
@@ -187,7 +195,10 @@ class MotionEquations:
         model = self.effects_model
         status = np.full(B, OK, np.int8)
         motion = Motion(s, sd, np.zeros_like(s), X, V, A0, status, K, None, link_angle)
-        ctx = Context.of(model, motion, self.units, lagrange=False)
+        if self._context is None:  # the masses' frames and the force tables' numbers: once
+            self._context = Context.of(model, motion, self.units, lagrange=False)
+        ctx = dataclasses.replace(self._context, motion=motion, position=X, velocity=V,
+                                  acceleration=A0)
         influence = Influence.of(model, X, X, s, K)
         for name in self.varying:
             if not applies(name, ctx):
@@ -197,6 +208,30 @@ class MotionEquations:
             if name not in STORED:
                 power += (g * sd).sum(axis=1)
         return generalized, power
+
+    def rates_one(self, q: np.ndarray, s: np.ndarray, sd: np.ndarray):
+        """:meth:`rates` of one state (q (n_q,), s, sd (nd,)) with Phi_q, Phi_s and gamma
+        evaluated on Python floats by the one-step kernels (kinematics.step: numpy's per-call
+        overhead would dominate rows this small); the same rows of model/equations.py."""
+        model, kern = self.model, self.kernels
+        J = kern.jac(q, s)
+        cond, inv = condition_and_inverse_one(J)
+        if inv is None or is_singular(cond, self.rcond):
+            return None, None, None, np.ones(1, bool)
+        K = -inv[:, model.n_constraints:] * np.array(kern.phi_s(q, s))[None, :]
+        qd = K @ sd
+        X = kern.points(q)
+        V = [0.0] * len(X)
+        for k, v in zip(kern.qpos, qd.tolist()):
+            V[k] = v
+        cs, sn = np.cos(s).tolist(), np.sin(s).tolist()
+        gamma = np.fromiter(eq.gamma_rows(model.rows, lambda p: (X[2 * p], X[2 * p + 1]),
+                                          lambda p: (V[2 * p], V[2 * p + 1]), s.tolist(),
+                                          sd.tolist(), [0.0] * len(s), cs, sn), float,
+                            count=model.n_rows)
+        qdd0 = inv @ gamma
+        return (model.velocities(qd[None]), model.velocities(qdd0[None]), K[None],
+                np.zeros(1, bool))
 
     def rates(self, X: np.ndarray, s: np.ndarray, sd: np.ndarray):
         """(V, A0 (B, P, 2), K (B, n_q, nd), singular (B,)) at positions X (B, P, 2), driver
