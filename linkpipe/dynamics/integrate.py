@@ -90,8 +90,9 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     first = rhs(0.0, y0)
     if not np.isfinite(first).all():
         raise NoAssembly(0.0)
+    options = {"jac": finite_jacobian(rhs, nd, atol / rtol)} if method == "Radau" else {}
     sol = solve_ivp(rhs, (0.0, dyn.to), y0, method=method, rtol=rtol, atol=atol,
-                    dense_output=True)
+                    dense_output=True, **options)
     end = float(sol.t[-1])
     event = ""
     if sol.status == -1:
@@ -106,6 +107,30 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     Y[0] = y0  # the start exactly as given
     return Trajectory(instants, Y[:, :nd], Y[:, nd:2 * nd], Y[:, 2 * nd], Y[:, 2 * nd + 1],
                       solved, end, event, len(sol.t) - 1, int(sol.nfev), method, rtol)
+
+
+def finite_jacobian(rhs, nd: int, scale: np.ndarray):
+    """Radau's Jacobian of ``rhs`` by forward differences over the motion's 2 nd states (the
+    works' columns are zero: nothing depends on them), each column taken backward where the
+    forward step leaves the assembled region, and zero where neither exists (a state at an
+    event: the step's Newton iterations then fail and the step shrinks, as for DOP853).
+    ``scale`` (2 nd + 2,): the states' scales; the step is sqrt(eps) times the larger of it and
+    |y|."""
+    def jac(t, y):
+        f0 = rhs(t, y)
+        J = np.zeros((len(y), len(y)))
+        for j in range(2 * nd):
+            h = np.sqrt(np.finfo(float).eps) * max(abs(y[j]), scale[j])
+            for step in (h, -h):
+                y1 = y.copy()
+                y1[j] += step
+                col = (rhs(t, y1) - f0) / step
+                if np.isfinite(col).all():
+                    J[:, j] = col
+                    break
+        return J
+
+    return jac
 
 
 def timed_integrate(scene, eqs, seconds: dict, **kw) -> Trajectory:
