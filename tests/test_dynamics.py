@@ -10,6 +10,7 @@ import pathlib
 import h5py
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.integrate import quad, solve_ivp
 
 import linkpipe
@@ -132,6 +133,30 @@ def test_energy_conserved_without_damping_and_decreasing_with_it():
     x = X_EQ + A0 * np.exp(-zeta * W * t) * (np.cos(wd * t) + zeta / np.sqrt(1 - zeta ** 2)
                                               * np.sin(wd * t))
     assert np.abs(r.driver_value[:, 0] - x).max() < 1e-8
+
+
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(k=st.floats(10.0, 5000.0), m=st.floats(0.1, 20.0), a=st.floats(-0.3, 0.3),
+       v0=st.floats(-2.0, 2.0))
+def test_spring_mass_family_follows_its_closed_form(k, m, a, v0):
+    """Any stiffness, mass, start offset and start rate: x(t) = x_eq + a cos(w t) + (v0 / w)
+    sin(w t) over 1 s at rtol 1e-10, within 1e-7 of the amplitude (the global error of an
+    adaptive 8th-order method at rtol 1e-10 over up to 11 periods) plus 100 times the
+    absolute tolerance rtol x the mechanism's size (0.75 m: a motion far smaller than the
+    mechanism is controlled to that, not to its own amplitude)."""
+    text = text_of("spring_mass_slider").replace("to = 3.0", "to = 1.0").replace(
+        "output_step = 0.001", "output_step = 0.01")
+    text = text.replace("k = 200.0", f"k = {k!r}").replace("mass = 2.0", f"mass = {m!r}")
+    text = text.replace("from = 0.65", f"from = {0.5 + a!r}").replace(
+        "start_rate = 0.0", f"start_rate = {v0!r}")
+    text = text.replace("P = { x = 0.65", f"P = {{ x = {0.5 + a!r}").replace(
+        "Q = { x = 0.75", f"Q = {{ x = {0.6 + a!r}")
+    r = solve_text(text, "family")
+    w = np.sqrt(k / m)
+    t = r.time
+    x = 0.5 + a * np.cos(w * t) + v0 / w * np.sin(w * t)
+    amplitude = np.hypot(a, v0 / w)
+    assert np.abs(r.driver_value[:, 0] - x).max() <= 1e-7 * amplitude + 100 * 1e-10 * 0.75
 
 
 # -- the drivers' forces: constant, law, log ----------------------------------------------------
