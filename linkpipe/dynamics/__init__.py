@@ -55,12 +55,13 @@ def equations_of(scene, model=None) -> MotionEquations:
 def simulate(scene, tell=lambda stage: None, seconds: dict | None = None):
     """Integrate ``scene``'s [dynamics] and return its Result (failed steps are data)."""
     from ..pipeline import result_of, status_of
-    from .finish import describe, forces_of, kinematics_of, mobility_for
+    from ..stage1 import mobility_of
+    from .finish import describe, forces_of, kinematics_of
 
     seconds = {} if seconds is None else seconds
     t0 = _time.perf_counter()
     model = build_model(scene)
-    mobility = mobility_for(model)
+    mobility = mobility_of(model)
     eqs = equations_of(scene, model)
     seconds["model"] = _time.perf_counter() - t0
     tell("integration")

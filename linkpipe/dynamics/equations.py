@@ -17,9 +17,13 @@ admissible motions ``dq = K ds`` (virtual power) gives the drivers' equations of
 
 ``M``: the constant natural-coordinate mass matrix, read once off the inertia effect
 (:func:`linkpipe.forces.effects.inertia`'s Lagrange side); ``K^T Q``: every other effect's
-generalized force, by virtual work (:func:`linkpipe.forces.compute_forces`, whose input force is
-``-K^T Q``); ``F``: the drivers' own forces (:mod:`.forcing`). Nothing here writes a constraint
-row, a force law or a mass matrix of its own.
+generalized force by virtual work, as the force stage computes the input force
+(:data:`linkpipe.forces.effects.EFFECTS` and :meth:`~linkpipe.forces.virtual_work.Influence.generalized`;
+gravity's loads, constant in natural coordinates, read once off the gravity effect); ``F``:
+the drivers' own forces (:mod:`.forcing`). Nothing here writes a constraint row, a force law
+or a mass matrix of its own: one state's ``Phi_q``, ``Phi_s`` and ``gamma`` are
+:mod:`linkpipe.model.equations`' rows, on whole arrays (:meth:`MotionEquations.rates`) or on
+Python floats through stage 1's one-step kernels (:meth:`MotionEquations.rates_one`).
 """
 from __future__ import annotations
 
@@ -68,7 +72,7 @@ def gravity_loads(model: Model) -> np.ndarray | None:
     gravity effect's point forces at the drawing), or None without gravity."""
     if "gravity" not in model.scene.effects or not model.scene.masses:
         return None
-    n, nd = model.n_points, model.n_drivers
+    nd = model.n_drivers
     X = model.start_position[None]
     zeros = np.zeros((1, nd))
     motion = Motion(zeros, zeros, zeros, X, np.zeros_like(X), np.zeros_like(X),

@@ -16,16 +16,17 @@ from .. import kinematics as kin
 from ..forces import compute_forces
 from ..model.drive import DriverMotion
 from ..output_units import units_of
-from ..stage1 import Kinematics, mobility_of
+from ..stage1 import Kinematics
 from ..status import NO_ASSEMBLY, OK
 from .equations import MotionEquations, State, potential_of
 from .forcing import Forcing
 from .integrate import Trajectory
 
 
-def kinematics_of(eqs: MotionEquations, traj: Trajectory, mobility) -> tuple[Kinematics, np.ndarray]:
-    """Stage 1 of the output instants (positions, rates, the accelerations the equations of
-    motion give) and the drivers' forces F (S, nd)."""
+def kinematics_of(eqs: MotionEquations, traj: Trajectory,
+                  mobility) -> tuple[Kinematics, np.ndarray, State]:
+    """(stage 1 of the S output instants: positions, rates, the accelerations the equations
+    of motion give; the drivers' forces F (S, nd); the instants' State, NaN where unsolved)."""
     scene, model = eqs.scene, eqs.model
     S, nd = traj.s.shape
     solved = traj.solved
@@ -98,6 +99,3 @@ def describe(traj: Trajectory, err: np.ndarray) -> str:
         line += f"; ended at t = {traj.end:.12g} s: {traj.event}; the steps after it are no_assembly"
     return line
 
-
-def mobility_for(model):
-    return mobility_of(model)

@@ -16,7 +16,6 @@ once scenes have it) is a terminal event function located by scipy's root finder
 """
 from __future__ import annotations
 
-import time as _time
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,10 +130,3 @@ def finite_jacobian(rhs, nd: int, scale: np.ndarray):
         return J
 
     return jac
-
-
-def timed_integrate(scene, eqs, seconds: dict, **kw) -> Trajectory:
-    t0 = _time.perf_counter()
-    out = integrate(scene, eqs, **kw)
-    seconds["integration"] = _time.perf_counter() - t0
-    return out
