@@ -154,6 +154,8 @@ class MotionEquations:
         if not ok[0] or not np.isfinite(q).all():
             raise NoAssembly(float(res[0]))
         X = self.model.positions(q)
+        if not self.model.aligned(X, s[None])[0]:  # an angle driver's mirror root (its
+            raise NoAssembly(0.0)  # direction turned half a turn): not this motion's pose
         return X
 
     def state(self, s: np.ndarray, sd: np.ndarray) -> State:
