@@ -352,3 +352,12 @@ def test_accuracy_ladders_rtol_on_a_dynamics_scene(tmp_path):
     order = np.argsort(-value[dop])
     assert np.all(np.diff(err[dop][order]) < 0)
     assert np.all(err[dop] < 100 * value[dop])
+
+
+def test_check_describes_the_dynamics(capsys):
+    """`check` on a dynamics scene says its span, integrator and each driver's start and force
+    (and checks its mass matrix: test_a_mass_free_mechanism_is_a_scene_error)."""
+    assert main(["check", str(DYN / "andrews_squeezer.toml"), str(DYN / "falling_lever.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "dynamics: 0 .. 0.03 s, output every 0.0001 s (301 instants), DOP853 at rtol 1e-10" in out
+    assert "crank from -3.53595 at 0/s, force 0.033" in out and "fall from 0 at 0/s, free" in out
