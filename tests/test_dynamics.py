@@ -81,6 +81,8 @@ def test_andrews_a03_matches_the_test_set():
     # the applied torque is the stored input force; the multipliers give it back from the
     # computed motion (an independent check of the equations of motion)
     assert np.all(r.forces["input_force"][1] == 0.033)
+    # every output instant's positions meet the constraints to [solver] tol (no drift)
+    assert np.all(r.residual <= r.model.tolerance())
     assert np.abs(r.forces["input_force_lagrange"][1] - 0.033).max() < 1e-9
     # the motor's work and the spring's energy balance the kinetic energy: energy_error ~ 0
     work = 0.033 * (np.deg2rad(r.driver_value[:, 0]) - np.deg2rad(r.driver_value[0, 0]))
@@ -361,3 +363,10 @@ def test_check_describes_the_dynamics(capsys):
     out = capsys.readouterr().out
     assert "dynamics: 0 .. 0.03 s, output every 0.0001 s (301 instants), DOP853 at rtol 1e-10" in out
     assert "crank from -3.53595 at 0/s, force 0.033" in out and "fall from 0 at 0/s, free" in out
+
+
+def test_an_input_on_a_dynamics_driver_is_warned_about():
+    text = text_of("spring_mass_slider").replace(
+        "start_rate = 0.0", 'start_rate = 0.0\ninput = { point = "Q", direction = [1.0, 0.0] }')
+    scene = parse_scene(text, "pushed.toml")
+    assert any("input is not used with [dynamics]" in w for w in scene.warnings)

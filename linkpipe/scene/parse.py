@@ -152,6 +152,11 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                            "its velocity and "
                            "acceleration are those at every step (the contract's instantaneous "
                            "state); give rate = 0 for a driver that does not move")
+        if self.dynamics is not None:  # the drivers' forces are generalized forces
+            out += [f'{self.path}: [drivers "{d.name}"] input is not used with [dynamics]: its '
+                    "force is the driver's own generalized force (a torque for an angle, an "
+                    "axial force for a distance or coordinate); remove input, or give force in "
+                    "those terms" for d in drivers if d.input is not None]
         moving = [d for d in drivers if d.from_value != d.to_value]
         if self.dynamics is None and self.time is None and drivers and drivers[0].steps > 1 and not moving:
             out.append(f"{self.path}: every driver is held (from = to): the sweep is "
