@@ -275,6 +275,10 @@ def _run(args) -> int:
             segment = steps_per_segment(scene)
             # before the progress bar: a sweep too big for memory is a scene error
             check_memory(scene, segment, _recorded_steps(scene, args))
+            if scene.dynamics is not None:  # its equations of motion hold, before any file
+                from .dynamics import equations_of
+
+                equations_of(scene)
             bar = _progress_bar(scene, args)
             from .stores import output_folder, output_lock
 

@@ -109,6 +109,10 @@ def preflight(scene: Scene, segment: int | None = None, recorded_steps: int = 0)
     model = build_model(scene)
     mob = mobility_of(model)
     kin.sweep_reach(model)  # the start assembles (first steps out of the drawing's reach are data)
+    if scene.dynamics is not None:  # its equations of motion hold (a mass for every driver)
+        from .dynamics import equations_of
+
+        equations_of(scene, model)
     return model, mob
 
 
@@ -148,6 +152,12 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     reused stage 1."""
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
+    if scene.dynamics is not None:  # another producer of a solved motion, the same finish
+        from .dynamics import simulate
+
+        check_memory(scene)
+        result = simulate(scene, tell, seconds)
+        return _with_measurements(result) if scene.measurements else result
     t0 = _time.perf_counter()
     if kinematics is None:  # a reused stage 1 was checked when it was solved
         check_memory(scene)

@@ -112,6 +112,12 @@ def describe(scene, mob, warnings=(), fit_parameters=()) -> str:
                      "link parallel to two others); solved by least squares, 'singular' flags only "
                      "rank loss beyond them, and the forces they share are a minimum-norm choice")
     lines.append(f"  effects: {', '.join(scene.effects) or 'none (kinematics only)'}")
+    if scene.dynamics is not None:
+        dyn = scene.dynamics
+        lines.append(f"  dynamics: 0 .. {dyn.to:g} s, output every {dyn.output_step:g} s "
+                     f"({len(dyn.instants)} instants), {dyn.method} at rtol {dyn.rtol:g}; "
+                     + ", ".join(f"{d.name} from {d.from_value:g} at {d.start_rate:g}/s, "
+                                 + _driver_force(d) for d in scene.drivers))
     if scene.present_but_off:
         lines.append(f"  present but off: {', '.join(scene.present_but_off)}")
     if fit_parameters:
@@ -129,6 +135,18 @@ def describe(scene, mob, warnings=(), fit_parameters=()) -> str:
             lines.append(f"  loss: {options.loss}, f_scale {options.f_scale:g} sigma")
     lines += [f"  warning: {w}" for w in warnings]
     return "\n".join(lines)
+
+
+def _driver_force(driver) -> str:
+    """A dynamics driver's force as ``check`` says it."""
+    if driver.force is not None:
+        return f"force {driver.force:g}"
+    if driver.force_law is not None:
+        fl = driver.force_law
+        return f"force {fl.law} {fl.from_value:g} -> {fl.to_value:g} over {fl.duration:g} s"
+    if driver.force_log is not None:
+        return f"force from log {'.'.join(driver.force_log)} x {driver.scale:g}"
+    return "free"
 
 
 def fit_table(result) -> str:

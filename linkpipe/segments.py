@@ -62,6 +62,8 @@ def segment_steps(scene: Scene) -> int:
 
 def why_whole(scene: Scene) -> str:
     """Why ``scene``'s sweep is solved whole rather than in segments ("" when it can be)."""
+    if scene.dynamics is not None:
+        return "dynamics: the motion is integrated over the whole run"
     if scene.measurements:
         return "measurements: their RMS and maximum span the sweep"
     if scene.solver.derivatives == "finite_difference":

@@ -39,6 +39,8 @@ class Stages:
 
     @classmethod
     def of(cls, scene: Scene) -> "Stages":
+        if scene.dynamics is not None:  # the motion is computed: every order, and its forces
+            return cls(velocity=True, acceleration=True, forces=True)
         eff = set(scene.effects)
         out = scene.outputs
         vectors = bool(out.vectors)
@@ -88,7 +90,7 @@ def finished(scene: Scene, model, segment: int, seconds: dict, tell=None,
 def finish(scene: Scene, model, motion: Kinematics, constants: ForceConstants | None = None,
            wanted: frozenset | None = None, *, reused: bool = False, seconds: dict | None = None,
            tell=None, time_axis: tuple | None = None,
-           step_numbers: np.ndarray | None = None) -> Result:
+           step_numbers: np.ndarray | None = None, forces=None) -> Result:
     """The Result of a solved motion: forces -> status -> Result, the one place it is done.
 
     ``motion``: the solved motion (:class:`linkpipe.stage1.Kinematics`: stage 1 of a whole
@@ -100,7 +102,9 @@ def finish(scene: Scene, model, motion: Kinematics, constants: ForceConstants | 
     ``reused``: ``motion`` is a stage 1 reused across calls (a fit's trials): the force stage
     keeps what it may in ``motion.force_cache``. ``seconds``: stage name -> wall seconds, added
     to; ``tell(stage)``: told as the force stage starts. ``time_axis``: (time, note) where
-    ``motion`` holds a segment of the sweep, with the segment's ``step_numbers``.
+    ``motion`` holds a segment of the sweep, with the segment's ``step_numbers``. ``forces``:
+    the force stage's result where the producer of the motion computed it (forward dynamics:
+    the applied force in ``input_force`` and ``energy_error`` added); else computed here.
 
     A step's status is decided once (:func:`linkpipe.status.assign`): the stages' verdicts,
     the residual against the tolerance (of the mechanism's size, per row with ``constants``),
@@ -108,8 +112,7 @@ def finish(scene: Scene, model, motion: Kinematics, constants: ForceConstants | 
     are finite.
     """
     seconds = seconds if seconds is not None else {}
-    forces = None
-    if Stages.of(scene).forces:
+    if forces is None and Stages.of(scene).forces:
         if tell is not None:
             tell("forces")
         t0 = _time.perf_counter()

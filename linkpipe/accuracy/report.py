@@ -161,9 +161,14 @@ def run_accuracy(path, out: pathlib.Path = pathlib.Path("outputs"), quick: bool 
     out = output_folder(out)  # before the ladder: a wrong --out is said at once
     if quick:
         repeats = min(repeats, 3)
-    ladder = measure(scene, quick=quick, repeats=repeats,
-                     echo=lambda line: print(line, file=sys.stderr, flush=True))
-    print(header(ladder))
+    echo = lambda line: print(line, file=sys.stderr, flush=True)  # noqa: E731
+    if scene.dynamics is not None:  # the integrator's rtol ladder (accuracy/dynamics.py)
+        from .dynamics import header as describe, measure_dynamics
+
+        ladder = measure_dynamics(scene, quick=quick, repeats=min(repeats, 3), tell=echo)
+    else:
+        ladder, describe = measure(scene, quick=quick, repeats=repeats, echo=echo), header
+    print(describe(ladder))
     print(table(ladder))
     if orders_line(ladder):
         print(orders_line(ladder))
@@ -176,7 +181,7 @@ def run_accuracy(path, out: pathlib.Path = pathlib.Path("outputs"), quick: bool 
     h5 = out / f"{scene.name}_accuracy.h5"
     rrd = out / f"{scene.name}_accuracy.rrd"
     store.write_h5(ladder, h5)
-    store.write_rrd(ladder, rrd, table_markdown=header(ladder, True) + "\n\n" + table(ladder, True, compact=True))
+    store.write_rrd(ladder, rrd, table_markdown=describe(ladder, True) + "\n\n" + table(ladder, True, compact=True))
     print(f"  wrote {h5}, {rrd}")
     failed = [r.label for r in ladder.rows if r.failure]
     if failed:

@@ -9,6 +9,7 @@ import numpy as np
 from . import units
 from .keys import EFFECT_NEEDS, LENGTH_DRIVER_EXAMPLES, _Table, _show, _suggest, _table_ref
 from .timing import check_not_timed
+from .dynamics import check_not_dynamic
 from .tables import Driver, EFFECTS, Input, KINEMATIC_ORDERS, Load, Mass, Outputs, SOLVER_CHOICES, Solver
 
 
@@ -33,7 +34,7 @@ class MotionTables:
         drivers = [self.driver(table) for table in tables]
         first = drivers[0]
         for table, driver in zip(tables[1:], drivers[1:]):
-            if self.time is not None:
+            if self.time is not None or self.dynamics is not None:
                 break  # every driver has the instants of [time]
             if driver.steps != first.steps:
                 raise table.error("step" if table.has("step") else "steps",
@@ -66,10 +67,14 @@ class MotionTables:
                               "drive the direction from a point to a moving point")
         if kind == "distance":
             self.check_distance_bodies(table, points)
-        if self.time is not None:
+        if self.dynamics is not None:
+            fields = self.dynamic_driver(table, kind, self.dynamics)
+        elif self.time is not None:
+            check_not_dynamic(table)
             fields = self.timed_driver(table, kind, self.time, self.logs)
         else:
             check_not_timed(table)
+            check_not_dynamic(table)
             start, stop = table.number("from"), table.number("to")
             steps, step = self.driver_steps(table, start, stop)
             fields = dict(from_value=start, to_value=stop, steps=steps, step=step,

@@ -19,10 +19,11 @@ from .springs import SpringTables
 from .friction import FrictionTables
 from . import units
 from .timing import MeasurementTables, TimeTables
+from .dynamics import DynamicsTables
 
 
 class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTables,
-              MeasurementTables, FrictionTables):
+              MeasurementTables, FrictionTables, DynamicsTables):
     """Read one scene; the table readers run in dependency order (names before their users)."""
 
     def __init__(self, data: dict, text: str, path: str):
@@ -30,6 +31,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
         self.points: dict[str, Point] = {}
         self.links: dict[str, Link] = {}
         self.time = None
+        self.dynamics = None
         self.logs = {}
 
 
@@ -117,6 +119,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
         if self.top("study") is not None:
             self.table("study")  # its keys; linkpipe.study reads and checks the values
         self.logs = self.log_tables()
+        self.dynamics = self.dynamics_table()
         self.time = self.time_table(self.logs)
         drivers = self.driver_tables()
         solver = self.solver_table()
@@ -133,7 +136,8 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                      sliders=sliders, drivers=drivers, solver=solver, effects=effects,
                      gravity=gravity, springs=springs, masses=masses, loads=loads,
                      outputs=outputs, torsion_springs=torsion_springs, time=self.time,
-                     logs=tuple(self.logs.values()), friction=friction, warnings=self.warnings(gravity, effects, drivers),
+                     logs=tuple(self.logs.values()), friction=friction, dynamics=self.dynamics,
+                     warnings=self.warnings(gravity, effects, drivers),
                      measurements=self.measurement_tables(drivers, springs, torsion_springs,
                                                           sliders, effects))
 
@@ -151,8 +155,13 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                            "its velocity and "
                            "acceleration are those at every step (the contract's instantaneous "
                            "state); give rate = 0 for a driver that does not move")
+        if self.dynamics is not None:  # the drivers' forces are generalized forces
+            out += [f'{self.path}: [drivers "{d.name}"] input is not used with [dynamics]: its '
+                    "force is the driver's own generalized force (a torque for an angle, an "
+                    "axial force for a distance or coordinate); remove input, or give force in "
+                    "those terms" for d in drivers if d.input is not None]
         moving = [d for d in drivers if d.from_value != d.to_value]
-        if self.time is None and drivers and drivers[0].steps > 1 and not moving:
+        if self.dynamics is None and self.time is None and drivers and drivers[0].steps > 1 and not moving:
             out.append(f"{self.path}: every driver is held (from = to): the sweep is "
                        f"{drivers[0].steps} identical steps; use steps = 1 for a single "
                        "position, or give a driver from != to to sweep")

@@ -116,11 +116,51 @@ class Driver:
     #: column's ``[[logs]] units`` in the driver's units, 1 without)
     offset: float = 0.0
     unit_factor: float = 1.0
+    #: with [dynamics]: the start velocity (driver units per second) and the actuator's
+    #: generalized force: a constant ``force``, a ``force_law`` or a ``force_log`` (log, column)
+    #: times ``scale``; all None: free (no actuator force)
+    start_rate: float = 0.0
+    force: float | None = None
+    force_law: "ForceLaw | None" = None
+    force_log: tuple[str, str] | None = None
+
+    @property
+    def free(self) -> bool:
+        """With [dynamics]: no actuator force on this driver."""
+        return self.force is None and self.force_law is None and self.force_log is None
 
     @property
     def is_angle(self) -> bool:
         """Whether the driven value is an angle (degrees in the file, radians inside)."""
         return self.kind == "angle"
+
+
+@dataclass(frozen=True)
+class ForceLaw:
+    """``force_law``: the force goes from ``from_value`` to ``to_value`` by ``law`` (one of
+    :data:`LAWS`) over the first ``duration`` seconds of [dynamics], then stays at ``to_value``."""
+
+    law: str
+    from_value: float
+    to_value: float
+    duration: float
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """``[dynamics]``: integrate from 0 to ``to`` s, the motion stored at ``instants`` (S,)
+    = 0, output_step, ... (``to`` itself where it lands within 1e-9 of a step), the
+    integrator's relative tolerance ``rtol`` and ``method`` (:data:`DYNAMICS_METHODS`)."""
+
+    to: float
+    output_step: float
+    rtol: float
+    method: str = "DOP853"
+    instants: np.ndarray = field(default=None, compare=False, repr=False)
+
+
+#: the integrators of ``[dynamics] method`` (scipy.integrate.solve_ivp's names; first = default)
+DYNAMICS_METHODS = ("DOP853", "Radau")
 
 
 #: the motion laws of ``[[drivers]] law`` (value = from + (to - from) f(tau) over [time])
@@ -342,6 +382,7 @@ class Scene:
     logs: tuple[LogData, ...] = ()
     measurements: tuple["Measurement", ...] = ()
     friction: tuple[Friction, ...] = ()
+    dynamics: Dynamics | None = None
 
     @property
     def point_names(self) -> tuple[str, ...]:

@@ -67,6 +67,8 @@ def plan(study) -> tuple[list | None, str]:
     scene = study.scene
     if scene.measurements or scene.time is not None:
         return None, "the scene has measurements or a [time] table"
+    if scene.dynamics is not None:
+        return None, "the scene has [dynamics]: each variant's motion is integrated on its own"
     slots = []
     for j, p in enumerate(study.parameters):
         slot = slot_of(scene, p.path)

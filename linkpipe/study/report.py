@@ -63,7 +63,9 @@ def study_table(study, path, seconds: float | None = None) -> str:
                 lines.append(f"  {label}: not finite at {len(col) - len(fin):,} variant(s)"
                              + (f" ({infinite:,} infinite: a division by zero or an overflow in "
                                 "the reduction?)" if infinite else " (no ok step, or NaN)"))
-    by_force = len(study.driver_names) > 0 and np.isfinite(f["peak_input_force"]).any()
+    # with [dynamics] the input force is the force applied, not one to keep low
+    by_force = (len(study.driver_names) > 0 and np.isfinite(f["peak_input_force"]).any()
+                and study.scene.dynamics is None)
     key_name = "peak_input_force" if by_force else study.metrics[0].name if study.metrics else None
     key = f["peak_input_force"][:, 0] if by_force else f[key_name] if key_name else None
     if key is not None and np.isfinite(key).any():

@@ -1,0 +1,45 @@
+"""The drivers' own forces over time: constant, a law, a log column, or none (free).
+
+Values are generalized forces in the drivers' internal units: a torque per radian for an angle
+driver, a force for a distance or coordinate driver (the scene's force and length units)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.drive import LAWS, log_spline
+
+
+class Forcing:
+    """``at(t)`` -> (nd,) the drivers' forces at time ``t`` (s)."""
+
+    def __init__(self, scene):
+        logs = {log.name: log for log in scene.logs}
+        self.parts = []
+        for d in scene.drivers:
+            if d.force is not None:
+                self.parts.append(("constant", float(d.force)))
+            elif d.force_law is not None:
+                self.parts.append(("law", d.force_law))
+            elif d.force_log is not None:
+                log = logs[d.force_log[0]]
+                self.parts.append(("log", log_spline(log.t, log.columns[d.force_log[1]] * d.scale,
+                                                     0.0)))
+            else:
+                self.parts.append(("free", 0.0))
+
+    def at(self, t: float) -> np.ndarray:
+        out = np.empty(len(self.parts))
+        for j, (kind, how) in enumerate(self.parts):
+            if kind == "law":
+                tau = min(max(t / how.duration, 0.0), 1.0)
+                out[j] = how.from_value + (how.to_value - how.from_value) * float(
+                    LAWS[how.law][0](np.asarray(tau)))
+            elif kind == "log":
+                out[j] = float(how(t))
+            else:
+                out[j] = how
+        return out
+
+    def over(self, t: np.ndarray) -> np.ndarray:
+        """(S, nd) at the instants ``t`` (S,)."""
+        return np.array([self.at(float(x)) for x in t]).reshape(len(t), len(self.parts))
