@@ -18,6 +18,7 @@ def describe_study(study) -> str:
              f"{study.batch_size:,}"]
     for j, (p, unit) in enumerate(zip(study.parameters, study.parameter_units())):
         how = (f"{p.spec[0]:g} .. {p.spec[1]:g} in {p.spec[2]} steps" if p.kind == "grid"
+               else f"tied to {p.spec[0]}" if p.kind == "tie"
                else f"{p.kind} {', '.join(f'{v:g}' for v in p.spec)}")
         lines.append(f"  parameter {p.address} = {p.initial:g} in the base: {how} "
                      f"(variants {study.values[:, j].min():.6g} .. {study.values[:, j].max():.6g}"
