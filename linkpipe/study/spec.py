@@ -220,8 +220,8 @@ def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:
         return scene, scene.name
     extra = sorted(set(data) - {"study", "scene", "optimize"})
     if extra:
-        raise SceneError(path, extra[0], None, "a study file holds [study] (and [scene] name, "
-                         "[optimize]) only", "put scene tables in the base scene")
+        raise SceneError(path, extra[0], None, "a study file holds [study] (and [scene] name) only "
+                         "(and [optimize] to optimise)", "put scene tables in the base scene")
     if not isinstance(raw["base"], str):
         raise SceneError(path, "study", "base", "expected a string (a path)",
                          'write base = "../basketball_goal.toml"')
