@@ -43,6 +43,8 @@ from .problem import FAILED, Problem
 HANDOVER = 1e-3
 #: the polish's first step and its end (fractions of each bound's width), its most iterations
 STEP_START, STEP_END, POLISH_ITERATIONS = 1e-2, 1e-10, 400
+#: generations without a better best (or less violation) after which the search hands over
+STALL = 60
 #: a constraint within this fraction of its metric's spread over the evaluations is active;
 #: a parameter within this fraction of its bound's width of a bound sits on it
 ACTIVE, ON_BOUND = 1e-6, 1e-7
@@ -240,7 +242,7 @@ def _search(problem: Problem, ev: Evaluator, judge: _Judge, merit, seed: int, pr
     """One differential evolution over the bounds; returns (the best free values, scipy's
     message)."""
     lo, hi = problem.lower, problem.upper
-    first_spread = []
+    first_spread, history = [], []
 
     def constraints(xT):  # (F, S) or (F,) -> (M, S) or (M,)
         one = np.ndim(xT) == 1
@@ -262,10 +264,17 @@ def _search(problem: Problem, ev: Evaluator, judge: _Judge, merit, seed: int, pr
             progress(ev.generation, float(finite.min()) if len(finite) else float("nan"))
         if not first_spread:
             first_spread.append(float(np.std(finite)) if len(finite) else 0.0)
-        if len(finite) < len(energies):
-            return False
         spread = np.ptp(result.population, axis=0) / (hi - lo)
-        return bool(spread.max() < HANDOVER or np.std(finite) <= problem.tol * (
+        if spread.max() < HANDOVER:  # gathered (on the closest variant, if none is feasible)
+            return True
+        # stalled: the best (or, with no feasible one, the least violation) no better for
+        # STALL generations
+        best = (0, float(finite.min())) if len(finite) else \
+            (1, float(judge.violation(np.arange(ev.n)).min()))
+        history.append(best)
+        if len(history) > STALL and not history[-1] < history[-1 - STALL]:
+            return True
+        return len(finite) == len(energies) and bool(np.std(finite) <= problem.tol * (
             abs(np.mean(finite)) + first_spread[0]))
 
     n = problem.n_free
