@@ -71,7 +71,7 @@ KEYS: dict[str, dict[str, str]] = {
                  "parameters": '{ "springs.left.k" = [0.0, 5000.0] }',
                  "tie": '{ "springs.right.k" = "springs.left.k" }',
                  "constraints": '["hold_open <= 0"]', "seed": "1",
-                 "population": "60", "generations": "300", "tol": "1e-8"},
+                 "population": "60", "generations": "300", "tol": "1e-4"},
     "measurements": {"name": '"cylinder_force"', "log": '"run3.p_force"', "scale": "1.0",
                      "of": '"input_force.boom_cylinder"', "sigma": "50.0"},
     "drivers.input": {"point": '"H"', "direction": "[0.0, 1.0]", "link": '"handle"'},

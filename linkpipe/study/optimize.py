@@ -8,16 +8,20 @@ A global search, then a local polish, both over the study's vectorised variants
   Dask); the constraints and the failed steps are scipy's constraint rows (Lampinen's
   feasibility rules: a feasible variant beats an infeasible one; two infeasible ones compare
   by their excesses), the objective is asked only of feasible variants. It hands over to the
-  polish when the population has gathered: its spread is below ``HANDOVER`` of each bound's
-  width, or its objectives' standard deviation below ``tol`` x (|their mean| + the first
-  generation's spread), or after ``generations``.
-- **polish**: a direct search on a mesh that shrinks (mesh adaptive direct search): each
-  iteration evaluates the point's neighbours along the axes and along as many random
-  orthonormal directions, both ways, as one batch, moves to the best (by the same feasibility
-  rules) and doubles the step, or halves it when none is better, down to ``STEP_END`` of each
-  bound's width. Random directions make it converge on the kinks of a peak (``max(abs(..))``)
-  and along a constraint's boundary, where a gradient method or one search along the axes
-  stops short.
+  polish when the population has gathered (its spread is below ``HANDOVER`` of each bound's
+  width), or its best has improved by less than ``STALL_GAIN`` of itself plus ``tol`` x the
+  first generation's spread of the objective in ``STALL`` generations (with no feasible
+  member: its least violation by less than ``STALL_GAIN`` of itself), or after
+  ``generations``. The search's box reaches ``MARGIN`` beyond the bounds, a value there
+  evaluated at the bound (see ``MARGIN``).
+- **polish**: CMA-ES (:mod:`cma`, ask/tell: each iteration's population one batch, ranked
+  by the same feasibility rules; CMA-ES needs only the ranks, and its covariance follows a
+  curved valley and the kinks of a peak ``max(abs(..))``, where a gradient method stops
+  short) in the bounds scaled to [0, 1], from the search's best: a coarse pass (to
+  ``STEP_MIDDLE`` of each bound's width); every value then within ``BOUND_SNAP`` of a bound
+  is put on it and held, and a coarse pass runs on the others (an optimum on a bound is
+  reached exactly); then a fine pass (to ``STEP_END``). A pass that stops short of its
+  tolerance starts again from its best (``CMA_RUNS`` runs of ``CMA_ITERATIONS``).
 
 Every evaluated variant is kept (:class:`Outcome`): values, metrics, failed steps, which
 generation (-1: the polish). Two objectives: the search runs once per weight of a
@@ -42,9 +46,21 @@ from .problem import FAILED, Problem
 #: fraction of its bound's width
 HANDOVER = 1e-3
 #: the polish's first step and its end (fractions of each bound's width), its most iterations
-STEP_START, STEP_END, POLISH_ITERATIONS = 1e-2, 1e-10, 400
+STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-6, 1e-9
+#: CMA-ES runs a polish pass may start (each from the last one's best) and their iterations
+CMA_RUNS, CMA_ITERATIONS = 6, 100
+#: the search's box reaches this far (a fraction of each bound's width) beyond the bounds;
+#: a value there is evaluated at the bound: scipy puts a trial outside its box anywhere in
+#: it at random, which keeps a population from settling on a bound; here the bound is a
+#: plateau it can settle on
+MARGIN = 0.1
+#: differential evolution's crossover probability: high, as the variables of a design are
+#: seldom separable (a spring's rate against its anchor's place is a curved valley)
+RECOMBINATION = 0.9
 #: generations without a better best (or less violation) after which the search hands over
-STALL = 60
+STALL, STALL_GAIN = 30, 1e-3
+#: the polish tries the values this close to a bound (a fraction of its width) on the bound
+BOUND_SNAP = 1e-2
 #: a constraint within this fraction of its metric's spread over the evaluations is active;
 #: a parameter within this fraction of its bound's width of a bound sits on it
 ACTIVE, ON_BOUND = 1e-6, 1e-7
@@ -241,19 +257,21 @@ def _chebyshev(judge: _Judge, a: str, b: str, w: float):
 def _search(problem: Problem, ev: Evaluator, judge: _Judge, merit, seed: int, progress):
     """One differential evolution over the bounds; returns (the best free values, scipy's
     message)."""
-    lo, hi = problem.lower, problem.upper
+    lo, width = problem.lower, problem.upper - problem.lower
     first_spread, history = [], []
 
-    def constraints(xT):  # (F, S) or (F,) -> (M, S) or (M,)
-        one = np.ndim(xT) == 1
-        g = judge.rows(ev(np.atleast_2d(np.asarray(xT).T) if not one else xT[None]))
-        return g[0] if one else g.T
+    def evaluate(uT):  # (F, S) or (F,) scaled, beyond the bounds by MARGIN: clipped to them
+        u = np.atleast_2d(np.asarray(uT).T) if np.ndim(uT) > 1 else np.asarray(uT)[None]
+        return ev(lo + np.clip(u, 0.0, 1.0) * width)
 
-    def objective(xT):  # asked only of feasible variants (already evaluated)
-        one = np.ndim(xT) == 1
-        f = merit(ev(np.atleast_2d(np.asarray(xT).T) if not one else xT[None]))
+    def constraints(uT):  # (F, S) or (F,) -> (M, S) or (M,)
+        g = judge.rows(evaluate(uT))
+        return g[0] if np.ndim(uT) == 1 else g.T
+
+    def objective(uT):  # asked only of feasible variants (already evaluated)
+        f = merit(evaluate(uT))
         f = np.where(np.isfinite(f), f, np.inf)
-        return f[0] if one else f
+        return f[0] if np.ndim(uT) == 1 else f
 
     def gathered(intermediate_result) -> bool:
         result = intermediate_result
@@ -264,27 +282,32 @@ def _search(problem: Problem, ev: Evaluator, judge: _Judge, merit, seed: int, pr
             progress(ev.generation, float(finite.min()) if len(finite) else float("nan"))
         if not first_spread:
             first_spread.append(float(np.std(finite)) if len(finite) else 0.0)
-        spread = np.ptp(result.population, axis=0) / (hi - lo)
+        spread = np.ptp(np.clip(result.population, 0.0, 1.0), axis=0)
         if spread.max() < HANDOVER:  # gathered (on the closest variant, if none is feasible)
             return True
-        # stalled: the best (or, with no feasible one, the least violation) no better for
-        # STALL generations
+        # stalled: the best (or, with no feasible one, the least violation) better by less
+        # than STALL_GAIN of itself (plus tol x the first generation's spread) in STALL
+        # generations
+        scale = problem.tol * first_spread[0]
         best = (0, float(finite.min())) if len(finite) else \
             (1, float(judge.violation(np.arange(ev.n)).min()))
         history.append(best)
-        if len(history) > STALL and not history[-1] < history[-1 - STALL]:
-            return True
-        return len(finite) == len(energies) and bool(np.std(finite) <= problem.tol * (
-            abs(np.mean(finite)) + first_spread[0]))
+        if len(history) > STALL and history[-1 - STALL][0] == best[0]:
+            then = history[-1 - STALL][1]
+            if not best[1] < then - STALL_GAIN * abs(then) - (scale if best[0] == 0 else 0.0):
+                return True
+        return False
 
     n = problem.n_free
     result = differential_evolution(
-        objective, list(zip(lo, hi)), constraints=[NonlinearConstraint(constraints, -np.inf, 0.0)],
+        objective, [(-MARGIN, 1.0 + MARGIN)] * n,
+        constraints=[NonlinearConstraint(constraints, -np.inf, 0.0)],
         popsize=max(1, -(-problem.population // n)), maxiter=problem.generations, tol=0.0,
         atol=0.0, polish=False, vectorized=True, updating="deferred", rng=seed,
-        init="sobol" if n > 1 else "latinhypercube", callback=gathered)
+        recombination=RECOMBINATION, init="latinhypercube",
+        callback=gathered)
     ev.generation += 1  # the next run's (or the polish's) evaluations start a new generation
-    return np.asarray(result.x, dtype=float), str(result.message)
+    return lo + np.clip(result.x, 0.0, 1.0) * width, str(result.message)
 
 
 def _key(judge: _Judge, merit, idx) -> np.ndarray:
@@ -296,27 +319,68 @@ def _key(judge: _Judge, merit, idx) -> np.ndarray:
 
 
 def _polish(problem: Problem, ev: Evaluator, judge: _Judge, merit, x0, rng) -> None:
-    """The direct search from ``x0`` (free values): see the module doc. Its evaluations are
-    generation -1."""
+    """From ``x0`` (free values): see the module doc. Its evaluations are generation -1."""
     lo, width = problem.lower, problem.upper - problem.lower
-    F = problem.n_free
     keep, ev.generation = ev.generation, -1
-    u = (np.asarray(x0) - lo) / width
-    here = _key(judge, merit, ev(lo + u * width))[0]
-    step = STEP_START
-    for _ in range(POLISH_ITERATIONS):
-        if step < STEP_END:
+    u = np.clip((np.asarray(x0) - lo) / width, 0.0, 1.0)
+    free, fine = np.ones(problem.n_free, dtype=bool), False
+    while True:  # at most one pass per bound reached, and a fine one
+        near = free & ((u < BOUND_SNAP) | (u > 1 - BOUND_SNAP))
+        if near.any():  # a new face: those values on their bounds, a coarse pass on the rest
+            u, free, fine = np.where(near, np.round(u), u), free & ~near, False
+        ev(lo + u * width)
+        if not free.any():
             break
-        q, _r = np.linalg.qr(rng.normal(size=(F, F)))
-        D = np.concatenate([np.eye(F), -np.eye(F), q.T, -q.T])
-        trial = np.clip(u + step * D, 0.0, 1.0)
-        keys = _key(judge, merit, ev(lo + trial * width))
-        k = np.lexsort((keys[:, 1], keys[:, 0]))[0]
-        if tuple(keys[k]) < tuple(here):
-            u, here, step = trial[k], keys[k], min(2 * step, 0.1)
-        else:
-            step /= 2
+        _cma(problem, ev, judge, merit, u, free, rng, STEP_MIDDLE * 100 if fine else STEP_START,
+             STEP_END if fine else STEP_MIDDLE)
+        u = (ev.arrays()[0][_best_of(judge, merit, np.arange(ev.n)), :problem.n_free] - lo) / width
+        reached = (free & ((u < BOUND_SNAP) | (u > 1 - BOUND_SNAP))).any()
+        if fine and not reached:
+            break
+        fine = fine or not reached
     ev.generation = keep
+
+
+def _cma(problem: Problem, ev: Evaluator, judge: _Judge, merit, u0, free, rng, sigma, tolx) -> None:
+    """CMA-ES over the parameters ``free`` (a mask) from ``u0`` (scaled to the bounds' [0,
+    1]), the others held; each iteration's population one batch, ranked by the feasibility
+    rules (CMA-ES needs only the ranks)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # cma's note that matplotlib is not installed
+        import cma
+
+    lo, width = problem.lower, problem.upper - problem.lower
+    n = int(free.sum())
+    u = np.array(u0, dtype=float)
+    for _ in range(CMA_RUNS):  # a run that stops short of tolx starts again from its best
+        options = {"bounds": [0.0, 1.0], "tolx": tolx, "tolfun": 0.0, "tolfunhist": 0.0,
+                   "tolflatfitness": 20, "tolupsigma": 1e300, "maxiter": CMA_ITERATIONS,
+                   "popsize": max(16, 8 * n), "seed": int(rng.integers(1, 2**31 - 1)),
+                   "verbose": -9}
+        es = cma.CMAEvolutionStrategy(list(u[free]), sigma, options)
+        best = (np.inf, np.inf)
+        while not es.stop():
+            trial = np.clip(np.array(es.ask()), 0.0, 1.0)
+            full = np.tile(u, (len(trial), 1))
+            full[:, free] = trial
+            keys = _key(judge, merit, ev(lo + full * width))
+            order = np.lexsort((keys[:, 1], keys[:, 0]))
+            if tuple(keys[order[0]]) < best:
+                best, top = tuple(keys[order[0]]), full[order[0]]
+            rank = np.empty(len(keys))
+            rank[order] = np.arange(len(keys))
+            es.tell(list(trial), list(rank))
+        if best < (np.inf, np.inf):
+            u = top
+        if "tolx" in es.stop():
+            return
+
+
+def _best_of(judge: _Judge, merit, idx) -> int:
+    keys = _key(judge, merit, idx)
+    return int(idx[np.lexsort((keys[:, 1], keys[:, 0]))[0]])
 
 
 def _outcome(problem: Problem, ev: Evaluator, judge: _Judge, messages, seconds) -> Outcome:
@@ -336,7 +400,7 @@ def _outcome(problem: Problem, ev: Evaluator, judge: _Judge, messages, seconds) 
         best = int(pareto[0])
     else:
         f = np.where(feasible & np.isfinite(first), first, np.inf)
-        best = int(np.argmin(f))
+        best = len(f) - 1 - int(np.argmin(f[::-1]))  # the last of equals: a bound snapped to
     G = int(generation.max()) + 1 if len(generation) else 0
     population_best = np.full(G, np.nan)
     for g in range(G):

@@ -127,13 +127,13 @@ def load_problem(path, catalog_of=None) -> Problem:
     lower = np.array([p.spec[0] for p in bounded])
     upper = np.array([p.spec[1] for p in bounded])
     seed = _whole(path, raw, "seed", 0, 0)
-    population = _whole(path, raw, "population", max(40, 10 * len(bounded)), 5)
+    population = _whole(path, raw, "population", max(40, 20 * len(bounded)), 5)
     generations = _whole(path, raw, "generations", 1000, 1)
-    tol = raw.get("tol", 1e-6)
+    tol = raw.get("tol", 1e-4)
     if not _is_number(tol) or not 0 < tol < 1:
         raise SceneError(path, "optimize", "tol", f"expected a number in (0, 1), got {tol!r}",
-                         "write e.g. tol = 1e-6 (the population's spread, relative, where the "
-                         "global search hands over to the polish)")
+                         "write e.g. tol = 1e-4 (the objective's spread in the population, over "
+                         "the first generation's, where the search hands over to the polish)")
     failed = Metric(FAILED, "count_failed()", compile_metric(path, FAILED, "count_failed()", catalog))
     corners = spec.with_ties(params, np.concatenate(
         [np.stack([lower, upper]), np.zeros((2, len(params) - len(bounded)))], axis=1))
