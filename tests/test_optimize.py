@@ -321,3 +321,29 @@ def test_an_infeasible_problem_names_the_closest_variant(tmp_path, capsys):
     assert "no variant meets the constraints" in err and "points.S.x = 0.3" in err
     assert "anchor_x = 0.3" in err and "must be >= 0.5" in err
     assert not any(p for p in out.iterdir() if not p.name.startswith("."))
+
+
+def test_the_recording_marks_the_best_and_shows_the_progress(tmp_path):
+    """<name>_optimize.rrd: each metric against each parameter (the best ringed where it is
+    drawn), the generations' best on the ``generation`` timeline, one tab per metric."""
+    from test_rrd import Recording
+
+    out = tmp_path / "out"
+    assert main(["optimize", str(lever(tmp_path)), "--out", str(out), "--quiet"]) == 0
+    rec = Recording(out / "lever_optimize.rrd")
+    with h5py.File(out / "lever_optimize.h5", "r") as h5:
+        values, objective = h5["parameter_value"][()], h5["objective"][()]
+        best = int(h5.attrs["best_evaluation"])
+        progress = h5["population_best"][()]
+    k = values[:, 0]
+    ring = np.array(rec.static("/study/vs/springs.balancer.k/peak/best", "Points2D:positions").tolist())
+    # peak spans decades (1e-9 at the balance): a log scale, the best at the bottom
+    assert ring[0] == pytest.approx([(k[best] - k.min()) / np.ptp(k), 1.0], abs=1e-6)
+    axes = list(rec.static("/study/vs/springs.balancer.k/peak/axes", "Points2D:labels"))
+    assert axes[5].endswith("(log, up)") and float(axes[3]) == pytest.approx(objective.max(), rel=1e-3)
+    frame = rec.store.reader(index="generation", contents="/study/progress/**").to_pandas()
+    logged = np.concatenate(frame["/study/progress/population_best:Scalars:scalars"].dropna().to_numpy())
+    np.testing.assert_allclose(logged, progress[np.isfinite(progress)])
+    titles = rec.view_titles()
+    assert {"springs.balancer.k [force/length]", "points.S.x [length]"} <= titles
+    assert "/mechanism/links/lever" in rec.entities  # the best variant's motion
