@@ -1,4 +1,4 @@
-"""Command line: ``python -m linkpipe run|check|accuracy|fit|study``. Thin: parses, calls,
+"""Command line: ``python -m linkpipe run|check|accuracy|fit|study|optimize``. Thin: parses, calls,
 reports (the texts: :mod:`linkpipe.report`)."""
 from __future__ import annotations
 
@@ -69,6 +69,13 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     _executor_options(study)
     study.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
     study.add_argument("--quiet", action="store_true", help="print only errors")
+    opt = sub.add_parser("optimize", help="search [optimize] parameters for the best design: "
+                         "<name>_optimize.h5, .toml and .rrd")
+    opt.add_argument("file", help="a study file or scene with [optimize] and [study.metrics]")
+    opt.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _executor_options(opt)
+    opt.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
+    opt.add_argument("--quiet", action="store_true", help="print only errors")
     return p
 
 
@@ -134,7 +141,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     if args.command == "run":
         args.rrd_max_steps, args.rrd_max_mb = recording_caps(args.rrd_max_steps, args.rrd_max_mb)
     command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
-               "study": _study}[args.command]
+               "study": _study, "optimize": _optimize}[args.command]
     previous = _signals_as_interrupts()
     try:
         with using(getattr(args, "chunk_threads", 0)):
@@ -555,6 +562,36 @@ def _study(args) -> int:
         if not args.quiet:
             print(study_table(study, path, time.perf_counter() - t0))
             print("  wrote " + ", ".join(written))
+    return outcome.code
+
+
+def _optimize(args) -> int:
+    from .executors import Pool
+    from .stores import optimize as store, output_folder
+    from .study.optimize import optimize
+    from .study.problem import load_problem
+    from .study.report import optimize_table
+
+    outcome = _Outcome()
+    with _reporting(args.file, outcome):
+        t0 = time.perf_counter()
+        problem = load_problem(args.file)
+        out = output_folder(args.out)  # a wrong --out before the search
+        with Pool(args.workers, args.scheduler) as pool:
+            found = optimize(problem, pool)  # Infeasible: exit 1, nothing written
+        name = problem.study.name
+        paths = [out / f"{name}_optimize.h5", out / f"{name}_optimize.toml"]
+        store.write_h5(found, paths[0])
+        store.write_toml(found, paths[1])
+        if not args.no_rrd:
+            from .stores.rrd import study as study_rrd
+            from .study.view import optimize_view
+
+            paths.append(out / f"{name}_optimize.rrd")
+            study_rrd.write(optimize_view(found), paths[2])
+        if not args.quiet:
+            print(optimize_table(found, time.perf_counter() - t0))
+            print("  wrote " + ", ".join(map(str, paths)))
     return outcome.code
 
 

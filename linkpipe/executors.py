@@ -64,6 +64,42 @@ def _on_one_thread(fn, shared, *args):
         return fn(shared, *args)
 
 
+class Pool:
+    """One executor kept for many rounds of tasks (an optimiser's generations): here, or one
+    Dask cluster (``workers`` / ``scheduler`` as :func:`dask_client`) started once. ``share``
+    sends the argument every task shares (once to each worker); ``map`` runs one round and
+    returns the results in the tasks' order."""
+
+    def __init__(self, workers: int | None = None, scheduler: str | None = None):
+        self.dask = bool(workers or scheduler)
+        self.workers, self.scheduler = workers, scheduler
+        self._stack = contextlib.ExitStack()
+        self.client = None
+
+    def __enter__(self):
+        if self.dask:
+            self.client = self._stack.enter_context(dask_client(self.workers, self.scheduler))
+        return self
+
+    def __exit__(self, *exc):
+        return self._stack.__exit__(*exc)
+
+    @property
+    def n_workers(self) -> int:
+        """How many tasks run at once (1 here)."""
+        return max(1, len(self.client.scheduler_info()["workers"])) if self.client else 1
+
+    def share(self, shared):
+        return self.client.scatter(shared, broadcast=True) if self.client else shared
+
+    def map(self, fn, shared, tasks) -> list:
+        if self.client is None:
+            return [fn(shared, *args) for args in tasks]
+        futures = [self.client.submit(_on_one_thread, fn, shared, *args, pure=False)
+                   for args in tasks]
+        return self.client.gather(futures)
+
+
 EXECUTORS = {"in_process": in_process, "dask": on_dask}
 
 

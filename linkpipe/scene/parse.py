@@ -118,6 +118,8 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
             self.table("fit")  # its keys; linkpipe.fit reads and checks the values
         if self.top("study") is not None:
             self.table("study")  # its keys; linkpipe.study reads and checks the values
+        if self.top("optimize") is not None:
+            self.table("optimize")  # its keys; linkpipe.study.optimize reads the values
         self.logs = self.log_tables()
         self.dynamics = self.dynamics_table()
         self.time = self.time_table(self.logs)

@@ -14,7 +14,7 @@ study.
 from __future__ import annotations
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from ..pipeline import DEFAULT_THREADS
 from ..status import NO_ASSEMBLY
@@ -29,11 +29,21 @@ def wanted_series(study) -> list[tuple[str, tuple]]:
     return sorted({r for m in study.metrics for r in references(m.tree)})
 
 
+_POOLS: list = []  # one ThreadpoolController per process: building one scans the loaded
+# libraries (4 ms, most of a small batch's time: an optimiser's polish solves many)
+
+
+def _blas_limit():
+    if not _POOLS:
+        _POOLS.append(ThreadpoolController())
+    return _POOLS[0].limit(limits=DEFAULT_THREADS, user_api="blas")
+
+
 def solve_batch(study, lo: int, hi: int) -> dict[str, np.ndarray]:
     """Rows ``{variable: (hi - lo, ...)}`` of variants ``lo .. hi - 1``: all at once on the
     vectorised paths (:mod:`.paths`) where the study allows it, else variant by variant. The
     BLAS pool is set once for the batch (as :func:`linkpipe.solve` sets it for a scene)."""
-    with threadpool_limits(limits=DEFAULT_THREADS, user_api="blas"):
+    with _blas_limit():
         if study.slots is not None:
             status, arrays = variant_arrays(study, study.slots, lo, hi)
             batch = BatchArrays(status, arrays.get("input_force"), arrays["position"],

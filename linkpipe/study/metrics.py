@@ -89,5 +89,6 @@ def batch_metrics(study, arrays: BatchArrays, pins) -> dict[str, np.ndarray]:
         return np.where(ok, arrays.series[(var, index)], np.nan)
 
     for m in study.metrics:
-        out[m.name] = np.broadcast_to(reductions.evaluate(m.tree, series), (V,)).astype(float)
+        out[m.name] = np.broadcast_to(reductions.evaluate(m.tree, series, failed),
+                                      (V,)).astype(float)
     return out

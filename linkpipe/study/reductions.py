@@ -2,6 +2,10 @@
 
 A reduction is a small expression: numbers, ``+ - * /``, parentheses, the functions ``max``,
 ``min``, ``mean``, ``rms`` and ``percentile(x, q)`` (a series to one number), ``abs`` (either),
+the values at one pose ``at(x, step)`` (step 0 first, -1 the last) and ``at_driver(x, driver,
+value)`` (x interpolated linearly where the driver's value first passes ``value``, in the
+driver's units: NaN where the ok steps never reach it), ``count_failed()`` (the steps that are
+not ok),
 and references to one stored series ``<variable>[.<label>...]``: a variable of the output
 contract with the step axis first and one label per further dimension (``input_force.crank``,
 ``spring_force.left``, ``position.P.x``, ``joint_force.B@upper.y``, ``gravity_energy``). The
@@ -17,7 +21,8 @@ Grammar::
     expr  := term (("+" | "-") term)*
     term  := unary (("*" | "/") unary)*
     unary := "-" unary | atom
-    atom  := NUMBER | FUNC "(" expr ["," NUMBER] ")" | REF | "(" expr ")"
+    atom  := NUMBER | FUNC "(" expr ["," NUMBER] ")" | "at_driver(" expr "," NAME "," NUMBER ")"
+           | "count_failed()" | REF | "(" expr ")"
 """
 from __future__ import annotations
 
@@ -29,7 +34,9 @@ from ..errors import SceneError
 from ..scene.keys import _suggest
 
 REDUCE = ("max", "min", "mean", "rms", "percentile")
-FUNCTIONS = REDUCE + ("abs",)
+#: a series to its value at one pose, and the count of failed steps
+POSE = ("at", "at_driver", "count_failed")
+FUNCTIONS = REDUCE + POSE + ("abs",)
 _TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
                     r"|(?P<name>[A-Za-z_][\w@]*(?:\.[\w@]+)*)|(?P<op>[-+*/(),]))")
 
@@ -98,12 +105,24 @@ class _Parser:
         if text not in FUNCTIONS:
             raise ReductionError(f"unknown function {text!r} ({_suggest(text, FUNCTIONS)})")
         self.take("(")
+        if text == "count_failed":
+            self.take(")")
+            return ("call", text, [])
         args = [self.expr()]
-        if text == "percentile":
+        if text == "at_driver":
+            self.take(",")
+            kind, driver = self.take()
+            if kind != "name":
+                raise ReductionError(f"at_driver(x, driver, value): name a driver, not {driver!r}")
+            args.append(("driver", driver))
+        if text in ("percentile", "at", "at_driver"):
             self.take(",")
             q = self.unary()
             if q[0] != "num" and not (q[0] == "neg" and q[1][0] == "num"):
-                raise ReductionError("percentile(x, q): q must be a number")
+                raise ReductionError({"percentile": "percentile(x, q): q must be a number",
+                                      "at": "at(x, step): step must be a number",
+                                      "at_driver": "at_driver(x, driver, value): value must be "
+                                                   "a number"}[text])
             args.append(q)
         self.take(")")
         return ("call", text, args)
@@ -129,27 +148,31 @@ def parse(text: str):
     return node
 
 
-def resolve(node, catalog: dict):
+def resolve(node, catalog: dict, n_steps: int | None = None):
     """Return ``(tree, kind)``: references resolved to ``("ref", variable, index, text)`` and
     the tree's kind ("series" or "scalar"). ``catalog``: {variable: (dims, {dim: labels})} of
-    the stored variables (step axis first)."""
+    the stored variables (step axis first); ``n_steps``: the sweep's steps (``at``'s range)."""
     tag = node[0]
     if tag == "num":
         return node, "scalar"
     if tag == "ref":
         return _reference(node[1], catalog), "series"
     if tag == "neg":
-        inner, kind = resolve(node[1], catalog)
+        inner, kind = resolve(node[1], catalog, n_steps)
         return ("neg", inner), kind
     if tag == "bin":
-        (a, ka), (b, kb) = resolve(node[2], catalog), resolve(node[3], catalog)
+        (a, ka), (b, kb) = resolve(node[2], catalog, n_steps), resolve(node[3], catalog, n_steps)
         return ("bin", node[1], a, b), "series" if "series" in (ka, kb) else "scalar"
     name, args = node[1], node[2]
-    inner, kind = resolve(args[0], catalog)
+    if name == "count_failed":
+        return ("call", name, []), "scalar"
+    inner, kind = resolve(args[0], catalog, n_steps)
     if name == "abs":
         return ("call", name, [inner]), kind
     if kind != "series":
         raise ReductionError(f"{name}() reduces a stored series over the steps; it got a number")
+    if name in ("at", "at_driver"):
+        return _pose(name, inner, args, catalog, n_steps), "scalar"
     q = args[1] if len(args) > 1 else None
     if q is not None:
         value = q[1] if q[0] == "num" else -q[1][1]
@@ -157,6 +180,29 @@ def resolve(node, catalog: dict):
             raise ReductionError(f"percentile q must be within 0..100, got {value:g}")
         q = value
     return ("call", name, [inner] + ([q] if q is not None else [])), "scalar"
+
+
+def _number(node) -> float:
+    return node[1] if node[0] == "num" else -node[1][1]
+
+
+def _pose(name: str, inner, args, catalog: dict, n_steps):
+    """``("call", "at", [x, step])`` or ``("call", "at_driver", [x, driver series, value])``."""
+    value = _number(args[-1])
+    if name == "at":
+        if value != int(value):
+            raise ReductionError(f"at(x, step): step is a whole number (0 the first step, -1 the "
+                                 f"last), got {value:g}")
+        if n_steps is not None and not -n_steps <= value < n_steps:
+            raise ReductionError(f"at(x, step): step {value:g} is outside the sweep's {n_steps} "
+                                 f"steps (0 .. {n_steps - 1}, or -1 .. -{n_steps} from the end)")
+        return ("call", name, [inner, int(value)])
+    driver = args[1][1]
+    names = catalog.get("driver_value", ((), {"driver": []}))[1].get("driver", [])
+    if driver not in names:
+        raise ReductionError(f"at_driver: no driver {driver!r} ({_suggest(driver, names)})")
+    return ("call", name, [inner, ("ref", "driver_value", (names.index(driver),),
+                                   f"driver_value.{driver}"), value])
 
 
 def _reference(text: str, catalog: dict):
@@ -189,30 +235,55 @@ def references(tree) -> list[tuple[str, tuple]]:
         return [(tree[1], tree[2])]
     if tree[0] == "num":
         return []
-    children = tree[1:] if tree[0] == "neg" else tree[2:] if tree[0] == "bin" else tree[2][:1]
+    children = (tree[1:] if tree[0] == "neg" else tree[2:] if tree[0] == "bin"
+                else tree[2][:2] if tree[1] == "at_driver" else tree[2][:1])
     return [r for c in children for r in references(c)]
 
 
-def evaluate(tree, series) -> np.ndarray:
+def evaluate(tree, series, failed=None) -> np.ndarray:
     """The reduction's value per variant ``(V,)``. ``series(variable, index)`` returns that
     series ``(V, S)`` with NaN at the steps that are not ok (reductions skip them; a variant
-    with no ok step gives NaN)."""
+    with no ok step gives NaN); ``failed`` (V, S) bool: the steps that are not ok (for
+    ``count_failed()``)."""
     tag = tree[0]
     if tag == "num":
         return np.float64(tree[1])
     if tag == "ref":
         return series(tree[1], tree[2])
     if tag == "neg":
-        return -evaluate(tree[1], series)
+        return -evaluate(tree[1], series, failed)
     if tag == "bin":  # x / 0 is inf (NaN for 0 / 0), reported as not finite: not a warning
-        a, b = evaluate(tree[2], series), evaluate(tree[3], series)
+        a, b = evaluate(tree[2], series, failed), evaluate(tree[3], series, failed)
         with np.errstate(all="ignore"):
             return {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.divide}[tree[1]](a, b)
     name, args = tree[1], tree[2]
-    x = evaluate(args[0], series)
+    if name == "count_failed":
+        return failed.sum(axis=1).astype(float)
+    x = evaluate(args[0], series, failed)
     if name == "abs":
         return np.abs(x)
+    if name == "at":
+        return x[:, args[1]]
+    if name == "at_driver":
+        return at_value(x, series(*args[1][1:3]), args[2])
     return reduce_steps(name, x, args[1] if len(args) > 1 else None)
+
+
+def at_value(x: np.ndarray, d: np.ndarray, value: float) -> np.ndarray:
+    """(V,): ``x`` (V, S) interpolated linearly where ``d`` (V, S) first passes ``value``
+    between two neighbouring finite steps (either way; at a step that equals it: that step's
+    x); NaN where no pair of neighbours brackets it."""
+    with np.errstate(all="ignore"):
+        if x.shape[1] == 1:
+            return np.where(d[:, 0] == value, x[:, 0], np.nan)
+        a, b = d[:, :-1] - value, d[:, 1:] - value
+        x0, x1 = x[:, :-1], x[:, 1:]
+        bracket = (a * b <= 0) & np.isfinite(a * b) & np.isfinite(x0) & np.isfinite(x1)
+        k = bracket.argmax(axis=1)
+        rows = np.arange(x.shape[0])
+        a, b, x0, x1 = a[rows, k], b[rows, k], x0[rows, k], x1[rows, k]
+        t = np.where(a == b, 0.0, a / (a - b))
+        return np.where(bracket.any(axis=1), x0 + t * (x1 - x0), np.nan)
 
 
 def reduce_steps(name: str, x: np.ndarray, q=None) -> np.ndarray:
@@ -244,10 +315,20 @@ def _reduce_rows(name: str, x: np.ndarray, q) -> np.ndarray:
     return np.where(n > 0, out, np.nan)
 
 
-def compile_metric(path, name: str, text, catalog: dict):
+def counts_failed(tree) -> bool:
+    """Whether a resolved tree reads ``count_failed()``."""
+    if tree[0] in ("num", "ref", "driver"):
+        return False
+    if tree[0] == "call" and tree[1] == "count_failed":
+        return True
+    children = tree[1:] if tree[0] == "neg" else tree[2:] if tree[0] == "bin" else tree[2][:1]
+    return any(counts_failed(c) for c in children)
+
+
+def compile_metric(path, name: str, text, catalog: dict, n_steps: int | None = None):
     """Parse and resolve one ``[study.metrics]`` entry; SceneError naming file, table, key."""
     try:
-        tree, kind = resolve(parse(text), catalog)
+        tree, kind = resolve(parse(text), catalog, n_steps)
     except ReductionError as exc:
         raise SceneError(path, "study.metrics", name, f"{exc}",
                          'write e.g. peak = "max(abs(input_force.<driver>))"; reductions: '
@@ -255,7 +336,7 @@ def compile_metric(path, name: str, text, catalog: dict):
     if kind != "scalar":
         raise SceneError(path, "study.metrics", name, "gives a series, not one number per "
                          "variant", f'wrap it in a reduction: "max({text})"')
-    if not references(tree):
+    if not references(tree) and not counts_failed(tree):
         raise SceneError(path, "study.metrics", name, "names no stored variable",
                          'reduce a variable the scene stores, e.g. "max(abs(input_force.<driver>))"')
     return tree
@@ -275,7 +356,7 @@ def unit_of(tree, entry_unit) -> str:
     if tag == "neg":
         return unit_of(tree[1], entry_unit)
     if tag == "call":
-        return unit_of(tree[2][0], entry_unit)
+        return unit_of(tree[2][0], entry_unit) if tree[2] else "1"
     a, b = unit_of(tree[2], entry_unit), unit_of(tree[3], entry_unit)
     if tree[1] in "+-":
         return a if a == b else ""

@@ -18,6 +18,7 @@ def describe_study(study) -> str:
              f"{study.batch_size:,}"]
     for j, (p, unit) in enumerate(zip(study.parameters, study.parameter_units())):
         how = (f"{p.spec[0]:g} .. {p.spec[1]:g} in {p.spec[2]} steps" if p.kind == "grid"
+               else f"tied to {p.spec[0]}" if p.kind == "tie"
                else f"{p.kind} {', '.join(f'{v:g}' for v in p.spec)}")
         lines.append(f"  parameter {p.address} = {p.initial:g} in the base: {how} "
                      f"(variants {study.values[:, j].min():.6g} .. {study.values[:, j].max():.6g}"
@@ -102,3 +103,50 @@ def on_the_edge(study, v: int) -> list[str]:
                            f"of its range ({lo:.6g} .. {hi:.6g}); the optimum may lie beyond it: "
                            "widen the range")
     return out
+
+
+def optimize_table(outcome, seconds: float | None = None) -> str:
+    """What ``linkpipe optimize`` prints: the evaluations, the best values (tied ones with
+    what they follow, a bound where one sits on it), the objective and every named metric
+    there, each constraint (active or not) and, with two objectives, the Pareto set."""
+    problem = outcome.problem
+    study = problem.study
+    E = len(outcome.values)
+    polished = int((outcome.generation < 0).sum())
+    G = int(outcome.generation.max()) + 1
+    p_units, m_units = study.parameter_units(), study.metric_units()
+    free = problem.n_free
+    lines = [f"{study.name}: optimised {' and '.join(problem.objectives)} over {free} "
+             f"parameter(s)" + (f" ({len(study.parameters) - free} tied)"
+                                if len(study.parameters) > free else "")
+             + f" of {study.scene.name}: {E - polished:,} variants in {G} generation(s), "
+             f"{polished:,} in the polish, {int((~outcome.feasible).sum()):,} infeasible"
+             + (f"; {seconds:.2f} s" if seconds else ""),
+             f"  solved {study.path_note}"]
+    bound = dict(outcome.on_bound)
+    lines.append("  best:")
+    for j, p in enumerate(study.parameters):
+        unit = f" {p_units[j]}" if p_units[j] else ""
+        note = (f" (tied to {p.spec[0]})" if p.kind == "tie" else
+                f" (on its {bound[p.address]} bound)" if p.address in bound else
+                f" (within {p.spec[0]:g} .. {p.spec[1]:g})")
+        lines.append(f"    {p.address} = {outcome.best_values[j]:.10g}{unit}{note}")
+    for m in study.metrics:
+        if m.name.startswith("_"):
+            continue
+        unit = f" {m_units[m.name]}" if m_units[m.name] else ""
+        mark = "  <- objective" if m.name in problem.objectives else ""
+        lines.append(f"    {m.name} = {outcome.metrics[m.name][outcome.best]:.10g}{unit}{mark}")
+    for c in problem.constraints:
+        value = outcome.metrics[c.metric][outcome.best]
+        lines.append(f"  constraint {c.text}: {c.metric} = {value:.6g} "
+                     + ("(active: on its limit)" if c.text in outcome.active else "(inactive)"))
+    if not outcome.on_bound:
+        lines.append("  no parameter sits on a bound")
+    if len(problem.objectives) == 2:
+        a, b = problem.objectives
+        fa, fb = outcome.metrics[a][outcome.pareto], outcome.metrics[b][outcome.pareto]
+        lines.append(f"  Pareto set: {len(outcome.pareto)} variants, {a} {fa.min():.6g} .. "
+                     f"{fa.max():.6g} while {b} {fb.max():.6g} .. {fb.min():.6g} (the best: "
+                     f"the lowest {a})")
+    return "\n".join(lines)

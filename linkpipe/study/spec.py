@@ -177,14 +177,14 @@ def load_study(path, catalog_of=None) -> Study:
         raise SceneError(path, "study", unknown[0], "unknown key", _suggest(unknown[0], KEYS["study"]))
     scene, name = _base_scene(path, data, raw)
     base = tomllib.loads(scene.text)
-    base.pop("study", None)
-    base.pop("fit", None)
+    for table in ("study", "fit", "optimize"):
+        base.pop(table, None)
     samples, seed = (_whole(path, raw, key, default, low) for key, default, low in
                      (("samples", 1, 1), ("seed", 0, 0)))
     batch = _whole(path, raw, "batch_size", 1, 1) if "batch_size" in raw else None
     params = _parameters(path, raw, scene, base)
     catalog = (catalog_of or _catalog)(scene)
-    metrics = _metrics(path, raw, catalog)
+    metrics = _metrics(path, raw, catalog, scene.n_steps)
     _check_variant_count(path, params, samples)
     values = variant_values(params, samples, seed)
     if batch is None:
@@ -221,10 +221,10 @@ def _base_scene(path: str, data: dict, raw: dict) -> tuple[Scene, str]:
     if "base" not in raw:  # a scene with its own [study]
         scene = load_scene(path)
         return scene, scene.name
-    extra = sorted(set(data) - {"study", "scene"})
+    extra = sorted(set(data) - {"study", "scene", "optimize"})
     if extra:
-        raise SceneError(path, extra[0], None, "a study file holds [study] (and [scene] name) "
-                         "only", "put scene tables in the base scene")
+        raise SceneError(path, extra[0], None, "a study file holds [study] (and [scene] name) only "
+                         "(and [optimize] to optimise)", "put scene tables in the base scene")
     if not isinstance(raw["base"], str):
         raise SceneError(path, "study", "base", "expected a string (a path)",
                          'write base = "../basketball_goal.toml"')
@@ -276,6 +276,11 @@ def _parameters(path, raw, scene: Scene, base: dict) -> tuple[StudyParameter, ..
                          "least one parameter", 'add [study.parameters] with e.g. '
                          '"springs.left.k" = { from = 2.0, to = 6.0, steps = 9 }')
     out = []
+    table = dict(table)
+    tie = table.pop("tie", None)
+    if not table:
+        raise SceneError(path, "study", "parameters", "only a tie: a study varies at least one "
+                         "parameter", 'add e.g. "springs.left.k" = { from = 2.0, to = 6.0, steps = 9 }')
     for address, spec in table.items():
         where = (path, "study.parameters", address)
         p_path, value = locate(scene, base, address, where)
@@ -291,6 +296,43 @@ def _parameters(path, raw, scene: Scene, base: dict) -> tuple[StudyParameter, ..
                              "number)", "vary it once")
         kind, numbers = _variation(where, spec)
         out.append(StudyParameter(address, p_path, float(value), kind, numbers))
+    return tuple(out) + tied(path, "study.parameters", tie, scene, base, out)
+
+
+def tied(path, table: str, tie, scene: Scene, base: dict, params) -> tuple[StudyParameter, ...]:
+    """The parameters ``tie = { "<address>" = "<address it follows>" }`` adds (kind "tie",
+    ``spec`` = (the varied parameter it takes its value from,), chains followed to it):
+    SceneError naming ``table``'s ``tie`` for a tie that is not a table of addresses, to an
+    address no parameter varies, of a value that is varied or tied already, or in a cycle."""
+    if tie is None:
+        return ()
+    hint = 'write tie = { "springs.right.k" = "springs.left.k" } (a value = the one it follows)'
+    if not isinstance(tie, dict) or not all(isinstance(v, str) for v in tie.values()):
+        raise SceneError(path, table, "tie", "expected a table of addresses", hint)
+    varied = {p.address: p for p in params}
+    out = []
+    for address, target in tie.items():
+        where = (path, f"{table}.tie", address)
+        if address in varied:
+            raise SceneError(*where, "is varied itself; a tied value follows another and is "
+                             "not varied", f"remove it from the parameters, or from tie")
+        root, seen = target, [address]
+        while root in tie and root not in varied:
+            if root in seen:
+                raise SceneError(*where, "a cycle of ties: " + " -> ".join(seen + [root]),
+                                 "tie each value to a varied parameter (or to a value tied to one)")
+            seen.append(root)
+            root = tie[root]
+        if root not in varied:
+            raise SceneError(*where, f'ties to "{target}", which no parameter varies',
+                             _suggest(target, list(varied)) or "tie to one of the parameters: "
+                             + ", ".join(varied))
+        p_path, value = locate(scene, base, address, where)
+        twin = next((q.address for q in (*params, *out) if q.path == p_path), None)
+        if twin is not None:
+            raise SceneError(*where, f'is the same value as "{twin}" (two addresses of one '
+                             "number)", "name it once")
+        out.append(StudyParameter(address, p_path, float(value), "tie", (root,)))
     return tuple(out)
 
 
@@ -341,7 +383,7 @@ MAX_VARIANTS = 100_000_000
 
 def _check_variant_count(path, params, samples: int) -> None:
     """SceneError before any work when the grids' product times the samples is too many."""
-    count = samples if any(p.kind != "grid" for p in params) else 1
+    count = samples if any(p.kind in ("normal", "uniform") for p in params) else 1
     for p in params:
         if p.kind == "grid":
             count *= p.spec[2]
@@ -357,7 +399,7 @@ def variant_values(params, samples: int, seed: int) -> np.ndarray:
     # the full product in itertools.product's order (last grid fastest), as one array
     points = (np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, len(grids))
               if grids else np.zeros((1, 0)))
-    draws = [p for p in params if p.kind != "grid"]
+    draws = [p for p in params if p.kind in ("normal", "uniform")]
     per_point = samples if draws else 1
     V = points.shape[0] * per_point
     rng = np.random.default_rng(seed)
@@ -369,9 +411,18 @@ def variant_values(params, samples: int, seed: int) -> np.ndarray:
             g += 1
         elif p.kind == "normal":
             out[:, j] = rng.normal(p.spec[0], p.spec[1], V)
-        else:
+        elif p.kind == "uniform":
             out[:, j] = rng.uniform(p.spec[0], p.spec[1], V)
-    return out
+    return with_ties(params, out)
+
+
+def with_ties(params, values: np.ndarray) -> np.ndarray:
+    """``values`` (V, n_parameters) with each tied column set to the column it follows."""
+    names = [p.address for p in params]
+    for j, p in enumerate(params):
+        if p.kind == "tie":
+            values[:, j] = values[:, names.index(p.spec[0])]
+    return values
 
 
 def _catalog(scene: Scene) -> dict:
@@ -387,7 +438,7 @@ def catalog_of_result(result) -> dict:
             for v in result.variables() if v.dims[:1] == ("step",)}
 
 
-def _metrics(path, raw, catalog) -> tuple[Metric, ...]:
+def _metrics(path, raw, catalog, n_steps: int | None = None) -> tuple[Metric, ...]:
     table = raw.get("metrics", {})
     if not isinstance(table, dict):
         raise SceneError(path, "study", "metrics", "expected a table of named reductions",
@@ -398,5 +449,6 @@ def _metrics(path, raw, catalog) -> tuple[Metric, ...]:
             raise SceneError(path, "study.metrics", name, "cannot name a metric (a variable "
                              "of the study file needs a plain name of its own)",
                              "use letters, digits and _; not " + ", ".join(RESERVED))
-        out.append(Metric(name, text, reductions.compile_metric(path, name, text, catalog)))
+        out.append(Metric(name, text, reductions.compile_metric(path, name, text, catalog,
+                                                                n_steps)))
     return tuple(out)

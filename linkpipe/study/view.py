@@ -1,6 +1,7 @@
-"""What a study's recording shows, computed here (stores only draw it): each metric against
-each parameter, the Pareto set of two metrics, and the best variants solved again for their
-motion."""
+"""What a study's (or an optimisation's) recording shows, computed here (stores only draw it):
+each metric against each parameter coloured by the objective, the Pareto set of two metrics,
+the best variants solved again for their motion, and an optimisation's progress per
+generation."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -30,6 +31,13 @@ class StudyView:
     best: list
     spread: dict  # {metric: (counts (n,), bin centres (n,), bin widths (n,))}
     parameter_units: dict
+    #: the metric that colours every point (lower is better), and the generations' best of it
+    #: (an optimisation; None for a study); the tab names a study or an optimisation
+    objective: str | None = None
+    progress: np.ndarray | None = None
+    kind: str = "study"
+    #: (V,) bool: variants that break a constraint (an optimisation; None for a study)
+    infeasible: np.ndarray | None = None
 
     def label(self, name: str) -> str:
         """A metric's or parameter's axis label, with its unit where it has one."""
@@ -86,10 +94,40 @@ def study_view(study, columns: dict) -> StudyView:
             result = solve_variant(study, int(v))
             if result is not None:
                 best.append((int(v), result))
-    params = {p: study.values[:, j] for j, p in enumerate(study.names)}
+    params = {p: study.values[:, j] for j, p in enumerate(study.names)
+              if study.parameters[j].kind != "tie"}  # a tied one draws its twin again
     return StudyView(study.name, metrics, units, params, np.asarray(columns["worst_status"]),
                      pareto, best, {m: histogram(x) for m, x in metrics.items()},
-                     dict(zip(study.names, study.parameter_units())))
+                     dict(zip(study.names, study.parameter_units())),
+                     objective=names[0] if names else None)
+
+
+def optimize_view(outcome) -> StudyView:
+    """The view of an optimisation: every evaluated variant (a failed step: status 1 here),
+    coloured by the (first) objective, the Pareto set of two objectives, the best variant
+    solved again for its motion, the generations' best."""
+    import dataclasses
+
+    from .batch import solve_variant
+
+    problem = outcome.problem
+    study = problem.study
+    units = study.metric_units()
+    names = [m.name for m in study.metrics if not m.name.startswith("_")]
+    names = list(problem.objectives) + [n for n in names if n not in problem.objectives]
+    metrics = {n: outcome.metrics[n] for n in names}
+    status = (outcome.metrics["_failed_steps"] > 0).astype(np.int8)
+    pareto = (tuple(problem.objectives), outcome.pareto) if len(problem.objectives) == 2 \
+        else ((None, None), np.zeros(0, dtype=np.intp))
+    one = dataclasses.replace(study, values=outcome.values[[outcome.best]])
+    result = solve_variant(one, 0)
+    params = {p.address: outcome.values[:, j] for j, p in enumerate(study.parameters)
+              if p.kind != "tie"}
+    return StudyView(study.name, metrics, {n: units[n] for n in names}, params, status, pareto,
+                     [] if result is None else [(outcome.best, result)], {},
+                     dict(zip(study.names, study.parameter_units())),
+                     objective=problem.objectives[0], progress=outcome.population_best,
+                     kind="optimisation", infeasible=~outcome.feasible & (status == 0))
 
 
 def histogram(x: np.ndarray, bins: int = N_BINS) -> tuple:
