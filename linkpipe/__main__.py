@@ -375,13 +375,13 @@ def _check(args) -> int:
             model, mob = preflight(scene, steps_per_segment(scene),
                                    min(scene.n_steps, RRD_MAX_STEPS))
             from .fit import declared_fit_parameters
-            from .kinematics.start import scene_warnings, sweep_reach
+            from .kinematics.start import drawing_slip, scene_warnings, sweep_reach
 
             unreached, note = sweep_reach(model)
             reach = ((f"the first {unreached} of {scene.n_steps} steps are out of the drawing's "
                       f"reach and will be no_assembly: {note}",) if note else ())
             print(describe(scene, mob, scene_warnings(model) + reach,
-                           declared_fit_parameters(scene)))
+                           declared_fit_parameters(scene), drawing_slip(model)))
     return outcome.code
 
 

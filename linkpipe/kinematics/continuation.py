@@ -25,7 +25,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
                     jacobian: str | None = None, q_start: np.ndarray | None = None,
                     start_slope: np.ndarray | None = None, stop_on_failure: bool = False,
-                    subdivide: int = SUBDIVIDE):
+                    subdivide: int = SUBDIVIDE, skip: np.ndarray | None = None):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
@@ -37,6 +37,11 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
     ``stop_on_failure``: return at the first step that fails (the rest stay NaN, status 0).
     ``subdivide``: how many levels of ``SUBSTEPS`` sub-steps a step that fails right after an
     assembled one is retried in before it counts as failed.
+
+    ``skip`` (S,) bool: steps known not to assemble (the closed-form dyads'
+    :func:`linkpipe.kinematics.beyond_reach`): inside a gap they are no_assembly without a
+    solve (residual NaN, 0 iterations), except the last one before a step that may assemble,
+    whose damped least squares carries the gap's shape up to it, as every step's did before.
 
     After a step without assembly the next one starts by damped least squares from the last
     assembled shape (a gap in the assembly range); after a not_converged step (``max_iter``
@@ -51,7 +56,7 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
                         sc.jacobian if jacobian is None else jacobian, subdivide)
     if q_start is None:
         q_start, start_slope = start_state(model, s[0], run.tol_abs, run.max_iter)
-    return run.sweep(s, q_start, start_slope, stop_on_failure)
+    return run.sweep(s, q_start, start_slope, stop_on_failure, skip)
 
 
 @dataclass
@@ -133,7 +138,7 @@ class _Continuation:
         # large mechanisms: each step's Phi_q as a sparse LU (sparse_lu; None: dense)
         self.lu = self.fast.lu if self.fast is not None else None
 
-    def sweep(self, s, q_start, start_slope, stop_on_failure):
+    def sweep(self, s, q_start, start_slope, stop_on_failure, skip=None):
         n_steps, nq = s.shape[0], self.model.n_q
         q = np.full((n_steps, nq), np.nan)
         residual = np.full(n_steps, np.nan)
@@ -142,7 +147,12 @@ class _Continuation:
         # without a predictor the start slope is not used either (a singular start is then
         # left by trying either side, in leave_singular_start)
         path = _Path(q_start, s[0], start_slope if self.predictor != "none" else None)
+        if skip is not None:  # the last skippable step before one that may assemble is solved
+            skip = skip & np.r_[skip[1:], True]
         for i in range(n_steps):
+            if skip is not None and skip[i] and path.gap:
+                status[i] = NO_ASSEMBLY  # residual NaN, 0 iterations: not solved
+                continue
             att = _Attempt(self.predict(path, s[i]))
             if path.gap and nq and not self.through_gap(att, path, s[i]):
                 residual[i], iterations[i], status[i] = att.residual, att.iterations, NO_ASSEMBLY
