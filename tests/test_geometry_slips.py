@@ -87,10 +87,10 @@ def test_steps_beyond_reach_are_skipped_with_the_same_answer(tmp_path):
     tol = model.tolerance()
     np.testing.assert_allclose(q_skip[ok], q_all[ok], atol=10 * tol, rtol=0)
     assert np.isnan(q_skip[~ok]).all()
-    # a skipped step says it was not solved: no residual, no iteration (the first step of a
-    # gap and the last before the reach are solved, as before)
+    # a skipped step is not iterated (the first step of a gap and the last before the reach
+    # are solved, as before); its residual is where the gap's shape stands: above tolerance
     skipped = skip & (it_skip == 0)
-    assert skipped.sum() >= 300 and np.isnan(res_skip[skipped]).all()
-    assert np.isfinite(res_skip[~skipped]).all()
+    assert skipped.sum() >= 300 and (res_skip[skipped] > 10 * tol).all()
+    assert np.isfinite(res_skip).all()
     result = linkpipe.solve(scene)
     np.testing.assert_array_equal(result.status, st_all)

@@ -40,7 +40,8 @@ def solve_positions(model: Model, s: np.ndarray, tol: float | None = None,
 
     ``skip`` (S,) bool: steps known not to assemble (the closed-form dyads'
     :func:`linkpipe.kinematics.beyond_reach`): inside a gap they are no_assembly without a
-    solve (residual NaN, 0 iterations), except the last one before a step that may assemble,
+    solve (0 iterations; the residual max |Phi| of the gap's last least-squares shape at the
+    step's driver values), except the last one before a step that may assemble,
     whose damped least squares carries the gap's shape up to it, as every step's did before.
 
     After a step without assembly the next one starts by damped least squares from the last
@@ -151,7 +152,9 @@ class _Continuation:
             skip = skip & np.r_[skip[1:], True]
         for i in range(n_steps):
             if skip is not None and skip[i] and path.gap:
-                status[i] = NO_ASSEMBLY  # residual NaN, 0 iterations: not solved
+                # no_assembly without a solve: 0 iterations, the residual where it stands (the
+                # gap's last least-squares shape at this step's driver values)
+                status[i], residual[i] = NO_ASSEMBLY, self.standing_residual(path, s[i])
                 continue
             att = _Attempt(self.predict(path, s[i]))
             if path.gap and nq and not self.through_gap(att, path, s[i]):
@@ -171,6 +174,14 @@ class _Continuation:
             if not att.converged and stop_on_failure:
                 break
         return q, residual, iterations, status
+
+    def standing_residual(self, path: _Path, s_i) -> float:
+        """max |Phi| at the gap's last least-squares shape (else the last assembled one) and
+        driver values ``s_i``: a skipped step's residual (no iteration moved it)."""
+        q = path.gap_shape if path.gap_shape is not None else path.q
+        F = (self.fast.phi(q, s_i) if self.fast is not None else
+             self.model.phi(self.model.positions(q[None]), s_i[None])[0])
+        return float(np.abs(F).max()) if F.size else 0.0
 
     def predict(self, path: _Path, s_i) -> np.ndarray:
         """The guess: the last shape moved along its slope (and curvature), or aimed."""
