@@ -468,7 +468,16 @@ def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve
     np.testing.assert_allclose(origins, o, **close)
     np.testing.assert_allclose(vectors, v, **close)
     # each spring's force on both ends: a tension pulls them together; 0.3 .. 2.7 lbf at
-    # 1 ft = 100 lbf: drawn at the least length, each arrow labelled with its value
+    # 1 ft = 100 lbf: drawn at the least length, labelled with its value once (at its first
+    # end); the right spring lies on the left one (same points): one label says both
+    left, right = result.scene.springs
+    assert left.between == right.between
+    frame = rec.steps("/mechanism/forces/springs/left")
+    labels = _column(frame, "/mechanism/forces/springs/left", "Arrows2D:labels")
+    tension = F["spring_force"][1][:, 0]
+    assert [list(r) for r in labels] == [[f"left = right {abs(t):.3g} lbf", ""] for t in tension]
+    assert list(rec.static("/mechanism/forces/springs/right", "Arrows2D:labels")) == ["right"]
+    assert not rec.static("/mechanism/forces/springs/right", "Arrows2D:show_labels")
     for k, spring in enumerate(result.scene.springs):
         a, b = (X[:, i[p]] for p in spring.between)
         pull = F["spring_force"][1][:, k, None] * _unit(b - a)
@@ -477,10 +486,6 @@ def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve
         assert short.all()
         np.testing.assert_allclose(origins, o, **close)
         np.testing.assert_allclose(vectors, v, **close)
-        frame = rec.steps(f"/mechanism/forces/springs/{spring.name}")
-        labels = _column(frame, f"/mechanism/forces/springs/{spring.name}", "Arrows2D:labels")
-        tension = F["spring_force"][1][:, k]
-        assert [list(r) for r in labels] == [[f"{spring.name} {abs(t):.3g} lbf"] * 2 for t in tension]
     # the ground's reaction at each fixed point, drawn from its point outward (one pointing
     # into the mechanism ends at its point)
     inward = 0

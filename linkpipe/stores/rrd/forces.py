@@ -283,12 +283,19 @@ def log_forces(stream, send, result) -> None:
         return
     size = mechanism_size(result)
     unit = result.units()["force"]
-    for (kind, item, _, forces_), (_, _, origins, vectors, short) in zip(arrows, drawn_arrows(result)):
+    drawn = drawn_arrows(result)
+    under = _drawn_over(drawn)
+    for n_item, ((kind, item, _, forces_), (_, _, origins, vectors, short)) in enumerate(zip(arrows, drawn)):
         parts = item if isinstance(item, tuple) else (item,)
         entity = path_of("mechanism", "forces", kind.name, *parts)
         tag = " ".join(([kind.tag] if kind.tag else []) + [str(p) for p in parts])  # one per item: drawn at the
         # centre of its arrows (a cylinder's or a spring's middle), not once per arrow
+        same = [n for n, first in under.items() if first == n_item]
+        if same:   # items drawn on top of this one (two springs side by side): one label
+            tag = " = ".join([tag] + [_item_tag(*drawn[n][:2]) for n in same])
         valued, named = bool(short.any()), _labelled(forces_, scale, size)
+        if n_item in under:    # drawn under an earlier item's arrows: its label says both
+            valued = named = False
         stream.log(entity, rr.Arrows2D.from_fields(
             labels=None if valued else [tag], colors=kind.colour, show_labels=valued or named,
             radii=rr.components.Radius.ui_points(2.0), draw_order=45.0), static=True)
@@ -306,12 +313,35 @@ def log_forces(stream, send, result) -> None:
             import pyarrow as pa  # drawn at the least length, else the item's name (or none)
 
             other = tag if named else ""
-            extra["labels"] = pa.array([f"{tag} {v:.3g} {unit}" if s else other
-                                        for v, s in zip(values.tolist(), short.tolist())],
-                                       type=pa.string())
+            # the first arrow of each step carries it (a spring's two ends: one label)
+            first = (np.arange(ok.shape[1])[None, :] == np.argmax(ok, axis=1)[:, None])[ok]
+            extra["labels"] = pa.array([(f"{tag} {v:.3g} {unit}" if s else other) if f else ""
+                                        for v, s, f in zip(values.tolist(), short.tolist(),
+                                                           first.tolist())], type=pa.string())
         send(entity, rr.Arrows2D.columns(
             origins=origins.astype(np.float32),
             vectors=vectors.astype(np.float32), **extra).partition(ok.sum(axis=1)))
+
+
+def _item_tag(kind: ForceKind, item) -> str:
+    parts = item if isinstance(item, tuple) else (item,)
+    return " ".join(([kind.tag] if kind.tag else []) + [str(p) for p in parts])
+
+
+def _drawn_over(drawn) -> dict[int, int]:
+    """{item: the earlier item of its kind drawn exactly where it is at every step} (two
+    springs side by side in the plane): their labels would be drawn on top of each other."""
+    out = {}
+    for n, (kind, _, origins, vectors, _) in enumerate(drawn):
+        for m in range(n):
+            k2, _, o2, v2, _ = drawn[m]
+            if m in out or k2 is not kind or o2.shape != origins.shape:
+                continue
+            if (np.allclose(o2, origins, equal_nan=True, rtol=1e-9, atol=0)
+                    and np.allclose(v2, vectors, equal_nan=True, rtol=1e-9, atol=0)):
+                out[n] = m
+                break
+    return out
 
 
 def _labelled(vectors: np.ndarray, scale: float, size: float) -> bool:

@@ -23,6 +23,8 @@ from ...output_units import entry_units
 
 #: the mechanism's share of the window's width (of 20)
 COLUMNS = (11, 9)
+#: the plots' x axis: the whole sweep and this fraction of it either side
+X_PAD = 0.03
 
 
 def mechanism_bounds(result) -> tuple[np.ndarray, np.ndarray]:
@@ -79,8 +81,9 @@ def x_range(result, timeline: str):
         t = t[np.isfinite(t)]
         if not len(t):
             return None
-        start = rr.TimeRangeBoundary.absolute(seconds=float(t.min()))
-        end = rr.TimeRangeBoundary.absolute(seconds=float(t.max()))
+        pad = X_PAD * float(t.max() - t.min())
+        start = rr.TimeRangeBoundary.absolute(seconds=float(t.min()) - pad)
+        end = rr.TimeRangeBoundary.absolute(seconds=float(t.max()) + pad)
     else:
         values = dict(driver_timelines(result)).get(timeline)
         if values is None:
@@ -88,8 +91,9 @@ def x_range(result, timeline: str):
                       else np.asarray(result.step_numbers))
         if not len(values):
             return None
-        start = rr.TimeRangeBoundary.absolute(seq=int(values.min()))
-        end = rr.TimeRangeBoundary.absolute(seq=int(values.max()))
+        pad = int(np.ceil(X_PAD * float(values.max() - values.min())))
+        start = rr.TimeRangeBoundary.absolute(seq=int(values.min()) - pad)
+        end = rr.TimeRangeBoundary.absolute(seq=int(values.max()) + pad)
     return rrb.TimeAxis(view_range=rr.TimeRange(start=start, end=end))
 
 

@@ -4,7 +4,7 @@ A row per force kind in its colour ("input force", "ground reactions", ...) and 
 per quantity whose length is its true scale ("20,000 N", "velocity 5 m/s"; a force drawn at
 the least length carries its own value). The rows sit in a band above the mechanism (the
 view's bounds include it: :func:`.layout.view_bounds`), in columns of at most
-:data:`ROWS_PER_COLUMN`, sized in screen pixels for the view at 1400x900 (bigger windows only
+:data:`ROWS_PER_COLUMN` (a tall mechanism's in one column at its right), sized in screen pixels for the view at 1400x900 (bigger windows only
 space them more). A title would be cut at the view's width; the legend is not.
 """
 from __future__ import annotations
@@ -25,6 +25,9 @@ VIEW_PIXELS = (750.0, 790.0)
 CHAR_PIXELS, ARROW_MARGIN = 7.5, 56.0
 ROW_PIXELS, COLUMN_GAP, EDGE_PIXELS = 30.0, 28.0, 12.0
 ROWS_PER_COLUMN = 3
+#: a mechanism whose width over height is below this fraction of the view's gets its legend in
+#: a column at its right instead of a band above it
+SIDE_ASPECT = 0.75
 
 
 @dataclass(frozen=True)
@@ -49,31 +52,39 @@ def rows(result) -> list[Row]:
 
 
 def layout(result, lo: np.ndarray, hi: np.ndarray):
-    """Return (rows [(label, colour, origin (2,), vector (2,))], the band's height): the legend
-    placed above the box ``lo``..``hi`` (length units), sized for the view (module doc)."""
+    """Return (rows [(label, colour, origin (2,), vector (2,))], the height added above the box
+    ``lo``..``hi`` (length units)): the legend in a band above the box, or, for a mechanism
+    taller than :data:`SIDE_ASPECT` of the view's shape (a five-bar, a hatch), in one column to
+    its right, where the view has room; sized for the view (module doc)."""
     entries = rows(result)
     if not entries:
         return [], 0.0
     units = result.units()
     variables = {v.name: v.units for v in result.variables()}
     W, H = float(hi[0] - lo[0]), float(hi[1] - lo[1])
-    n_rows = min(len(entries), ROWS_PER_COLUMN)
+    side = W / H < SIDE_ASPECT * VIEW_PIXELS[0] / VIEW_PIXELS[1]
+    per_column = len(entries) if side else ROWS_PER_COLUMN
+    n_rows = min(len(entries), per_column)
     ppu = min(VIEW_PIXELS[0] / W, VIEW_PIXELS[1] / H)
-    for _ in range(3):  # the band's height depends on the scale it makes
-        placed, width_px = _place(entries, ppu, units, variables)
-        band = n_rows * ROW_PIXELS / ppu
-        ppu = min(VIEW_PIXELS[0] / max(W, width_px / ppu), VIEW_PIXELS[1] / (H + band))
-    placed, _ = _place(entries, ppu, units, variables)
-    band = (n_rows + 0.5) * ROW_PIXELS / ppu
+    for _ in range(3):  # the legend's size in length units depends on the scale it makes
+        placed, width_px = _place(entries, ppu, units, variables, per_column)
+        if side:
+            ppu = min(VIEW_PIXELS[0] / (W + (width_px + EDGE_PIXELS) / ppu), VIEW_PIXELS[1] / H)
+        else:
+            band = n_rows * ROW_PIXELS / ppu
+            ppu = min(VIEW_PIXELS[0] / max(W, width_px / ppu), VIEW_PIXELS[1] / (H + band))
+    placed, _ = _place(entries, ppu, units, variables, per_column)
+    band = 0.0 if side else (n_rows + 0.5) * ROW_PIXELS / ppu
+    left = hi[0] if side else lo[0]
     out = []
     for label, colour, col_x, row, length in placed:
         y = hi[1] + band - (row + 0.75) * ROW_PIXELS / ppu
-        x = lo[0] + (col_x + EDGE_PIXELS) / ppu
+        x = left + (col_x + EDGE_PIXELS) / ppu
         out.append((label, colour, np.array([x, y]), np.array([length, 0.0])))
     return out, band
 
 
-def _place(entries, ppu, units, variables):
+def _place(entries, ppu, units, variables, per_column=ROWS_PER_COLUMN):
     """[(label, colour, column x (px), row, length (length units))] and the width (px)."""
     sized = []
     for e in entries:
@@ -91,8 +102,8 @@ def _place(entries, ppu, units, variables):
             length = (len(label) * CHAR_PIXELS + ARROW_MARGIN) / ppu
         sized.append((label, e.colour, length))
     out, x, width = [], 0.0, 0.0
-    for c in range(0, len(sized), ROWS_PER_COLUMN):
-        column = sized[c:c + ROWS_PER_COLUMN]
+    for c in range(0, len(sized), per_column):
+        column = sized[c:c + per_column]
         col_px = max(length for *_, length in column) * ppu
         for r, (label, colour, length) in enumerate(column):
             out.append((label, colour, x, r, length))
