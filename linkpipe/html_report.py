@@ -261,15 +261,20 @@ def _poses(plt, variables, scene, root):
     for p in scene.get("outputs", {}).get("trace", []):
         if p in idx:
             ax.plot(X[:, idx[p], 0], X[:, idx[p], 1], color="0.6", lw=0.8, ls="--", zorder=1)
+    cylinders = [[idx[p] for p in d["distance"] if p in idx] for d in scene.get("drivers", [])
+                 if isinstance(d.get("distance"), list)]
     for n_pose, k in enumerate(picks):
         colour = cmap(0.85 * n_pose / max(len(picks) - 1, 1))
         for _, pts in links:
             if len(pts) < 2:
                 continue
-            ring = pts + [pts[0]] if len(pts) > 2 else pts
-            xy = X[k, [idx[p] for p in ring]]
+            xy = _outline(X[k, [idx[p] for p in pts]])
             ax.plot(xy[:, 0], xy[:, 1], color=colour, lw=2.0, alpha=0.9, zorder=2,
                     solid_capstyle="round")
+        for ends in cylinders:   # a linear actuator: a wide grey bar between its pins
+            if len(ends) == 2:
+                ax.plot(X[k, ends, 0], X[k, ends, 1], color="0.55", lw=4.5, alpha=0.6, zorder=1,
+                        solid_capstyle="butt")
         ax.plot([], [], color=colour, lw=2, label=f"step {int(k)}")
     if len(picks):
         k = picks[0]
@@ -305,6 +310,16 @@ def _input_names(scene: dict) -> dict[str, str]:
         else:
             out[name] = f"force of {name}"
     return out
+
+
+def _outline(xy: np.ndarray) -> np.ndarray:
+    """A bar's two points, or a plate's points in turn about their centre, closed (a plate
+    drawn in the scene's listing order may cross itself)."""
+    if len(xy) <= 2:
+        return xy
+    c = xy.mean(axis=0)
+    order = np.argsort(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]), kind="stable")
+    return xy[np.r_[order, order[0]]]
 
 
 def _lines(plt, x, xlabel, variables, name, dim, title, lagrange=False, names=None):
@@ -363,8 +378,9 @@ def _study_page(h5_path, root, variables) -> str:
     body = [f"<h1>{html.escape(name)}: design study</h1>",
             f"<div class=\"headline {'ok' if n_ok == V else 'failed'}\">{V:,} variants, "
             f"{n_ok:,} all ok, {V - n_ok:,} with failed steps</div>",
-            f"<p class=\"small\">{html.escape(h5_path.name)}, written "
-            f"{html.escape(str(root.get('created', '')))}</p>"]
+            f"<p class=\"small\">{html.escape(h5_path.name)}"
+            + (f", written {html.escape(str(root['created']))}" if root.get("created") else "")
+            + "</p>"]
     funit = _unit(variables, "peak_input_force")
     rows = [("variants", V), ("parameters", ", ".join(params))]
     for j, p in enumerate(params):
