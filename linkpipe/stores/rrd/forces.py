@@ -315,12 +315,21 @@ def log_forces(stream, send, result) -> None:
             other = tag if named else ""
             # the first arrow of each step carries it (a spring's two ends: one label)
             first = (np.arange(ok.shape[1])[None, :] == np.argmax(ok, axis=1)[:, None])[ok]
-            extra["labels"] = pa.array([(f"{tag} {v:.3g} {unit}" if s else other) if f else ""
+            extra["labels"] = pa.array([(f"{tag} {_value(v)} {unit}" if s else other) if f else ""
                                         for v, s, f in zip(values.tolist(), short.tolist(),
                                                            first.tolist())], type=pa.string())
         send(entity, rr.Arrows2D.columns(
             origins=origins.astype(np.float32),
             vectors=vectors.astype(np.float32), **extra).partition(ok.sum(axis=1)))
+
+
+def _value(v: float) -> str:
+    """A force's value to 3 significant figures, in plain digits between 0.001 and 10^7
+    (``14,700``, ``2.67``, ``0.195``), else in exponent form."""
+    if not 1e-3 <= abs(v) < 1e7:
+        return f"{v:.3g}"
+    r = float(f"{v:.3g}")
+    return f"{r:,.0f}" if abs(r) >= 100 else f"{r:.3g}"
 
 
 def _item_tag(kind: ForceKind, item) -> str:

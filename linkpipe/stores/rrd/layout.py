@@ -53,6 +53,7 @@ def _view_bounds(result):
     placed, band = legend_layout(result, lo, hi)
     if placed:
         right = max(float(o[0] + v[0]) for _, _, o, v in placed)
+        right += 0.03 * (right - lo[0])       # the last bar's head clear of the view's edge
         hi = np.array([max(hi[0], right), hi[1] + band])
     return lo, hi
 
