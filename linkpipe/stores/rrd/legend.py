@@ -4,7 +4,7 @@ A row per force kind in its colour ("input force", "ground reactions", ...) and 
 per quantity whose length is its true scale ("20,000 N", "velocity 5 m/s"; a force drawn at
 the least length carries its own value). The rows sit in a band above the mechanism (the
 view's bounds include it: :func:`.layout.view_bounds`), in columns of at most
-:data:`ROWS_PER_COLUMN` (a tall mechanism's in one column at its right), sized in screen pixels for the view at 1400x900 (bigger windows only
+:data:`ROWS_PER_COLUMN` (or in one column at its right, where that draws the mechanism larger), sized in screen pixels for the view at 1400x900 (bigger windows only
 space them more). A title would be cut at the view's width; the legend is not.
 """
 from __future__ import annotations
@@ -25,9 +25,9 @@ VIEW_PIXELS = (750.0, 790.0)
 CHAR_PIXELS, ARROW_MARGIN = 7.5, 56.0
 ROW_PIXELS, COLUMN_GAP, EDGE_PIXELS = 30.0, 28.0, 12.0
 ROWS_PER_COLUMN = 3
-#: a mechanism whose width over height is below this fraction of the view's gets its legend in
-#: a column at its right instead of a band above it
-SIDE_ASPECT = 0.75
+#: the legend goes in a column at the mechanism's right when that draws the mechanism this
+#: much larger than a band above it would
+SIDE_GAIN = 1.05
 
 
 @dataclass(frozen=True)
@@ -53,26 +53,36 @@ def rows(result) -> list[Row]:
 
 def layout(result, lo: np.ndarray, hi: np.ndarray):
     """Return (rows [(label, colour, origin (2,), vector (2,))], the height added above the box
-    ``lo``..``hi`` (length units)): the legend in a band above the box, or, for a mechanism
-    taller than :data:`SIDE_ASPECT` of the view's shape (a five-bar, a hatch), in one column to
-    its right, where the view has room; sized for the view (module doc)."""
+    ``lo``..``hi`` (length units)): the legend in a band above the box or in one column at its
+    right, whichever leaves the mechanism drawn larger in the view (a tall mechanism, a five-bar
+    or a hatch, gets the column); sized for the view (module doc)."""
     entries = rows(result)
     if not entries:
         return [], 0.0
     units = result.units()
     variables = {v.name: v.units for v in result.variables()}
     W, H = float(hi[0] - lo[0]), float(hi[1] - lo[1])
-    side = W / H < SIDE_ASPECT * VIEW_PIXELS[0] / VIEW_PIXELS[1]
+
+    def scale_with(side: bool) -> float:
+        """Pixels per length unit with the legend beside or above the box."""
+        per_column = len(entries) if side else ROWS_PER_COLUMN
+        ppu = min(VIEW_PIXELS[0] / W, VIEW_PIXELS[1] / H)
+        for _ in range(3):  # the legend's size in length units depends on the scale it makes
+            _, width_px = _place(entries, ppu, units, variables, per_column)
+            if side:
+                ppu = min(VIEW_PIXELS[0] / (W + (width_px + 2 * EDGE_PIXELS) / ppu),
+                          VIEW_PIXELS[1] / H)
+            else:
+                band = (min(len(entries), per_column) + 0.5) * ROW_PIXELS / ppu
+                ppu = min(VIEW_PIXELS[0] / max(W, (width_px + 2 * EDGE_PIXELS) / ppu),
+                          VIEW_PIXELS[1] / (H + band))
+        return ppu
+
+    above, beside = scale_with(False), scale_with(True)
+    side = beside > above * SIDE_GAIN
+    ppu = beside if side else above
     per_column = len(entries) if side else ROWS_PER_COLUMN
     n_rows = min(len(entries), per_column)
-    ppu = min(VIEW_PIXELS[0] / W, VIEW_PIXELS[1] / H)
-    for _ in range(3):  # the legend's size in length units depends on the scale it makes
-        placed, width_px = _place(entries, ppu, units, variables, per_column)
-        if side:
-            ppu = min(VIEW_PIXELS[0] / (W + (width_px + EDGE_PIXELS) / ppu), VIEW_PIXELS[1] / H)
-        else:
-            band = n_rows * ROW_PIXELS / ppu
-            ppu = min(VIEW_PIXELS[0] / max(W, width_px / ppu), VIEW_PIXELS[1] / (H + band))
     placed, _ = _place(entries, ppu, units, variables, per_column)
     band = 0.0 if side else (n_rows + 0.5) * ROW_PIXELS / ppu
     left = hi[0] if side else lo[0]
