@@ -51,7 +51,14 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                           "link angles and rates, finiteness checks); results do not depend on "
                           "it (default 0: the CPUs this process may use but one, which the HDF5 "
                           "writer takes, at most 4)")
+    run.add_argument("--report", action="store_true",
+                     help="also write <name>.html beside the .h5: the page `report` writes")
     _fleet_options(run)
+    rep = sub.add_parser("report", help="write a self-contained HTML page of a run's or a "
+                         "study's .h5 (NAME.html beside it)")
+    rep.add_argument("files", nargs="+", metavar="NAME.h5")
+    rep.add_argument("--out", default=None, help="the page's path (one file only; default: "
+                     "beside the .h5, .html)")
     chk = sub.add_parser("check", help="validate scenes and describe them without solving")
     chk.add_argument("scenes", nargs="+")
     acc = sub.add_parser("accuracy", help="measure what accuracy costs in time for a scene")
@@ -141,7 +148,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     if args.command == "run":
         args.rrd_max_steps, args.rrd_max_mb = recording_caps(args.rrd_max_steps, args.rrd_max_mb)
     command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
-               "study": _study, "optimize": _optimize}[args.command]
+               "study": _study, "optimize": _optimize, "report": _report}[args.command]
     previous = _signals_as_interrupts()
     try:
         with using(getattr(args, "chunk_threads", 0)):
@@ -293,6 +300,10 @@ def _run(args) -> int:
 
             with output_lock(out, scene.name):  # another run of this name waits: .h5, .rrd pair
                 result, written, kept = _solve_and_write(scene, out, args, bar, segment)
+                if args.report and not args.no_h5:
+                    from .html_report import write_report
+
+                    written.append(str(write_report(out / f"{scene.name}.h5")))
             if bar:
                 bar.close()
             if not args.quiet:
@@ -302,6 +313,24 @@ def _run(args) -> int:
                     print(stage_table(result.seconds, total, result.totals.n_steps))
     if outcome.failed and len(args.scenes) > 1 and not args.quiet:
         print(f"failed: {', '.join(outcome.failed)}", file=sys.stderr)
+    return outcome.code
+
+
+def _report(args) -> int:
+    """``report NAME.h5 ...``: each file's HTML page (:mod:`linkpipe.html_report`)."""
+    from .html_report import write_report
+
+    if args.out and len(args.files) > 1:
+        print("error: --out names one page; give one .h5 with it", file=sys.stderr)
+        return 2
+    outcome = _Outcome()
+    for path in args.files:
+        with _reporting(path, outcome):
+            if not pathlib.Path(path).is_file():
+                outcome.fail(path, 2, f"{path}: no such file; give a .h5 that `run` or "
+                             "`study` wrote")
+                continue
+            print(f"wrote {write_report(path, args.out)}")
     return outcome.code
 
 
@@ -407,13 +436,13 @@ def _check(args) -> int:
             model, mob = preflight(scene, steps_per_segment(scene),
                                    min(scene.n_steps, RRD_MAX_STEPS))
             from .fit import declared_fit_parameters
-            from .kinematics.start import scene_warnings, sweep_reach
+            from .kinematics.start import drawing_slip, scene_warnings, sweep_reach
 
             unreached, note = sweep_reach(model)
             reach = ((f"the first {unreached} of {scene.n_steps} steps are out of the drawing's "
                       f"reach and will be no_assembly: {note}",) if note else ())
             print(describe(scene, mob, scene_warnings(model) + reach,
-                           declared_fit_parameters(scene)))
+                           declared_fit_parameters(scene), drawing_slip(model)))
     return outcome.code
 
 

@@ -8,10 +8,23 @@ import numpy as np
 from .output_units import input_force_units
 
 
+def slip_clause(slip: str) -> str:
+    """`` — but B assembles 3.55 m from its drawing`` (a geometry slip said first), or ""."""
+    return f" \u2014 but {slip}" if slip else ""
+
+
+def headline(result) -> str:
+    """The run's first words: the steps' message and, where the drawing is far from its own
+    assembly, that slip (``all 61 steps ok — but E assembles 2.1 m from its drawing``)."""
+    from .kinematics.start import drawing_slip
+
+    return result.totals.message + slip_clause(drawing_slip(result.model))
+
+
 def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run`` (``written``: the files' paths)."""
     sc, totals = result.scene, result.totals
-    lines = [f"{sc.name}: {totals.message} ({totals.n_steps} steps, {totals.n_ok} ok, "
+    lines = [f"{sc.name}: {headline(result)} ({totals.n_steps} steps, {totals.n_ok} ok, "
              f"{totals.n_steps - totals.n_ok} failed)"]
     lines += [f"  warning: {w}" for w in result.warnings]
     if totals.first_non_finite >= 0:
@@ -96,10 +109,11 @@ def stage_table(seconds: dict, total: float, n_steps: int) -> str:
     return "\n".join(lines)
 
 
-def describe(scene, mob, warnings=(), fit_parameters=()) -> str:
+def describe(scene, mob, warnings=(), fit_parameters=(), slip: str = "") -> str:
     """What ``check`` prints of a valid scene (``warnings``: what is legal but probably not
-    meant, the scene's and its drawing's; ``fit_parameters``: its checked [fit] parameters)."""
-    lines = [f"{scene.path}: scene {scene.name!r} is valid",
+    meant, the scene's and its drawing's; ``fit_parameters``: its checked [fit] parameters;
+    ``slip``: a drawing far from its assembly, said on the first line)."""
+    lines = [f"{scene.path}: scene {scene.name!r} is valid{slip_clause(slip)}",
              f"  points: {', '.join(p.name + (' (fixed)' if p.fixed else '') for p in scene.points)}",
              f"  links: {', '.join(l.name + '[' + ' '.join(l.points) + ']' for l in scene.links)}"]
     if scene.sliders:

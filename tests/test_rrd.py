@@ -20,7 +20,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 ARCHETYPE = {"links": "LineStrips2D", "guides": "LineStrips2D", "trace": "LineStrips2D",
              "springs": "LineStrips2D", "points": "Points2D", "ground": "Points2D",
              "velocity": "Arrows2D", "acceleration": "Arrows2D", "forces": "Arrows2D",
-             "actuators": "LineStrips2D"}
+             "actuators": "LineStrips2D", "legend": "Arrows2D"}
 
 
 class Recording:
@@ -47,7 +47,7 @@ class Recording:
         """The display names of the embedded blueprint's views."""
         (entry,) = self.blueprints
         store = self.reader.store(store=entry).stream().collect()
-        frame = store.reader(index="blueprint", contents="/view/**").to_pandas()
+        frame = _frame(store.reader(index="blueprint", contents="/view/**"))
         return {str(name) for col in frame.columns if col.endswith("ViewBlueprint:display_name")
                 for value in frame[col].dropna() for name in value}
 
@@ -55,7 +55,7 @@ class Recording:
         """{display name: the view's contents queries} of the embedded blueprint."""
         (entry,) = self.blueprints
         store = self.reader.store(store=entry).stream().collect()
-        frame = store.reader(index="blueprint", contents="/view/**").to_pandas()
+        frame = _frame(store.reader(index="blueprint", contents="/view/**"))
         out = {}
         for col in frame.columns:
             if col.endswith(":ViewBlueprint:display_name"):
@@ -67,6 +67,14 @@ class Recording:
 
     def static(self, entity, component):
         return self.store.reader(index=None, contents=entity).to_pandas()[f"{entity}:{component}"][0]
+
+
+def _frame(reader):
+    """A blueprint's rows as pandas, without the columns pandas cannot hold (a plot's x-axis
+    range is an Arrow union)."""
+    table = reader.to_arrow_table()
+    keep = [c for c, f in zip(table.column_names, table.schema) if "union" not in str(f.type)]
+    return table.select(keep).to_pandas()
 
 
 def _column(frame, entity, component):
@@ -96,6 +104,7 @@ def _expected_entities(result) -> set[str]:
     out |= {"/mechanism/ground"} if any(p.fixed for p in sc.points) else set()
     out |= {f"/mechanism/links/{link}" for link in result.link_names}
     out |= {f"/plots/link_angle/{link}" for link in result.link_names}
+    out |= {f"/plots/link_angle_deg/{link}" for link in result.link_names}   # addition: degrees
     out |= {f"/mechanism/guides/{s.name}" for s in sc.sliders}
     out |= {f"/mechanism/trace/{p}" for p in sc.outputs.trace}
     for quantity in ("velocity", "acceleration"):
@@ -131,6 +140,8 @@ def _expected_entities(result) -> set[str]:
         from linkpipe.stroke import names
 
         out |= {f"/plots/stroke_margin/{n}" for n in names(sc)} | {"/plots/stroke_margin/out_of_stroke"}
+    if "input_force" in forces or sc.outputs.vectors:   # addition: the arrows' legend
+        out |= {"/mechanism/legend"}
     return out
 
 
@@ -202,14 +213,20 @@ def test_values_match_the_result_and_the_hdf5_file(solve, tmp_path):
     assert lengths.max() == pytest.approx(0.25 * rrd.mechanism_size(result))
     (label,) = rec.static("/mechanism/velocity/P", "Arrows2D:labels")
     assert f"1 m = {1 / scale:.3g} m/s" in label
-    # labels of arrows at one point would overlap: stored (hover), not drawn; the 2D view's
-    # title gives both scales
+    # labels of arrows at one point would overlap: stored (hover), not drawn; the legend gives
+    # both scales as bars of their true length ("velocity 5 m/s")
     assert not rec.static("/mechanism/velocity/P", "Arrows2D:show_labels")
     accel = rrd.arrow_scales(result)["acceleration"]
+    labels = list(rec.static("/mechanism/legend", "Arrows2D:labels"))
+    bars = np.stack(rec.static("/mechanism/legend", "Arrows2D:vectors"))
+    for quantity, unit, s in (("velocity", "m/s", scale), ("acceleration", "m/s^2", accel)):
+        (k,) = [k for k, label in enumerate(labels) if label.startswith(quantity)]
+        value = float(labels[k].split()[1].replace(",", ""))
+        assert labels[k] == f"{quantity} {value:,.6g} {unit}"
+        assert bars[k][0] == pytest.approx(value * s, rel=1e-6) and bars[k][1] == 0
     titles = rec.view_titles()
-    assert (f"fourbar_crank_rocker (y up); arrows: velocity (green) 1 m = {1 / scale:.3g} m/s, "
-            f"acceleration (magenta) 1 m = {1 / accel:.3g} m/s^2") in titles
-    assert {"link_angle [rad]", "log10 residual [m]", "residual [m]", "iterations [1]"} <= titles
+    assert {"fourbar_crank_rocker (y up)", "link angle [deg]", "log10 residual [m]",
+            "residual [m]", "iterations [1]"} <= titles
 
     # the traced coupler curve is one static strip through every step
     (trace,) = rec.static("/mechanism/trace/P", "LineStrips2D:strips")
@@ -453,6 +470,24 @@ def _unit(d):
     return d / np.hypot(d[:, 0], d[:, 1])[:, None]
 
 
+def _drawn(result, at, force, scale, outward=False):
+    """The arrows the recording should draw for forces ``force`` (S, k, 2) acting at ``at``
+    (S, k, 2): the force times the scale, at least MIN_FRACTION of the size long where it is
+    not zero (issue 34: a 2.7 lbf spring force at 1 ft = 100 lbf was an invisible dot); with
+    ``outward`` (the ground reactions) an arrow pointing towards the centre of the step's points
+    ends at its point. Returns (origins, vectors, short) as float32 arrays."""
+    at, v = np.asarray(at, float), np.asarray(force, float) * scale
+    least = rrd.MIN_FRACTION * rrd.mechanism_size(result)
+    length = np.hypot(v[..., 0], v[..., 1])
+    short = (length > 0) & (length < least)
+    v = np.where(short[..., None], v / np.where(short, length, 1.0)[..., None] * least, v)
+    if outward:
+        centre = np.nanmean(result.position, axis=1)[:, None, :]
+        inward = np.einsum("skc,skc->sk", v, centre - at) > 0
+        at = np.where(inward[..., None], at - v, at)
+    return _f32(at), _f32(v), short
+
+
 def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve, tmp_path):
     """The basketball goal (springs, gravity, inertia, a handle input): at every step each arrow
     starts at the stored point and is the stored force times the one scale (float32: exact)."""
@@ -464,29 +499,49 @@ def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve
     # the handle's input force at its point, along its direction
     (driver,) = result.scene.drivers
     n = np.asarray(driver.input.direction, float) / np.hypot(*driver.input.direction)
+    close = dict(rtol=2e-6, atol=2e-6 * rrd.mechanism_size(result))   # float32
     origins, vectors = _arrows(rec, f"/mechanism/forces/input/{driver.name}")
-    np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[driver.input.point]]))
-    np.testing.assert_array_equal(vectors[:, 0], _f32(F["input_force"][1][:, :1] * n * scale))
-    # each spring's force on both ends: a tension pulls them together
+    o, v, _ = _drawn(result, X[:, [i[driver.input.point]]], F["input_force"][1][:, :1, None] * n, scale)
+    np.testing.assert_allclose(origins, o, **close)
+    np.testing.assert_allclose(vectors, v, **close)
+    # each spring's force on both ends: a tension pulls them together; 0.3 .. 2.7 lbf at
+    # 1 ft = 100 lbf: drawn at the least length, labelled with its value once (at its first
+    # end); the right spring lies on the left one (same points): one label says both
+    left, right = result.scene.springs
+    assert left.between == right.between
+    frame = rec.steps("/mechanism/forces/springs/left")
+    labels = _column(frame, "/mechanism/forces/springs/left", "Arrows2D:labels")
+    tension = F["spring_force"][1][:, 0]
+    assert [list(r) for r in labels] == [[f"left = right {abs(t):.3g} lbf", ""] for t in tension]
+    assert list(rec.static("/mechanism/forces/springs/right", "Arrows2D:labels")) == ["right"]
+    assert not rec.static("/mechanism/forces/springs/right", "Arrows2D:show_labels")
     for k, spring in enumerate(result.scene.springs):
         a, b = (X[:, i[p]] for p in spring.between)
         pull = F["spring_force"][1][:, k, None] * _unit(b - a)
         origins, vectors = _arrows(rec, f"/mechanism/forces/springs/{spring.name}")
-        np.testing.assert_array_equal(origins, _f32(np.stack([a, b], axis=1)))
-        np.testing.assert_array_equal(vectors, _f32(np.stack([pull, -pull], axis=1) * scale))
-    # the ground's reaction at each fixed point
+        o, v, short = _drawn(result, np.stack([a, b], axis=1), np.stack([pull, -pull], axis=1), scale)
+        assert short.all()
+        np.testing.assert_allclose(origins, o, **close)
+        np.testing.assert_allclose(vectors, v, **close)
+    # the ground's reaction at each fixed point, drawn from its point outward (one pointing
+    # into the mechanism ends at its point)
+    inward = 0
     for k, name in enumerate(result.force_coords["fixed_point"]):
         origins, vectors = _arrows(rec, f"/mechanism/forces/reactions/{name}")
-        np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[name]]))
-        np.testing.assert_array_equal(vectors[:, 0], _f32(F["ground_reaction"][1][:, k] * scale))
+        o, v, _ = _drawn(result, X[:, [i[name]]], F["ground_reaction"][1][:, k, None], scale, True)
+        np.testing.assert_allclose(origins, o, **close)
+        np.testing.assert_allclose(vectors, v, **close)
+        ends_there = np.allclose(origins[:, 0] + vectors[:, 0], X[:, i[name]], atol=close["atol"])
+        inward += ends_there
+    assert inward >= 1   # the pole's foot: its reaction no longer runs up the pole
     # each weight m g at its centre (the backboard's centre is its point G)
     g = np.asarray(result.scene.gravity)
     for mass in result.scene.masses:
         origins, vectors = _arrows(rec, f"/mechanism/forces/weights/{mass.link}")
         if isinstance(mass.center, str):
             np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[mass.center]]))
-        np.testing.assert_array_equal(vectors[:, 0], np.broadcast_to(_f32(mass.mass * g * scale),
-                                                                     vectors[:, 0].shape))
+        _, v, _ = _drawn(result, origins.astype(float), np.broadcast_to(mass.mass * g, origins.shape), scale)
+        np.testing.assert_allclose(vectors, v, **close)
     # one scale: 1 ft stands for a round force; the longest arrow is at most 30 % of the
     # mechanism's size and at least half of that; the 2D view's title says it
     per = 1 / scale
@@ -494,13 +549,23 @@ def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve
     longest = max(np.nanmax(np.hypot(v[..., 0], v[..., 1])) for *_, v in arrows) * scale
     size = rrd.mechanism_size(result)
     assert 0.15 * size <= longest <= 0.3 * size * (1 + 1e-12)
-    (title,) = [t for t in rec.view_titles() if t.startswith("basketball_goal")]
-    assert f"forces 1 ft = {per:,.10g} lbf (input red, weights violet, springs yellow, " \
-           "reactions cyan)" in title
-    # each item is labelled with what it is, once (a spring's two arrows: at their centre)
+    # the legend names each kind in its colour and draws the scale as a bar of its true length
+    labels = list(rec.static("/mechanism/legend", "Arrows2D:labels"))
+    colours = [int(c) for c in rec.static("/mechanism/legend", "Arrows2D:colors")]
+    bars = np.stack(rec.static("/mechanism/legend", "Arrows2D:vectors"))
+    for kind in rrd.KINDS:
+        if kind.name in ("input", "weights", "springs", "reactions"):
+            k = labels.index(kind.legend)
+            r, g_, b_ = kind.colour
+            assert colours[k] == (r << 24) | (g_ << 16) | (b_ << 8) | 255
+    (bar,) = [k for k, label in enumerate(labels) if label.endswith(" lbf")]
+    force = float(labels[bar][:-4].replace(",", ""))
+    assert bars[bar][0] * per == pytest.approx(force, rel=1e-6)
+    assert force / 10 ** np.floor(np.log10(force)) in (1.0, 2.0, 2.5, 5.0)
+    assert "basketball_goal (y up)" in rec.view_titles()
+    # each item long enough is labelled with what it is, once (a spring's two arrows: at their
+    # centre; here they are short: their values instead, above)
     assert list(rec.static("/mechanism/forces/input/theta3a", "Arrows2D:labels")) == ["theta3a"]
-    assert list(rec.static("/mechanism/forces/reactions/O2", "Arrows2D:labels")) == ["R O2"]
-    assert list(rec.static("/mechanism/forces/springs/left", "Arrows2D:labels")) == ["left"]
 
 
 def test_cylinders_loads_and_weights_of_the_excavator(solve, tmp_path):
@@ -529,19 +594,23 @@ def test_cylinders_loads_and_weights_of_the_excavator(solve, tmp_path):
         frame = frame[keep]
         vectors = np.array([np.stack(r) for r in _column(frame, f"/mechanism/forces/input/{driver.name}",
                                                          "Arrows2D:vectors")])
-        np.testing.assert_array_equal(vectors, _f32(np.stack([-push, push], axis=1)[keep] * scale))
+        _, v, _ = _drawn(result, np.stack([a, b], axis=1)[keep], np.stack([-push, push], axis=1)[keep], scale)
+        np.testing.assert_allclose(vectors, v, rtol=2e-6, atol=2e-6 * rrd.mechanism_size(result))
     (load,) = [ld for ld in result.scene.loads if ld.point is not None]
     origins, vectors = _arrows(rec, f"/mechanism/forces/loads/{load.name}")
     np.testing.assert_array_equal(origins[:, 0], _f32(X[:, i[load.point]]))
-    np.testing.assert_array_equal(vectors[:, 0], np.broadcast_to(
-        _f32(np.asarray(load.force) * scale), vectors[:, 0].shape))
+    _, v, _ = _drawn(result, origins.astype(float), np.broadcast_to(np.asarray(load.force, float),
+                                                                     origins.shape), scale)
+    np.testing.assert_allclose(vectors, v, rtol=2e-6, atol=2e-6 * rrd.mechanism_size(result))
     assert rec.entities == _expected_entities(result)
 
 
-def test_an_angle_drivers_torque_is_drawn_as_the_force_at_its_arm(solve, tmp_path):
+def test_an_angle_drivers_torque_is_drawn_as_the_force_at_its_arm(solve, tmp_path, monkeypatch):
     """Without an input point, an angle driver's torque is the force at the driven vector's
-    head, perpendicular to it, whose moment about its tail is the torque."""
-    result = solve("hatch_gas_spring")
+    head, perpendicular to it, whose moment about its tail is the torque (no least length
+    here: each arrow is its force times the scale)."""
+    monkeypatch.setattr(rrd.forces, "MIN_FRACTION", 0.0)
+    result = dataclasses.replace(solve("hatch_gas_spring"))   # its own drawn arrows
     rec = Recording(_write(result, tmp_path))
     _, scale = rrd.force_arrows(result)
     (driver,) = result.scene.drivers
@@ -655,12 +724,13 @@ def test_one_driver_sweeps_have_a_timeline_of_the_drivers_value(solve, tmp_path)
     assert not np.isfinite(encoder.driver_value).all() and rrd.driver_timeline(encoder) is None
 
 
-def test_a_motor_between_links_is_drawn_on_both(tmp_path):
+def test_a_motor_between_links_is_drawn_on_both(tmp_path, monkeypatch):
     """tests/data/two_link_arm.toml: the elbow motor (B about A, relative to A -> O) turns the
     forearm with its torque (force at B, moment about A) and the upper arm with minus it (force
-    at O, moment about A); the shoulder's torque is a force at A."""
+    at O, moment about A); the shoulder's torque is a force at A (no least length here)."""
     from conftest import CONFIG_DIR
 
+    monkeypatch.setattr(rrd.forces, "MIN_FRACTION", 0.0)
     result = solve_scene(str(CONFIG_DIR.parent / "tests" / "data" / "two_link_arm.toml"))
     rec = Recording(_write(result, tmp_path))
     _, scale = rrd.force_arrows(result)

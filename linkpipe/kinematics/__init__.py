@@ -15,8 +15,8 @@ dense solves, condition), :mod:`.rates` (velocities, accelerations, link rates),
 from __future__ import annotations
 
 from .decompose import decompose
-from .plan import (DYADS_LEFT, METHODS, Method, Plan, Sweep, dyad_plan, dyad_sweep,
-                   solve_sweep, solve_with_newton, start_branches)
+from .plan import (DYADS_LEFT, METHODS, Method, Plan, Sweep, beyond_reach, dyad_plan,
+                   dyad_sweep, solve_sweep, solve_with_newton, start_branches)
 from .start import OutOfReach, start_state, steps_out_of_reach, sweep_reach
 
 from .pivots import solve_pivot_variants  # noqa: E402
@@ -27,7 +27,7 @@ from .roots import newton  # noqa: E402
 from .continuation import solve_positions  # noqa: E402
 from .sparse_lu import SPARSE_FROM, linear_algebra_used  # noqa: E402
 
-__all__ = ["solve_sweep", "METHODS", "OutOfReach", "steps_out_of_reach", "sweep_reach", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "Plan", "Method", "solve_with_newton", "decompose",
+__all__ = ["solve_sweep", "beyond_reach", "METHODS", "OutOfReach", "steps_out_of_reach", "sweep_reach", "AngleCarry", "dyad_plan", "dyad_sweep", "DYADS_LEFT", "solve_pivot_variants", "start_branches", "Sweep", "Plan", "Method", "solve_with_newton", "decompose",
            "start_state", "derivatives", "dense_derivatives", "driver_motion", "fd_derivatives",
            "link_angles_unwrapped", "link_rates", "newton", "solve_positions", "linear_algebra_used",
            "dense_chunk", "SPARSE_FROM"]

@@ -24,7 +24,7 @@ def solve_positions(model: Model, s: np.ndarray, q_start: np.ndarray,
                     start_slope: np.ndarray | None = None, tol: float | None = None,
                     max_iter: int | None = None, predictor: str | None = None,
                     jacobian: str | None = None, stop_on_failure: bool = False,
-                    subdivide: int = SUBDIVIDE):
+                    subdivide: int = SUBDIVIDE, skip: np.ndarray | None = None):
     """Solve every step's positions in sweep order with branch-keeping continuation.
 
     ``s`` (S, nd) driver values in internal units. Returns q (S, n_q) with NaN rows at failed
@@ -38,6 +38,12 @@ def solve_positions(model: Model, s: np.ndarray, q_start: np.ndarray,
     ``subdivide``: how many levels of ``SUBSTEPS`` sub-steps a step that fails right after an
     assembled one is retried in before it counts as failed.
 
+    ``skip`` (S,) bool: steps known not to assemble (the closed-form dyads'
+    :func:`linkpipe.kinematics.beyond_reach`): inside a gap they are no_assembly without a
+    solve (0 iterations; the residual max |Phi| of the gap's last least-squares shape at the
+    step's driver values), except the last one before a step that may assemble,
+    whose damped least squares carries the gap's shape up to it, as every step's did before.
+
     After a step without assembly the next one starts by damped least squares from the last
     assembled shape (a gap in the assembly range); after a not_converged step (``max_iter``
     reached on a step that has a root) the sweep predicts on from the root that told the two
@@ -49,7 +55,7 @@ def solve_positions(model: Model, s: np.ndarray, q_start: np.ndarray,
                         sc.max_iter if max_iter is None else max_iter,
                         sc.predictor if predictor is None else predictor,
                         sc.jacobian if jacobian is None else jacobian, subdivide)
-    return run.sweep(s, q_start, start_slope, stop_on_failure)
+    return run.sweep(s, q_start, start_slope, stop_on_failure, skip)
 
 
 @dataclass
@@ -131,7 +137,7 @@ class _Continuation:
         # large mechanisms: each step's Phi_q as a sparse LU (sparse_lu; None: dense)
         self.lu = self.fast.lu if self.fast is not None else None
 
-    def sweep(self, s, q_start, start_slope, stop_on_failure):
+    def sweep(self, s, q_start, start_slope, stop_on_failure, skip=None):
         n_steps, nq = s.shape[0], self.model.n_q
         q = np.full((n_steps, nq), np.nan)
         residual = np.full(n_steps, np.nan)
@@ -140,7 +146,14 @@ class _Continuation:
         # without a predictor the start slope is not used either (a singular start is then
         # left by trying either side, in leave_singular_start)
         path = _Path(q_start, s[0], start_slope if self.predictor != "none" else None)
+        if skip is not None:  # the last skippable step before one that may assemble is solved
+            skip = skip & np.r_[skip[1:], True]
         for i in range(n_steps):
+            if skip is not None and skip[i] and path.gap:
+                # no_assembly without a solve: 0 iterations, the residual where it stands (the
+                # gap's last least-squares shape at this step's driver values)
+                status[i], residual[i] = NO_ASSEMBLY, self.standing_residual(path, s[i])
+                continue
             att = _Attempt(self.predict(path, s[i]))
             if path.gap and nq and not self.through_gap(att, path, s[i]):
                 residual[i], iterations[i], status[i] = att.residual, att.iterations, NO_ASSEMBLY
@@ -159,6 +172,14 @@ class _Continuation:
             if not att.converged and stop_on_failure:
                 break
         return q, residual, iterations, status
+
+    def standing_residual(self, path: _Path, s_i) -> float:
+        """max |Phi| at the gap's last least-squares shape (else the last assembled one) and
+        driver values ``s_i``: a skipped step's residual (no iteration moved it)."""
+        q = path.gap_shape if path.gap_shape is not None else path.q
+        F = (self.fast.phi(q, s_i) if self.fast is not None else
+             self.model.phi(self.model.positions(q[None]), s_i[None])[0])
+        return float(np.abs(F).max()) if F.size else 0.0
 
     def predict(self, path: _Path, s_i) -> np.ndarray:
         """The guess: the last shape moved along its slope (and curvature), or aimed."""

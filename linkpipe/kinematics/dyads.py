@@ -315,6 +315,10 @@ class ChainSweep:
     #: acceleration or None) (S, n_links), from the pass itself
     link_angle: np.ndarray | None = None
     link_rates: tuple | None = None
+    #: (S,) with ``gaps=True``: the smallest over the dyads of the squared distance between a
+    #: dyad's two roots at the step; negative where a dyad has no real root (its circles, or its
+    #: circle and line, miss each other), by as much as the chord they would need
+    miss: np.ndarray | None = None
 
 
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
@@ -369,6 +373,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     al = np.empty((S, L)) if links and order >= 2 else None
     ok = np.ones(S, dtype=bool)
     gap = np.full(S, np.inf) if gaps else None  # margin: gap^2 - (BRANCH_MARGIN move)^2
+    miss = np.full(S, np.inf) if gaps else None
     residual = np.empty(S) if max_abs_phi is not None else None
     moving = [int(p) for p in model.moving]
     nd = model.n_drivers
@@ -392,6 +397,8 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             if moving:
                 ok[lo:hi] = np.isfinite(total)
             if gaps:
+                for _, g2 in ch.gap2:  # NaN downstream of a dyad without a root: fmin skips it
+                    np.fmin(miss[lo:hi], g2, out=miss[lo:hi])
                 _branch_margins(ch, gap, prev, lo, hi)
             if max_abs_phi is not None:
                 pts = {p: (ch.px[p], ch.py[p]) for p in moving + list(fixed_at)}
@@ -421,7 +428,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             A[np.ix_(bad, moving)] = np.nan
         if residual is not None:
             residual[bad] = np.nan
-    return ChainSweep(X, V, A, ok, residual, gap, angle, None if w is None else (w, al))
+    return ChainSweep(X, V, A, ok, residual, gap, angle, None if w is None else (w, al), miss)
 
 
 def _position_pass(plan: DyadChain, ch: _Chunk, fixed_at: dict, lo: int, hi: int,

@@ -146,12 +146,31 @@ def solve_with_newton(model: Model, s, note: str = "", start=None) -> Sweep:
     if reason:  # a declared path: the summary and the HDF5 solver_note say it
         note = "; ".join(x for x in (note, f"no sparse engine ({reason}): sequential "
                                            "continuation on every step, dense derivatives") if x)
-    out = solve_newton(model, s, start=start)
+    out = solve_newton(model, s, start=start, skip=beyond_reach(model, s))
     q = out["q"]
     X = model.positions(np.where(np.isfinite(q), q, 0.0))
     X[~np.isfinite(q).all(axis=1)] = np.nan
     X[:, model.fixed] = model.start_position[model.fixed]
     return Sweep(X, out["residual"], out["iterations"], out["status"], "newton", note)
+
+
+#: a step is beyond reach when a dyad's circles miss each other so far that the chord between
+#: its roots would be imaginary by more than this fraction of the mechanism's size (a miss
+#: of ~1e-7 of the size for radii of its order: far above any tolerance Newton meets)
+BEYOND_REACH = 1e-3
+
+
+def beyond_reach(model: Model, s: np.ndarray) -> np.ndarray | None:
+    """(S,) bool: the steps of ``s`` (S, nd) that cannot assemble, by the closed-form dyads
+    (a dyad whose circles, or circle and line, miss each other by :data:`BEYOND_REACH`; the
+    branches do not matter), where the scene decomposes into them; None where it does not.
+    The general path skips them inside a gap (:func:`.continuation.solve_positions`): a sweep
+    that mostly cannot assemble then costs about what one that can does (issue 34)."""
+    chain = decompose(model)
+    if not chain.ok or not model.n_q or s.shape[0] < 3:
+        return None
+    sw = solve_chain(chain, s, order=0, gaps=True)
+    return sw.miss < -(BEYOND_REACH * model.size) ** 2
 
 
 class Plan:

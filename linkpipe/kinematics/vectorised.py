@@ -42,7 +42,7 @@ MAX_NODE_SHARE = 0.25  # drivers that turn back at more than this share of the s
 
 
 def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk: int = CHUNK,
-                 start=None):
+                 start=None, skip: np.ndarray | None = None):
     """Solve the sweep by the general path, vectorised; return a dict.
 
     Keys: q (S, n_q) NaN at failed steps, residual, iterations, status (as
@@ -53,6 +53,8 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
     turn is a coarse node). Any spacing of the driver values is fine: the prediction is a
     Hermite cubic in the driver value (:func:`_parameter`). ``start``: the
     :func:`linkpipe.kinematics.start_state` at ``s[0]`` when the caller has it already.
+    ``skip`` (S,) bool: steps known not to assemble (:func:`linkpipe.kinematics.beyond_reach`),
+    not solved inside a gap (:func:`.continuation.solve_positions`).
     """
     sc = model.scene.solver
     S = s.shape[0]
@@ -64,10 +66,12 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
         start = start_state(model, s[0], model.tolerance(), sc.max_iter)
     if (eng is None or sc.jacobian != "analytic" or S < VECTORISE_FROM
             or len(nodes) > MAX_NODE_SHARE * S):
-        q, res, it, st = solve_positions(model, s, q_start=start[0], start_slope=start[1])
+        q, res, it, st = solve_positions(model, s, q_start=start[0], start_slope=start[1],
+                                         skip=skip)
         out.update(q=q, residual=res, iterations=it, status=st, sequential=np.ones(S, bool))
         return out
-    qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1])
+    qn, resn, itn, stn = solve_positions(model, s[nodes], q_start=start[0], start_slope=start[1],
+                                         skip=None if skip is None else skip[nodes])
     qn, resn = _one_more_newton_step(eng, qn, s[nodes], stn == OK, resn)
     out = dict(q=np.full((S, model.n_q), np.nan), residual=np.full(S, np.nan),
                iterations=np.zeros(S, dtype=np.int32), status=np.zeros(S, dtype=np.int8),
@@ -78,7 +82,7 @@ def solve_newton(model: Model, s: np.ndarray, coarse: int = COARSE_NODES, chunk:
     chord = np.diff(s[nodes], axis=0)  # each interval's driver increment (n_nodes - 1, nd)
     slopes, regular = _node_slopes(model, eng, qn, s[nodes], chord, stn == OK)
     bad_interval = _refine_between_nodes(model, eng, out, s, nodes, qn, slopes, regular, chunk)
-    _rerun_sequentially(model, out, s, nodes, qn, bad_interval, start)
+    _rerun_sequentially(model, out, s, nodes, qn, bad_interval, start, skip)
     return out
 
 
@@ -177,7 +181,7 @@ def _refine_between_nodes(model: Model, eng, out: dict, s, nodes, qn, slopes, re
     return bad_interval
 
 
-def _rerun_sequentially(model: Model, out: dict, s, nodes, qn, bad_interval, start):
+def _rerun_sequentially(model: Model, out: dict, s, nodes, qn, bad_interval, start, skip=None):
     """Runs of intervals the vectorised refinement could not do go to the sequential
     continuation, from the run's first node (or the last assembled step before it); where it
     arrives elsewhere than the coarse run at a node, it continues to the end."""
@@ -188,13 +192,13 @@ def _rerun_sequentially(model: Model, out: dict, s, nodes, qn, bad_interval, sta
     for run in runs:
         j0, j1 = run[0], run[-1]
         a, b = nodes[j0], nodes[j1 + 1]
-        solved = _sequential_from_before(model, s, out["q"], a, b, start)
+        solved = _sequential_from_before(model, s, out["q"], a, b, start, skip)
         for key, arr in zip(keys, solved):
             out[key][a + 1:b + 1] = arr[1:]
         out["sequential"][a + 1:b + 1] = True
         if j1 + 1 < last and not _same(solved[0][-1], qn[j1 + 1], model):
             # the coarse continuation went elsewhere at this node: continue sequentially
-            solved = _sequential_from_before(model, s, out["q"], b, S - 1, start)
+            solved = _sequential_from_before(model, s, out["q"], b, S - 1, start, skip)
             for key, arr in zip(keys, solved):
                 out[key][b + 1:] = arr[1:]
             out["sequential"][b + 1:] = True
@@ -264,7 +268,7 @@ def _same(a, b, model) -> bool:
     return bool(np.abs(a - b).max() <= 1e-8 * model.size)
 
 
-def _sequential_from_before(model, s, q, a, b, start):
+def _sequential_from_before(model, s, q, a, b, start, skip=None):
     """Run the sequential continuation over steps a..b from the last assembled step at or before a.
 
     ``start``: :func:`linkpipe.kinematics.start_state` at step 0 (its slope is the first
@@ -273,7 +277,8 @@ def _sequential_from_before(model, s, q, a, b, start):
     p = prev[-1] if len(prev) else 0
     slope = start[1] if p == 0 else None
     qs, rs, its, sts = solve_positions(model, s[p:b + 1], q_start=q[p] if len(prev) else start[0],
-                                           start_slope=slope)
+                                           start_slope=slope,
+                                           skip=None if skip is None else skip[p:b + 1])
     return qs[a - p:], rs[a - p:], its[a - p:], sts[a - p:]
 
 

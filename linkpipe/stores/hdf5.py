@@ -440,3 +440,28 @@ def root_attributes(result) -> dict[str, Any]:
     for stage, sec in result.seconds.items():
         attrs[f"seconds_{stage}"] = float(sec)
     return attrs
+
+
+def read_plain(path: str | os.PathLike) -> tuple[dict, dict]:
+    """Read any linkpipe ``.h5`` (a run's, a study's) with h5py alone: ``(root attributes,
+    {name: {"dims": (dimension names), "data": array, "attrs": {...}}})``, strings decoded,
+    every variable and coordinate loaded (the HTML report's input: :mod:`linkpipe.html_report`)."""
+    def plain(value):
+        if isinstance(value, bytes):
+            return value.decode()
+        if isinstance(value, np.ndarray) and value.dtype.kind in "OS":
+            return _decoded(value)
+        return value
+
+    with h5py.File(path, "r") as f:
+        root = {k: plain(v) for k, v in f.attrs.items()}
+        variables = {}
+        for name, ds in f.items():
+            if not isinstance(ds, h5py.Dataset):
+                continue
+            dims = tuple((d[0].name.rsplit("/", 1)[-1] if len(d) else "") for d in ds.dims)
+            attrs = {k: plain(v) for k, v in ds.attrs.items()
+                     if k not in ("DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME",
+                                  "_Netcdf4Dimid", "_Netcdf4Coordinates")}
+            variables[name] = {"dims": dims, "data": _decoded(ds[()]), "attrs": attrs}
+    return root, variables

@@ -32,7 +32,7 @@ from ..errors import SceneError
 from ..fit import locate
 from ..scene.keys import KEYS, _is_number, _suggest
 from ..version import __version__
-from . import spec, vector
+from . import paths, spec
 from .reductions import compile_metric
 from .spec import Metric, Study, StudyParameter
 
@@ -141,7 +141,7 @@ def load_problem(path, catalog_of=None) -> Problem:
     batch = spec.default_batch_size(population, scene.n_steps)
     study = Study(path, name, text, scene, base, params, corners, metrics + (failed,), catalog,
                   1, seed, batch, digest)
-    slots, why = vector.plan(study)
+    slots, why = paths.plan(study)
     note = (f"variant by variant: {why}" if slots is None else
             "vectorised: each generation one batch of variants")
     study = dataclasses.replace(study, slots=None if slots is None else tuple(slots),

@@ -10,9 +10,10 @@ it so the mechanism appears y-up. The logged data are the scene's own coordinate
 
 Modules: :mod:`.mechanism` (points, links and plates, actuators, guides, springs, traces,
 velocity and acceleration arrows), :mod:`.forces` (force arrows, one row per kind),
-:mod:`.series` (plots and solver series), :mod:`.columns` (timelines, the driver's value as
-one, Arrow arrays), :mod:`.geometry` (sizes, scales, plate outlines), :mod:`.layout`
-(blueprint), :mod:`.style` (colours).
+:mod:`.series` (plots and solver series), :mod:`.columns` (timelines, each driver's value as
+one, Arrow arrays), :mod:`.geometry` (sizes, scales, plate outlines), :mod:`.legend` (the 2D
+view's legend: each arrow kind's colour and scale), :mod:`.layout` (blueprint), :mod:`.style`
+(the palette: links muted, each arrow kind one saturated hue).
 """
 from __future__ import annotations
 
@@ -24,18 +25,19 @@ import rerun as rr
 
 from .. import atomic_path
 from ...result import stride_of
-from . import forces, mechanism, series
-from .columns import driver_timeline, sender
-from .forces import FORCE_FRACTION, KINDS, force_arrows, force_legend
+from . import forces, legend, mechanism, series
+from .columns import driver_timeline, driver_timelines, sender
+from .forces import FORCE_FRACTION, KINDS, MIN_FRACTION, drawn_arrows, force_arrows, force_legend
 from .geometry import ARROW_FRACTION, arrow_legend, arrow_scales, mechanism_size, outline
-from .layout import blueprint, mechanism_title, view_bounds
+from .layout import active_timeline, blueprint, mechanism_bounds, mechanism_title, view_bounds
 from .mechanism import path_of
 from .series import PLOTTED, SOLVER, log10_residual
 
 __all__ = ["write", "log_result", "blueprint", "path_of", "arrow_scales", "arrow_legend",
            "mechanism_size", "force_arrows", "force_legend", "driver_timeline", "outline",
            "log10_residual", "view_bounds", "mechanism_title", "KINDS", "PLOTTED", "SOLVER",
-           "ARROW_FRACTION", "FORCE_FRACTION", "APPLICATION_ID"]
+           "ARROW_FRACTION", "FORCE_FRACTION", "APPLICATION_ID", "MIN_FRACTION", "drawn_arrows",
+           "driver_timelines", "active_timeline", "mechanism_bounds"]
 
 APPLICATION_ID = "linkpipe"
 
@@ -171,5 +173,6 @@ def log_result(stream: rr.RecordingStream, result) -> None:
     mechanism.log_traces(stream, result)
     mechanism.log_vectors(stream, send, result)
     forces.log_forces(stream, send, result)
+    legend.log_legend(stream, result, *mechanism_bounds(result))
     series.log_series(stream, send, result)
     series.log_out_of_stroke(stream, send, result)

@@ -17,18 +17,26 @@ def sender(stream: rr.RecordingStream, result):
     # nanoseconds rounded to the nearest (rerun truncates float seconds: 1 ns short at times)
     nanoseconds = (None if result.time is None else
                    np.round(np.asarray(result.time, float) * 1e9).astype("timedelta64[ns]"))
-    by_value = driver_timeline(result)
+    by_value = driver_timelines(result)
 
     def send(entity: str, columns, rows: np.ndarray | None = None) -> None:
         rows = slice(None) if rows is None else rows
         index = [rr.TimeColumn("step", sequence=steps[rows])]
         if nanoseconds is not None:
             index.append(rr.TimeColumn("time", duration=nanoseconds[rows]))
-        if by_value is not None:
-            index.append(rr.TimeColumn(by_value[0], sequence=by_value[1][rows]))
+        for name, values in by_value:
+            index.append(rr.TimeColumn(name, sequence=values[rows]))
         stream.send_columns(entity, indexes=index, columns=columns)
 
     return send
+
+
+def driver_timelines(result) -> list[tuple[str, np.ndarray]]:
+    """[(name, values (S,) int64)]: a timeline per driver whose value is finite at every step
+    and only rises or only falls (:func:`driver_timeline`), so that every plot can be read
+    against any driver's value (a sweep of two drivers has two)."""
+    return [t for t in (_timeline(result, j) for j in range(len(result.driver_names)))
+            if t is not None]
 
 
 def driver_timeline(result) -> tuple[str, np.ndarray] | None:
@@ -42,9 +50,16 @@ def driver_timeline(result) -> tuple[str, np.ndarray] | None:
     else in a decimal fraction of it fine enough that neighbouring steps are 10 to 100 counts
     apart: 100,000 steps over 360 degrees give ``"crank [0.0001 degree]"`` (3600000 at 360).
     """
-    if len(result.driver_names) != 1 or result.n_steps < 2:
+    if len(result.driver_names) != 1:
         return None
-    value = np.asarray(result.driver_value[:, 0], dtype=float)
+    return _timeline(result, 0)
+
+
+def _timeline(result, j: int) -> tuple[str, np.ndarray] | None:
+    """:func:`driver_timeline` of driver ``j``."""
+    if result.n_steps < 2:
+        return None
+    value = np.asarray(result.driver_value[:, j], dtype=float)
     if not np.isfinite(value).all():
         return None
     step = np.diff(value)
@@ -59,9 +74,9 @@ def driver_timeline(result) -> tuple[str, np.ndarray] | None:
     ints = np.round(value * 10.0 ** digits).astype(np.int64)
     if not (np.diff(ints) != 0).all():
         return None
-    unit = result.driver_units()[0]
+    unit = result.driver_units()[j]
     count = unit if digits == 0 else f"{10.0 ** -digits:.{digits}f} {unit}"
-    return f"{result.driver_names[0]} [{count}]", ints
+    return f"{result.driver_names[j]} [{count}]", ints
 
 
 def labels_arrow(names, ok: np.ndarray):

@@ -36,6 +36,7 @@ import numpy as np
 import rerun as rr
 
 from ...cache import derived
+from . import style
 from .geometry import finite_rows, mechanism_size
 from .mechanism import path_of
 
@@ -57,6 +58,9 @@ class ForceKind:
     arrows: Callable  # result -> [(item (a name, or a tuple of path parts), origins (S, k, 2),
     #                              forces (S, k, 2))]
     tag: str          # the arrows' drawn label: "<tag> <item>" ("R O2"), or the item alone
+    legend: str = ""  # what the legend calls the kind ("ground reactions")
+    outward: bool = False  # drawn from its point outward: an arrow pointing into the mechanism
+    #                        ends at its point instead of starting there (:func:`placed`)
 
 
 def _points(result) -> tuple[np.ndarray, dict[str, int]]:
@@ -200,17 +204,21 @@ def friction_arrows(result) -> list:
             sign = np.sign(rel[:, 0] * t[:, 0] + rel[:, 1] * t[:, 1])
             out.append((fr.name, X[:, p][:, None], (-(mag[:, e] * sign)[:, None] * t)[:, None]))
     return out
+def _kind(name, variable, arrows, tag, legend, outward=False) -> ForceKind:
+    """A kind in its own saturated hue (:data:`.style.ARROW_HUES`, never a link's)."""
+    return ForceKind(name, variable, tuple(style.arrow_colour(name)), style.ARROW_HUE_NAMES[name],
+                     arrows, tag, legend, outward)
 
 
 #: the kinds of force arrows, drawn in this order; a new kind is one row (the loads are the
 #: scene's own constants: drawn whenever forces are computed, i.e. ``input_force`` is there)
 KINDS = (
-    ForceKind("input", "input_force", (255, 50, 50), "red", input_arrows, ""),
-    ForceKind("loads", "input_force", (255, 160, 0), "orange", load_arrows, ""),
-    ForceKind("weights", "gravity_energy", (190, 130, 255), "violet", weight_arrows, "W"),
-    ForceKind("springs", "spring_force", (255, 230, 40), "yellow", spring_arrows, ""),
-    ForceKind("reactions", "ground_reaction", (0, 220, 255), "cyan", reaction_arrows, "R"),
-    ForceKind("friction", "friction_force", (255, 90, 200), "pink", friction_arrows, "f"),
+    _kind("input", "input_force", input_arrows, "", "input force"),
+    _kind("loads", "input_force", load_arrows, "", "loads"),
+    _kind("weights", "gravity_energy", weight_arrows, "W", "weights"),
+    _kind("springs", "spring_force", spring_arrows, "", "spring forces"),
+    _kind("reactions", "ground_reaction", reaction_arrows, "R", "ground reactions", True),
+    _kind("friction", "friction_force", friction_arrows, "f", "friction"),
 )
 
 
@@ -256,33 +264,126 @@ def force_legend(result) -> str:
             + ", ".join(f"{k.name} {k.colour_name}" for k in kinds) + ")")
 
 
+#: a force whose arrow would be shorter than this fraction of the mechanism's size (but not
+#: zero) is drawn at this length, its value labelled: a 2.7 lbf spring force at 1 ft = 100 lbf
+#: would otherwise be an invisible dot
+MIN_FRACTION = 0.04
+
+
+def drawn_arrows(result) -> list[tuple[ForceKind, str, np.ndarray, np.ndarray, np.ndarray]]:
+    """Return [(kind, item, origins (S, k, 2), vectors (S, k, 2), short (S, k))]: every force
+    arrow as drawn (length units): the force times the scale, at least :data:`MIN_FRACTION` of
+    the size where it is not zero (``short``: drawn longer than its scale, its value labelled);
+    a kind drawn ``outward`` (the ground reactions) that points into the mechanism (towards the
+    centre of its points at that step) ends at its point instead of starting there, so that it
+    lies outside the body it acts on. Built once."""
+    return derived(result, "rrd_drawn_arrows", _drawn_arrows)
+
+
+def _drawn_arrows(result):
+    arrows, scale = force_arrows(result)
+    if not scale:
+        return []
+    least = MIN_FRACTION * mechanism_size(result)
+    centre = None
+    out = []
+    for kind, item, origins, vectors in arrows:
+        v = vectors * scale
+        with np.errstate(invalid="ignore", over="ignore"):
+            length = np.hypot(v[..., 0], v[..., 1])
+            short = (length > 0) & (length < least)
+            if short.any():
+                v = np.where(short[..., None], v * (least / np.where(short, length, 1.0))[..., None], v)
+            if kind.outward:
+                if centre is None:
+                    with np.errstate(all="ignore"):
+                        centre = np.nanmean(result.position, axis=1)       # (S, 2)
+                inward = np.einsum("skc,skc->sk", v, centre[:, None, :] - origins) > 0
+                origins = np.where(inward[..., None], origins - v, origins)
+        out.append((kind, item, origins, v, short))
+    return out
+
+
 def log_forces(stream, send, result) -> None:
-    """``mechanism/forces/<kind>/<item>``: each item's arrows at every step where they are finite
-    (a failed step clears them), each labelled with its item (a reaction ``R <point>``, a weight
-    ``W <link>``): drawn where the arrows are long enough to carry it (:func:`_labelled`), else on
-    hover; the kinds' colours and the scale are in the 2D view's title."""
+    """``mechanism/forces/<kind>/<item>``: each item's arrows (:func:`drawn_arrows`) at every
+    step where they are finite (a failed step clears them), each labelled with its item (a
+    reaction ``R <point>``, a weight ``W <link>``): drawn where the arrows are long enough to
+    carry it (:func:`_labelled`), else on hover. An item drawn at the least length at some
+    step carries its value at every step (``S1 2.7 lbf``), drawn. The kinds' colours and the
+    scale are in the legend (:mod:`.legend`)."""
     arrows, scale = force_arrows(result)
     if not scale:
         return
     size = mechanism_size(result)
-    for kind, item, origins, vectors in arrows:
+    unit = result.units()["force"]
+    drawn = drawn_arrows(result)
+    under = _drawn_over(drawn)
+    for n_item, ((kind, item, _, forces_), (_, _, origins, vectors, short)) in enumerate(zip(arrows, drawn)):
         parts = item if isinstance(item, tuple) else (item,)
         entity = path_of("mechanism", "forces", kind.name, *parts)
         tag = " ".join(([kind.tag] if kind.tag else []) + [str(p) for p in parts])  # one per item: drawn at the
         # centre of its arrows (a cylinder's or a spring's middle), not once per arrow
+        same = [n for n, first in under.items() if first == n_item]
+        if same:   # items drawn on top of this one (two springs side by side): one label
+            tag = " = ".join([tag] + [_item_tag(*drawn[n][:2]) for n in same])
+        valued, named = bool(short.any()), _labelled(forces_, scale, size)
+        if n_item in under:    # drawn under an earlier item's arrows: its label says both
+            valued = named = False
         stream.log(entity, rr.Arrows2D.from_fields(
-            labels=[tag], colors=kind.colour, show_labels=_labelled(vectors, scale, size),
+            labels=None if valued else [tag], colors=kind.colour, show_labels=valued or named,
             radii=rr.components.Radius.ui_points(2.0), draw_order=45.0), static=True)
         ok = finite_rows(origins) & finite_rows(vectors)          # (S, k)
+        values = np.hypot(forces_[..., 0], forces_[..., 1])
         if ok.all():  # no masked copies
             origins, vectors = origins.reshape(-1, 2), vectors.reshape(-1, 2)
+            values, short = values.reshape(-1), short.reshape(-1)
         elif ok.any():
-            origins, vectors = origins[ok], vectors[ok]
+            origins, vectors, values, short = origins[ok], vectors[ok], values[ok], short[ok]
         else:
             continue
+        extra = {}
+        if valued:  # per step (a static label would shadow them): the value where the arrow is
+            import pyarrow as pa  # drawn at the least length, else the item's name (or none)
+
+            other = tag if named else ""
+            # the first arrow of each step carries it (a spring's two ends: one label)
+            first = (np.arange(ok.shape[1])[None, :] == np.argmax(ok, axis=1)[:, None])[ok]
+            extra["labels"] = pa.array([(f"{tag} {_value(v)} {unit}" if s else other) if f else ""
+                                        for v, s, f in zip(values.tolist(), short.tolist(),
+                                                           first.tolist())], type=pa.string())
         send(entity, rr.Arrows2D.columns(
             origins=origins.astype(np.float32),
-            vectors=(vectors * scale).astype(np.float32)).partition(ok.sum(axis=1)))
+            vectors=vectors.astype(np.float32), **extra).partition(ok.sum(axis=1)))
+
+
+def _value(v: float) -> str:
+    """A force's value to 3 significant figures, in plain digits between 0.001 and 10^7
+    (``14,700``, ``2.67``, ``0.195``), else in exponent form."""
+    if not 1e-3 <= abs(v) < 1e7:
+        return f"{v:.3g}"
+    r = float(f"{v:.3g}")
+    return f"{r:,.0f}" if abs(r) >= 100 else f"{r:.3g}"
+
+
+def _item_tag(kind: ForceKind, item) -> str:
+    parts = item if isinstance(item, tuple) else (item,)
+    return " ".join(([kind.tag] if kind.tag else []) + [str(p) for p in parts])
+
+
+def _drawn_over(drawn) -> dict[int, int]:
+    """{item: the earlier item of its kind drawn exactly where it is at every step} (two
+    springs side by side in the plane): their labels would be drawn on top of each other."""
+    out = {}
+    for n, (kind, _, origins, vectors, _) in enumerate(drawn):
+        for m in range(n):
+            k2, _, o2, v2, _ = drawn[m]
+            if m in out or k2 is not kind or o2.shape != origins.shape:
+                continue
+            if (np.allclose(o2, origins, equal_nan=True, rtol=1e-9, atol=0)
+                    and np.allclose(v2, vectors, equal_nan=True, rtol=1e-9, atol=0)):
+                out[n] = m
+                break
+    return out
 
 
 def _labelled(vectors: np.ndarray, scale: float, size: float) -> bool:

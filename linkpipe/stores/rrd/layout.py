@@ -1,82 +1,150 @@
-"""The embedded blueprint: the mechanism (y up, every arrow in view) beside the plots."""
+"""The embedded blueprint: the mechanism (y up, every arrow and the legend in view) beside the
+plots, read against the quantity that moves the scene.
+
+Laid out for a 1400x900 window and up (1920x1080): the mechanism takes 11 of 20 columns, the
+plots the rest, one row each; the solver's series are a second tab beside the plots (collapsed
+until asked for). The time panel opens on ``time`` for a timed or logged scene (``[time]``),
+on the first driver's value for a sweep (``crank [degree]``), else on ``time`` or ``step``.
+"""
 from __future__ import annotations
 
 import numpy as np
+import rerun as rr
 import rerun.blueprint as rrb
 
-from . import style
-from .forces import force_arrows, force_legend
-from .geometry import arrow_legend, arrow_scales, bounds, point_index
+from ...cache import derived
+from .columns import driver_timelines
+from .forces import drawn_arrows
+from .geometry import arrow_scales, bounds, point_index
+from .legend import layout as legend_layout
 from .mechanism import path_of
-from .series import PLOTTED, SOLVER
+from .series import DEGREES, PLOTTED, SOLVER, hidden
 from ...output_units import entry_units
 
+#: the mechanism's share of the window's width (of 20)
+COLUMNS = (11, 9)
+#: the plots' x axis: the whole sweep and this fraction of it either side
+X_PAD = 0.03
 
-def view_bounds(result) -> tuple[np.ndarray, np.ndarray]:
-    """Return the 2D view's (lower, upper) corners: every position and arrow tip, padded 8 %."""
+
+def mechanism_bounds(result) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (lower, upper) corners of every position and arrow tip (as drawn), padded 8 %."""
     drawn = [result.position.reshape(-1, 2)]
     k = point_index(result, result.scene.outputs.vectors)
     for quantity, scale in arrow_scales(result).items():    # arrow tips too
         drawn.append((result.position[:, k] + scale * getattr(result, quantity)[:, k]).reshape(-1, 2))
-    arrows, scale = force_arrows(result)
-    for _, _, origins, vectors in arrows:
-        drawn.append((origins + scale * vectors).reshape(-1, 2))
+    for _, _, origins, vectors, _ in drawn_arrows(result):
+        drawn.append(origins.reshape(-1, 2))
+        drawn.append((origins + vectors).reshape(-1, 2))
     corners = np.concatenate([np.stack(bounds(result, d)) for d in drawn])  # no (S * n, 2) copy
     lo, hi = bounds(result, corners)
     pad = 0.08 * max(float(np.max(hi - lo)), 1e-9)
     return lo - pad, hi + pad
 
 
+def view_bounds(result) -> tuple[np.ndarray, np.ndarray]:
+    """Return the 2D view's (lower, upper) corners: :func:`mechanism_bounds` and, above them,
+    the legend's band (:mod:`.legend`); computed once."""
+    return derived(result, "rrd_view_bounds", _view_bounds)
+
+
+def _view_bounds(result):
+    lo, hi = mechanism_bounds(result)
+    placed, band = legend_layout(result, lo, hi)
+    if placed:
+        right = max(float(o[0] + v[0]) for _, _, o, v in placed)
+        right += 0.03 * (right - lo[0])       # the last bar's head clear of the view's edge
+        hi = np.array([max(hi[0], right), hi[1] + band])
+    return lo, hi
+
+
 def mechanism_title(result) -> str:
-    """The 2D view's name: the scene, y up, and the scale and colour of every kind of arrow."""
-    name = f"{result.scene.name} (y up)"
-    forces = force_legend(result)    # first: a long title is cut at the view's width
-    if forces:
-        name += f"; {forces}"
-    scales = arrow_scales(result)
-    if result.scene.outputs.vectors and scales:
-        name += "; arrows: " + ", ".join(
-            f"{q} ({style.VECTOR_COLOR_NAMES[q]}) {arrow_legend(result, q)}" for q in scales)
-    return name
+    """The 2D view's name: the scene, y up (the arrows' kinds and scales are in its legend)."""
+    return f"{result.scene.name} (y up)"
+
+
+def active_timeline(result) -> str:
+    """The timeline the plots open on: ``time`` for a timed or logged scene, the first driver's
+    value for a sweep (:func:`.columns.driver_timelines`), else ``time`` or ``step``."""
+    if result.time is not None and result.scene.time is not None:
+        return "time"
+    timelines = driver_timelines(result)
+    if timelines:
+        return timelines[0][0]
+    return "time" if result.time is not None else "step"
+
+
+def x_range(result, timeline: str):
+    """The whole sweep on ``timeline``, for the plots' x axis (else the viewer may open on a
+    window around its cursor)."""
+    if timeline == "time":
+        t = np.asarray(result.time, dtype=float)
+        t = t[np.isfinite(t)]
+        if not len(t):
+            return None
+        pad = X_PAD * float(t.max() - t.min())
+        start = rr.TimeRangeBoundary.absolute(seconds=float(t.min()) - pad)
+        end = rr.TimeRangeBoundary.absolute(seconds=float(t.max()) + pad)
+    else:
+        values = dict(driver_timelines(result)).get(timeline)
+        if values is None:
+            values = (np.arange(result.n_steps) if result.step_numbers is None
+                      else np.asarray(result.step_numbers))
+        if not len(values):
+            return None
+        pad = int(np.ceil(X_PAD * float(values.max() - values.min())))
+        start = rr.TimeRangeBoundary.absolute(seq=int(values.min()) - pad)
+        end = rr.TimeRangeBoundary.absolute(seq=int(values.max()) + pad)
+    return rrb.TimeAxis(view_range=rr.TimeRange(start=start, end=end))
 
 
 def blueprint(result) -> rrb.Blueprint:
-    """Return the default layout: the mechanism (y up) beside the plots and solver series."""
+    """Return the default layout: the mechanism (y up) beside the plots; the solver a tab."""
     lo, hi = view_bounds(result)
     mechanism = rrb.Spatial2DView(
         origin="/", contents="mechanism/**", name=mechanism_title(result),
         visual_bounds=rrb.VisualBounds2D(x_range=[lo[0], hi[0]], y_range=[-hi[1], -lo[1]]))
     variables = {v.name: v for v in result.variables()}
     labels = {c.name: list(c.data) for c in result.coordinates()}
+    left_out = hidden(result)
+    legend = rrb.PlotLegend(corner="LeftTop")
+    timeline = active_timeline(result)
+    axis = dict(axis_x=x_range(result, timeline))
     plots = []
     for name in PLOTTED:
         if name not in variables:
             continue
         var = variables[name]
         units = entry_units(var) if len(var.dims) == 2 else [var.units]
-        if len(set(units)) == 1:
-            plots.append(rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{units[0]}]"))
-            continue
-        # entries in different units (a torque beside a force): one view per unit, each on
-        # its own scale
+        shown, title = name, name.replace("_", " ")
+        if name == "link_angle":   # degrees, beside the drivers' degrees
+            shown, units = DEGREES, ["deg"] * len(units)
         for unit in dict.fromkeys(units):
-            entries = [path_of("plots", name, label)
-                       for label, u in zip(labels[var.dims[1]], units) if u == unit]
-            plots.append(rrb.TimeSeriesView(origin=f"plots/{name}", name=f"{name} [{unit}]",
-                                            contents=entries))
+            # entries in different units (a torque beside a force): one view per unit, each on
+            # its own scale; a series that coincides with another is left out (its name says so)
+            entries = [path_of("plots", shown, label)
+                       for label, u in zip(labels[var.dims[1]], units)
+                       if u == unit and path_of("plots", name, label) not in left_out]
+            plots.append(rrb.TimeSeriesView(origin=f"plots/{shown}", name=f"{title} [{unit}]",
+                                            contents=entries, plot_legend=legend, **axis))
     if result.measurements:
         plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
-                                     name=f"{name}: computed and measured [{unit}]")
+                                     name=f"{name}: computed and measured [{unit}]",
+                                     plot_legend=legend, **axis)
                   for name, unit in zip(result.measurements["names"],
                                         result.measurements["units"])]
     length = variables["residual"].units
     solver = [rrb.TimeSeriesView(origin="solver", name=f"log10 residual [{length}]",
-                                 contents=["solver/log10_residual", "solver/log10_tolerance"])]
-    solver += [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]")
+                                 contents=["solver/log10_residual", "solver/log10_tolerance"],
+                                 plot_legend=legend, **axis)]
+    solver += [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]",
+                                  plot_legend=rrb.PlotLegend(visible=False), **axis)
                for name in SOLVER]
+    right = rrb.Tabs(rrb.Vertical(*plots, name="plots"), rrb.Vertical(*solver, name="solver"),
+                     active_tab=0) if plots else rrb.Vertical(*solver, name="solver")
     return rrb.Blueprint(
-        rrb.Horizontal(mechanism, rrb.Vertical(*plots, rrb.Tabs(*solver)), column_shares=[3, 2]),
+        rrb.Horizontal(mechanism, right, column_shares=list(COLUMNS)),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline="step", state="collapsed"),
+        rrb.TimePanel(timeline=timeline, state="collapsed"),
     )

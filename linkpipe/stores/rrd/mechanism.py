@@ -37,13 +37,13 @@ def log_points(stream, send, result) -> None:
 
 
 def log_links(stream, send, result) -> None:
-    """Each link in its own colour (:func:`.style.colour`, the colour of its ``link_angle``
-    series too): a bar between its two points, a plate (3 or more points) as a closed polygon
+    """Each link in its own muted colour (:func:`.style.link_colour`, the colour of its
+    ``link_angle`` series too; never an arrow's hue): a bar between its two points, a plate (3 or more points) as a closed polygon
     that does not cross itself (:func:`.geometry.outline`)."""
     for j, link in enumerate(result.scene.links):
         k = outline(result, point_index(result, link.points))
         send_strips(stream, send, path_of("mechanism", "links", link.name), result.position[:, k],
-                    radii=rr.components.Radius.ui_points(2.5), colors=style.colour(j),
+                    radii=rr.components.Radius.ui_points(3.0), colors=style.link_colour(j),
                     draw_order=20.0)
 
 

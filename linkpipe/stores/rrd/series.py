@@ -1,5 +1,13 @@
 """The plotted series: ``plots/<variable>/<label>``, ``plots/measurements/<name>/computed`` and
-``.../measured``, and ``solver/**``, each in a colour of its own."""
+``.../measured``, and ``solver/**``, each in a colour of its own.
+
+What a person reads: link angles are also plotted in degrees (``plots/link_angle_deg/<link>``,
+the view the blueprint shows; ``plots/link_angle/<link>`` keeps the contract's radians, as the
+.h5 does); an input force is named for what it is (``force at H``, ``torque of crank``), not
+by the driver alone; series of one plot that coincide at every step are one legend entry
+(``left = right``: the others stay logged, out of the view: :func:`coinciding`). Series
+names carry no unit: the view's title has it.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -7,6 +15,7 @@ import rerun as rr
 
 from . import style
 from .mechanism import path_of
+from ...cache import derived
 from ...output_units import entry_units
 from ...status import OUT_OF_STROKE
 
@@ -14,37 +23,118 @@ from ...status import OUT_OF_STROKE
 PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle",
            "friction_force", "stroke_margin")
 SOLVER = ("residual", "iterations")
+#: link angles in degrees beside the contract's radians (what the blueprint shows)
+DEGREES = "link_angle_deg"
+
+
+def input_force_name(driver, unit: str) -> str:
+    """What an input force is: a force along the input at its point, a cylinder's axial force,
+    a torque of an angle driver."""
+    if driver.input is not None:
+        return f"force at {driver.input.point} ({driver.name})"
+    if driver.kind == "angle":
+        return f"torque of {driver.name}"
+    if driver.kind == "distance":
+        return f"{driver.name} axial force"
+    return f"force of {driver.name}"
+
+
+def coinciding(result) -> dict[str, list[list[int]]]:
+    """{plotted variable: groups of its columns equal at every step (NaN where the other is)},
+    each group in column order, only groups of two or more; computed once."""
+    return derived(result, "rrd_coinciding", _coinciding)
+
+
+def _coinciding(result):
+    variables = {v.name: v for v in result.variables()}
+    out = {}
+    for name in PLOTTED:
+        var = variables.get(name)
+        if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2 or var.data.shape[1] < 2:
+            continue
+        data = np.asarray(var.data, dtype=float)
+        units = entry_units(var)
+        groups, seen = [], set()
+        for j in range(data.shape[1]):
+            if j in seen:
+                continue
+            group = [j]
+            for k in range(j + 1, data.shape[1]):
+                if k not in seen and units[k] == units[j] and _same(data[:, j], data[:, k]):
+                    group.append(k)
+            if len(group) > 1:
+                seen.update(group)
+                groups.append(group)
+        if groups:
+            out[name] = groups
+    return out
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal where either is finite, to a millionth of the larger's range (a curve drawn over
+    another one at any plot's resolution); NaN at the same steps."""
+    fa, fb = np.isfinite(a), np.isfinite(b)
+    if not (fa == fb).all() or not fa.any():
+        return False
+    span = max(float(np.ptp(a[fa])), float(np.ptp(b[fb])), float(np.abs(a[fa]).max()), 1e-300)
+    return bool(np.abs(a[fa] - b[fb]).max() <= 1e-6 * span)
+
+
+def hidden(result) -> set[str]:
+    """The entities of series that coincide with an earlier one of their plot (left out of the
+    views; the earlier one's name says both)."""
+    labels = {c.name: list(c.data) for c in result.coordinates()}
+    variables = {v.name: v for v in result.variables()}
+    out = set()
+    for name, groups in coinciding(result).items():
+        names = labels[variables[name].dims[1]]
+        for group in groups:
+            out |= {path_of("plots", name, names[k]) for k in group[1:]}
+            if name == "link_angle":
+                out |= {path_of("plots", DEGREES, names[k]) for k in group[1:]}
+    return out
 
 
 def series_of(result) -> list[tuple[str, str, np.ndarray, list[int]]]:
     """Return [(entity, name, values (S,), colour)] of every plotted series. Within a plot each
-    series has its own colour (:func:`.style.colour` of its column: a link's angle is drawn in
+    series has its own colour (:func:`.style.colour` of its column; a link's angle is drawn in
     the link's colour); the residual and the tolerance beside it differ too."""
     variables = {v.name: v for v in result.variables()}
     labels = {c.name: c.data for c in result.coordinates()}
+    together = coinciding(result)
+    drivers = {d.name: d for d in result.scene.drivers}
     series = []
     for name in PLOTTED:
         var = variables.get(name)
         if var is None or var.dims[:1] != ("step",) or len(var.dims) != 2:
             continue
-        for j, (label, unit) in enumerate(zip(labels[var.dims[1]], entry_units(var))):
-            series.append((path_of("plots", name, label), f"{label} [{unit}]", var.data[:, j],
-                           style.colour(j)))
+        names = [str(x) for x in labels[var.dims[1]]]
+        if name == "input_force":
+            shown = [input_force_name(drivers[n], u) if n in drivers else n
+                     for n, u in zip(names, entry_units(var))]
+        else:
+            shown = list(names)
+        for group in together.get(name, []):
+            shown[group[0]] = " = ".join(shown[k] for k in group) + " (coincide)"
+        for j, label in enumerate(names):
+            colour = style.link_colour(j) if name == "link_angle" else style.colour(j)
+            series.append((path_of("plots", name, label), shown[j], var.data[:, j], colour))
+            if name == "link_angle":
+                series.append((path_of("plots", DEGREES, label), shown[j],
+                               np.degrees(var.data[:, j]), colour))
     for name in SOLVER:
         var = variables[name]
-        series.append((f"solver/{name}", f"{name} [{var.units}]", var.data, style.colour(0)))
+        series.append((f"solver/{name}", name, var.data, style.colour(0)))
     if result.measurements:  # computed beside measured, one plot per measurement
         m = result.measurements
         for k, name in enumerate(m["names"]):
-            unit = m["units"][k]
-            series.append((path_of("plots", "measurements", name, "computed"), f"computed [{unit}]",
+            series.append((path_of("plots", "measurements", name, "computed"), "computed",
                            m["measured"][:, k] + m["residual"][:, k], style.colour(0)))
-            series.append((path_of("plots", "measurements", name, "measured"), f"measured [{unit}]",
+            series.append((path_of("plots", "measurements", name, "measured"), "measured",
                            m["measured"][:, k], style.colour(1)))
     log_res, log_tol = log10_residual(result)
-    length = variables["residual"].units
-    series.append(("solver/log10_residual", f"log10 residual [{length}]", log_res, style.colour(0)))
-    series.append(("solver/log10_tolerance", f"log10 tolerance [{length}]",
+    series.append(("solver/log10_residual", "log10 residual", log_res, style.colour(0)))
+    series.append(("solver/log10_tolerance", "log10 tolerance",
                    np.full(result.n_steps, log_tol), style.colour(3)))
     return series
 

@@ -1,0 +1,126 @@
+"""Recordings a person reads at a glance (issue 34): the palette keeps links and arrow kinds
+apart, the legend is an entity, plots read in degrees against the quantity that moves the
+scene, coinciding series are one legend entry. Real .rrd files, read back."""
+import dataclasses
+import pathlib
+
+import numpy as np
+import pytest
+
+from linkpipe import solve as solve_scene
+from linkpipe.stores import rrd
+from linkpipe.stores.rrd import legend, style
+from linkpipe.stores.rrd.series import hidden
+
+from test_rrd import Recording, _column, _write
+
+CONFIGS = pathlib.Path(__file__).parent.parent / "configs"
+
+
+def test_links_and_arrow_kinds_never_share_a_hue():
+    """Every link colour (as many as the largest shipped mechanism has, and more) is muted and
+    at least HUE_CLEARANCE degrees from every arrow kind's hue (friction's reserved one too);
+    every force kind and vector has a saturated hue of its own."""
+    arrows = {k: style.arrow_colour(k) for k in style.ARROW_HUES}
+    assert {tuple(kind.colour) for kind in rrd.KINDS} <= {tuple(c) for c in arrows.values()}
+    assert len({style.hue_of(c) // 1 for c in arrows.values()}) == len(arrows)
+    for c in arrows.values():
+        assert style.saturation_of(c) >= 0.8
+    for j in range(24):
+        link = style.link_colour(j)
+        assert style.saturation_of(link) <= 0.4
+        for name, c in arrows.items():
+            assert style.hue_distance(style.hue_of(link), style.hue_of(c)) >= 19.5, (j, name)
+    # the velocity and acceleration arrows are two of the kinds
+    assert style.VECTOR_COLORS["velocity"] == arrows["velocity"]
+
+
+def test_arrows_are_drawn_above_links(solve, tmp_path):
+    result = solve("basketball_goal")
+    rec = Recording(_write(result, tmp_path))
+    link = float(np.ravel(rec.static("/mechanism/links/lower", "LineStrips2D:draw_order"))[0])
+    for entity in ("/mechanism/forces/input/theta3a", "/mechanism/acceleration/C",
+                   "/mechanism/legend"):
+        assert float(np.ravel(rec.static(entity, "Arrows2D:draw_order"))[0]) > link
+
+
+def test_the_legend_names_every_kind_drawn_and_fits_the_view(solve, tmp_path):
+    """The excavator: input, loads, weights, reactions and the vectors; each row's arrow in its
+    kind's colour; every row inside the view's bounds and clear of the mechanism (above it, or
+    at its right for a tall one)."""
+    for name in ("excavator_arm", "five_bar"):
+        result = solve(name)
+        rec = Recording(_write(result, tmp_path / name))
+        labels = list(rec.static("/mechanism/legend", "Arrows2D:labels"))
+        kinds = dict.fromkeys(kind for kind, *_ in rrd.force_arrows(result)[0])
+        assert [k.legend for k in kinds] == labels[:len(kinds)]
+        origins = np.stack(rec.static("/mechanism/legend", "Arrows2D:origins"))
+        tips = origins + np.stack(rec.static("/mechanism/legend", "Arrows2D:vectors"))
+        lo, hi = rrd.view_bounds(result)
+        mlo, mhi = rrd.mechanism_bounds(result)
+        for xy in (origins, tips):
+            tol = 1e-6 * float(np.max(hi - lo))                        # float32
+            assert (xy >= lo - tol).all() and (xy <= hi + tol).all()
+            assert ((xy[:, 1] > mhi[1]) | (xy[:, 0] > mhi[0])).all()   # not over the mechanism
+
+
+def test_link_angles_in_degrees_and_coinciding_series_as_one_entry(solve, tmp_path):
+    """The basketball goal: its upper and lower links are a parallelogram's (their angles
+    coincide), its two springs the same spring on either side (their forces coincide)."""
+    result = solve("basketball_goal")
+    rec = Recording(_write(result, tmp_path))
+    j = result.link_names.index("upper")
+    frame = rec.steps("/plots/link_angle_deg/upper")
+    got = np.concatenate(_column(frame, "/plots/link_angle_deg/upper", "Scalars:scalars").to_list())
+    np.testing.assert_array_equal(got, np.degrees(result.link_angle[:, j]))
+    frame = rec.steps("/plots/link_angle/upper")                   # the contract's radians kept
+    got = np.concatenate(_column(frame, "/plots/link_angle/upper", "Scalars:scalars").to_list())
+    np.testing.assert_array_equal(got, result.link_angle[:, j])
+    assert list(rec.static("/plots/spring_force/left", "SeriesLines:names")) == [
+        "left = right (coincide)"]
+    assert list(rec.static("/plots/link_angle_deg/upper", "SeriesLines:names")) == [
+        "upper = lower (coincide)"]
+    assert list(rec.static("/plots/input_force/theta3a", "SeriesLines:names")) == [
+        "force at H (theta3a)"]
+    views = rec.views()
+    assert "/plots/spring_force/right" not in str(views["spring force [lbf]"])
+    assert "/plots/spring_force/left" in str(views["spring force [lbf]"])
+    assert "/plots/link_angle_deg/lower" not in str(views["link angle [deg]"])
+    assert hidden(result) == {"/plots/spring_force/right", "/plots/link_angle/lower",
+                              "/plots/link_angle_deg/lower"}
+    # both contract entities are there, with their own values
+    assert {"/plots/spring_force/right", "/plots/link_angle/lower"} <= rec.entities
+
+
+def test_series_that_differ_are_not_merged(solve):
+    result = solve("excavator_arm")
+    assert hidden(result) == set()
+
+
+def test_plots_open_on_time_for_timed_scenes_and_on_the_driver_for_sweeps(solve):
+    logged = solve_scene(str(CONFIGS / "logged" / "dump_truck_logged.toml"))
+    assert rrd.active_timeline(logged) == "time"
+    assert rrd.active_timeline(solve("basketball_goal")) == "theta3a [degree]"
+    assert rrd.active_timeline(solve("fourbar_crank_rocker")) == "crank [degree]"
+    # two drivers: a timeline each, the first opened
+    five = solve("five_bar")
+    names = [n for n, _ in rrd.driver_timelines(five)]
+    assert [n.split(" [")[0] for n in names] == list(five.driver_names)
+    assert all(n.endswith("degree]") for n in names)
+    assert rrd.active_timeline(five) == names[0]
+
+
+def test_a_tiny_force_is_drawn_at_the_least_length_with_its_value(solve):
+    """MIN_FRACTION of the size, along the force, where force x scale is shorter."""
+    result = solve("basketball_goal")
+    arrows, scale = rrd.force_arrows(result)
+    least = rrd.MIN_FRACTION * rrd.mechanism_size(result)
+    for (kind, item, _, forces), (_, _, origins, vectors, short) in zip(arrows, rrd.drawn_arrows(result)):
+        F = np.hypot(forces[..., 0], forces[..., 1])
+        L = np.hypot(vectors[..., 0], vectors[..., 1])
+        np.testing.assert_allclose(L, np.where((F > 0) & (F * scale < least), least, F * scale),
+                                   rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(short, (F > 0) & (F * scale < least))
+        cross = vectors[..., 0] * forces[..., 1] - vectors[..., 1] * forces[..., 0]
+        np.testing.assert_allclose(cross, 0, atol=1e-9 * F.max() * L.max())
+        assert (np.einsum("skc,skc->sk", vectors, forces) >= 0).all()
