@@ -151,6 +151,7 @@ class Measurement:
     of: tuple
     sigma: float | None = None
     values: np.ndarray = field(default=None, compare=False, repr=False)
+    alarm: float | None = None  # follow: a residual beyond alarm x sigma is an alarm
 
     @property
     def address(self) -> str:

@@ -258,6 +258,11 @@ class MeasurementTables:
             if sigma is not None and not sigma > 0:
                 raise table.error("sigma", f"must be positive, got {sigma:g}",
                                   "the measurement's standard deviation, in its scaled unit")
+            alarm = table.number("alarm", None)
+            if alarm is not None and not (alarm > 0 and sigma is not None):
+                raise table.error("alarm", f"alarm = {alarm:g} is a number of sigmas: it needs "
+                                  "a positive value and the measurement's sigma",
+                                  "give sigma (the measurement's standard deviation) and alarm > 0")
             of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
             need = MEASURED_NEEDS.get(of[0])
             if need == "forces" and not effects or need == "springs" and "springs" not in effects:
@@ -269,7 +274,7 @@ class MeasurementTables:
                                   "springs" else 'add the effects the machine has, e.g. '
                                   '[analysis] effects = ["gravity"]')
             out.append(Measurement(table.data["name"], log.name, column, scale, of, sigma,
-                                   log.columns[column] * scale))
+                                   log.columns[column] * scale, alarm))
         return tuple(out)
 
     def measured_of(self, table, drivers, springs, torsion_springs, sliders) -> tuple:
