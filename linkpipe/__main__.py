@@ -79,6 +79,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     view.add_argument("--connect", metavar="ADDR", help="stream to a running viewer "
                       "(rerun+http://host:9876/proxy)")
     fol.add_argument("--port", type=_positive, default=None, help="--serve's port (default 9876)")
+    fol.add_argument("--rrd", action="store_true", help="also write <name>.rrd as it grows")
     fol.add_argument("--idle", type=_megabytes, default=None, metavar="S",
                      help="end after S seconds without a new row (default: follow until "
                           "Ctrl-C or SIGTERM)")
@@ -516,7 +517,7 @@ def _follow(args) -> int:
     try:
         with _reporting(args.scene, outcome):
             done = follow(args.scene, args.out, serve=args.serve, connect=args.connect,
-                          port=args.port, idle=args.idle, stop=stop,
+                          port=args.port, idle=args.idle, stop=stop, rrd=args.rrd,
                           say=(lambda text: None) if args.quiet else print)
             if done.code:
                 print(f"error: {done.why}", file=sys.stderr)

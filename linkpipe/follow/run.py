@@ -220,10 +220,11 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
            port: int | None = None, idle: float | None = None, stop: threading.Event | None = None,
            say=print, settle: int = SETTLE_ROWS, poll: float = POLL_SECONDS,
            max_block: int = MAX_BLOCK_ROWS, memory: str | None = None,
-           on_block=None) -> Outcome:
+           on_block=None, rrd: bool = False) -> Outcome:
     """Follow ``scene_path``'s ``[time]`` log into ``out/<name>.h5`` until ``idle`` seconds
     pass without a new row, ``stop`` is set, or the source fails; return the :class:`Outcome`.
-    ``on_block(part, seconds)``: called after each stored block (benchmarks)."""
+    ``on_block(part, seconds)``: called after each stored block (benchmarks); ``rrd``: also
+    write ``out/<name>.rrd`` as it grows."""
     from ..stores import output_folder
 
     stop = stop or threading.Event()
@@ -241,14 +242,14 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
     lock = _lock(out, scene.name, pathlib.Path(scene_path))
     try:
         return _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settle,
-                       wait, last_new, max_block, memory, on_block)
+                       wait, last_new, max_block, memory, on_block, rrd)
     finally:
         tail.close()
         lock.close()
 
 
 def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settle, wait,
-            last_new, max_block, memory, on_block) -> Outcome:
+            last_new, max_block, memory, on_block, rrd) -> Outcome:
     from ..pipeline import solve
     from ..stores.growing import GrowingWriter, stored
 
@@ -273,10 +274,11 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
     template = solve(window_scene(scene, first.t[:2], {c: v[:2] for c, v in first.columns.items()}))
     writer = GrowingWriter(path, template, before)
     recording = None
-    if serve or connect:
+    if serve or connect or rrd:
         from ..stores.rrd.live import SERVER_MEMORY, LiveRecording
 
-        recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY)
+        recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY,
+                                  path.with_suffix(".rrd") if rrd else None)
         outcome.address = recording.address
         if serve:
             say(f"serving the recording: rerun {recording.address}")

@@ -204,9 +204,10 @@ class CsvTail:
         if len(wrong) and wrong[0] < bad:
             bad = int(wrong[0])
             row = first_row + bad
-            what = ("has no time stamp" if np.isnan(t[bad]) else
-                    f"time {t[bad]!r} s goes backwards (the row before has {prev[bad]!r} s)"
-                    if t[bad] < prev[bad] else f"time {t[bad]!r} s repeats the row before's")
+            now, before = float(t[bad]), float(prev[bad])
+            what = ("has no time stamp" if np.isnan(now) else
+                    f"time {now!r} s goes backwards (the row before has {before!r} s)"
+                    if now < before else f"time {now!r} s repeats the row before's")
             fault = LogFault(f"{self.path}: {_line_of(self.path, row, self.skip_rows)}: {what}; "
                              f"the {row:,} rows before it are kept")
         t = t[:bad]

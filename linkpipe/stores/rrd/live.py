@@ -21,22 +21,28 @@ ALARMS = "alarms"
 
 
 class LiveRecording:
-    """``serve``: start a gRPC server (``port``; its address in :attr:`address`);
-    ``connect``: stream to a running viewer at that address. ``template``: a Result of the
-    scene (the layout of the views)."""
+    """``serve``: start a gRPC server (``port``, default 9876; its address in
+    :attr:`address`); ``connect``: stream to a running viewer at that address; ``file``: also
+    write the recording to that ``.rrd`` as it grows (not bounded: the file keeps every row).
+    ``template``: a Result of the scene (the layout of the views)."""
 
     def __init__(self, template, serve: bool = False, connect: str | None = None,
-                 port: int | None = None, memory: str = SERVER_MEMORY):
+                 port: int | None = None, memory: str = SERVER_MEMORY, file=None):
         name = template.scene.name
         self.stream = rr.RecordingStream(APPLICATION_ID,
                                          recording_id=f"{name}-follow-{uuid.uuid4().hex}")
         self.address = None
+        sinks = []
         if serve:
-            self.address = self.stream.serve_grpc(grpc_port=port, server_memory_limit=memory,
-                                                  default_blueprint=blueprint(template))
+            server = rr.GrpcServerSink(port=port or 9876, server_memory_limit=memory)
+            self.address = server.uri.replace("0.0.0.0", "127.0.0.1")
+            sinks.append(server)
         elif connect:
-            self.stream.connect_grpc(connect, default_blueprint=blueprint(template))
+            sinks.append(rr.GrpcSink(connect))
             self.address = connect
+        if file is not None:
+            sinks.append(rr.FileSink(str(file)))
+        self.stream.set_sinks(*sinks, default_blueprint=blueprint(template))
         self.stream.send_recording_name(name)
 
     def add(self, part) -> None:
@@ -53,6 +59,6 @@ class LiveRecording:
         self.stream.reset_time()
 
     def close(self) -> None:
+        """Flush every row to the sinks and end them (the server with them)."""
         self.stream.flush()
-        if self.address is not None and self.stream is not None:
-            self.stream.disconnect()
+        self.stream.disconnect()
