@@ -9,7 +9,7 @@ spline interpolates them). So :class:`Window` holds back the last ``settle`` row
 has arrived, and solves the rows before them with a spline through the rows from ``settle``
 before the block to the last row arrived: each stored row then has at least ``settle``
 samples on either side of it in its spline, where the end conditions reach it damped by
-0.27^settle (1e-18 at the default 32: below rounding; docs/follow.md). At the end
+0.268^settle (2e-14 at the default 24; docs/follow.md). At the end
 (``final``), the held-back rows are solved with the spline ending at the log's last row,
 as a batch ``run`` of the same log ends.
 
@@ -27,9 +27,9 @@ from ..errors import SceneError
 from ..pipeline import solve
 from ..result import Result
 
-#: rows held back at the end and taken before a block: 0.27^32 ~ 1e-18 of the end conditions'
-#: change reaches a stored row's rates (docs/follow.md)
-SETTLE_ROWS = 32
+#: rows held back at the end and taken before a block: 0.268^24 ~ 2e-14 of the end
+#: conditions' change reaches a stored row's rates (docs/follow.md)
+SETTLE_ROWS = 24
 #: the fewest rows a block solves (smaller ones wait for more, unless the log ends)
 MIN_BLOCK_ROWS = 1
 

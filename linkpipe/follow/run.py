@@ -22,6 +22,7 @@ import tomllib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import SceneError
 from ..status import Status
@@ -223,8 +224,9 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
            on_block=None, rrd: bool = False) -> Outcome:
     """Follow ``scene_path``'s ``[time]`` log into ``out/<name>.h5`` until ``idle`` seconds
     pass without a new row, ``stop`` is set, or the source fails; return the :class:`Outcome`.
-    ``on_block(part, seconds)``: called after each stored block (benchmarks); ``rrd``: also
-    write ``out/<name>.rrd`` as it grows."""
+    ``on_block(part, where)``: called when a block's rows are in the .h5 (``where`` "h5") and
+    when they are with the viewer's sinks ("viewer"; benchmarks); ``rrd``: also write
+    ``out/<name>.rrd`` as it grows."""
     from ..stores import output_folder
 
     stop = stop or threading.Event()
@@ -259,7 +261,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
                          "another version of this scene (its scene_toml differs)",
                          "move that file away, or give --out another folder")
     start = before.rows if before else 0
-    window = Window(scene, 0, settle, before.link_angle if before else None)
+    window = Window(scene, 0, settle, before.link_angle if before else None, threads=None)
     window.stored = start
     outcome = Outcome(path, rows=start)
     first = tail.poll()
@@ -278,7 +280,9 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         from ..stores.rrd.live import SERVER_MEMORY, LiveRecording
 
         recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY,
-                                  path.with_suffix(".rrd") if rrd else None)
+                                  path.with_suffix(".rrd") if rrd else None,
+                                  None if on_block is None else
+                                  (lambda part: on_block(part, "viewer")))
         outcome.address = recording.address
         if serve:
             say(f"serving the recording: rerun {recording.address}")
@@ -291,17 +295,17 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         + f" into {path}")
 
     def store(part) -> None:
-        t0 = _time.perf_counter()
         writer.add(part)
+        if on_block is not None:
+            on_block(part, "h5")
         if recording is not None:
             recording.add(part)
         reports.block(part)
         for k, v in part.seconds.items():
             seconds[k] = seconds.get(k, 0.0) + v
         outcome.new += part.n_steps
-        if on_block is not None:
-            on_block(part, _time.perf_counter() - t0)
 
+    pools = threadpool_limits(limits=1, user_api="blas")  # once: each block's solve is small
     try:
         while True:
             if len(rows):
@@ -345,9 +349,12 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
             while (part := window.block(final=True, max_rows=max_block)) is not None:
                 store(part)
     finally:
-        writer.finish(seconds, {"follow_log": str(log), "follow_settle_rows": settle})
-        if recording is not None:
-            recording.close()
+        pools.restore_original_limits()
+        try:
+            writer.finish(seconds, {"follow_log": str(log), "follow_settle_rows": settle})
+        finally:
+            if recording is not None:
+                recording.close()
     reports.end()
     outcome.rows, outcome.alarms = writer.rows, reports.alarms
     if fault is not None:

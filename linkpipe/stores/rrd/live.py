@@ -6,6 +6,8 @@ Alarms and reports go to the ``alarms`` entity (a ``TextLog`` the viewer lists w
 and level)."""
 from __future__ import annotations
 
+import queue
+import threading
 import uuid
 
 import numpy as np
@@ -27,8 +29,10 @@ class LiveRecording:
     ``template``: a Result of the scene (the layout of the views)."""
 
     def __init__(self, template, serve: bool = False, connect: str | None = None,
-                 port: int | None = None, memory: str = SERVER_MEMORY, file=None):
+                 port: int | None = None, memory: str = SERVER_MEMORY, file=None,
+                 on_sent=None):
         name = template.scene.name
+        self.on_sent = on_sent  # on_sent(part): a block's rows are with the sinks (benchmarks)
         self.stream = rr.RecordingStream(APPLICATION_ID,
                                          recording_id=f"{name}-follow-{uuid.uuid4().hex}")
         self.address = None
@@ -44,14 +48,41 @@ class LiveRecording:
             sinks.append(rr.FileSink(str(file)))
         self.stream.set_sinks(*sinks, default_blueprint=blueprint(template))
         self.stream.send_recording_name(name)
+        # the blocks are logged on a thread of their own while the next block solves (a
+        # bounded queue: a viewer slower than the log holds the solver back, never memory)
+        self._queue: queue.Queue = queue.Queue(maxsize=16)
+        self._failed: BaseException | None = None
+        self._thread = threading.Thread(target=self._work, name="linkpipe-live-rrd", daemon=True)
+        self._thread.start()
 
     def add(self, part) -> None:
         """Log the rows of one stored block (every entity ``run``'s recording has)."""
-        log_result(self.stream, part)
-        self.stream.flush()
+        self._put((self._block, (part,)))
 
     def note(self, step: int, time: float | None, text: str, level: str = "WARN") -> None:
         """One line in the ``alarms`` entity at ``step`` (and ``time``)."""
+        self._put((self._note, (step, time, text, level)))
+
+    def _put(self, item) -> None:
+        if self._failed is not None:
+            raise self._failed
+        self._queue.put(item)
+
+    def _work(self) -> None:
+        while (item := self._queue.get()) is not None:
+            if self._failed is None:
+                try:
+                    item[0](*item[1])
+                except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
+                    self._failed = exc
+
+    def _block(self, part) -> None:
+        log_result(self.stream, part)
+        self.stream.flush()
+        if self.on_sent is not None:
+            self.on_sent(part)
+
+    def _note(self, step: int, time: float | None, text: str, level: str) -> None:
         self.stream.set_time("step", sequence=int(step))
         if time is not None and np.isfinite(time):
             self.stream.set_time("time", duration=np.timedelta64(int(round(time * 1e9)), "ns"))
@@ -60,5 +91,7 @@ class LiveRecording:
 
     def close(self) -> None:
         """Flush every row to the sinks and end them (the server with them)."""
+        self._queue.put(None)
+        self._thread.join()
         self.stream.flush()
         self.stream.disconnect()
