@@ -166,7 +166,7 @@ with threadpool_limits(1, "blas"), tempfile.TemporaryDirectory() as tmp:
     t, cols = rows(0, 2)
     template = solve(window_scene(scene, t, cols))
     writer = GrowingWriter(pathlib.Path(tmp) / "sim.h5", template)
-    recording = LiveRecording(template, serve=True, port={port}, memory="64MiB")
+    recording = LiveRecording(template, serve=True, port={port}, memory="64MiB") if {port} else None
     window = Window(scene)
     n, t0 = 0, time.perf_counter()
     for target in targets:
@@ -176,10 +176,12 @@ with threadpool_limits(1, "blas"), tempfile.TemporaryDirectory() as tmp:
             n += len(t)
             while (part := window.block(max_rows=block)) is not None:
                 writer.add(part)
-                recording.add(part)
+                if recording is not None:
+                    recording.add(part)
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(f"MEM {{n}} {{peak:.1f}} {{time.perf_counter() - t0:.1f}}", flush=True)
-    recording.close()
+    if recording is not None:
+        recording.close()
     writer.finish()
 """
 
@@ -199,8 +201,8 @@ def memory(counts: list[int], port: int) -> bool:
         return False
     for n, peak, sec in marks:
         print(f"memory  {int(n):,} rows simulated: peak RSS {float(peak):,.0f} MB after "
-              f"{float(sec):,.0f} s ({int(n) / max(float(sec), 1e-9):,.0f} rows/s with the "
-              "recording served)")
+              f"{float(sec):,.0f} s ({int(n) / max(float(sec), 1e-9):,.0f} rows/s"
+              + (", the recording served)" if port else ", no recording)"))
     ratio = float(marks[-1][1]) / float(marks[0][1])
     ok = ratio <= 1.2
     print(f"memory  peak at {int(marks[-1][0]):,} / at {int(marks[0][0]):,} rows: {ratio:.3f}; "
@@ -214,6 +216,7 @@ def main(argv=None) -> int:
     p.add_argument("--rows", type=int, default=200_000, help="throughput: rows followed")
     p.add_argument("--memory-rows", default="1000000,10000000")
     p.add_argument("--port", type=int, default=9877)
+    p.add_argument("--no-recording", action="store_true", help="memory: the .h5 alone")
     p.add_argument("--skip", nargs="*", default=[], choices=["latency", "throughput", "memory"])
     args = p.parse_args(argv)
     ok = True
@@ -222,7 +225,8 @@ def main(argv=None) -> int:
     if "throughput" not in args.skip:
         ok &= throughput(args.rows)
     if "memory" not in args.skip:
-        ok &= memory([int(x) for x in args.memory_rows.split(",")], args.port + 1)
+        ok &= memory([int(x) for x in args.memory_rows.split(",")],
+                     0 if args.no_recording else args.port + 1)
     return 0 if ok else 1
 
 

@@ -23,6 +23,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..cache import forget
 from ..errors import SceneError
 from ..pipeline import solve
 from ..result import Result
@@ -142,6 +143,7 @@ class Window:
         part = replace(part, step_numbers=np.arange(lo, lo + n), measurements=_rows_only(
             whole.measurements, rows), kinematics=None)
         part = self._turns(part, whole, k)
+        forget(whole.model)  # its engine and kernels refer back to it: freed with the block
         self.stored = lo + n
         self.last_angles = part.link_angle[-1].copy()
         self.skip_to(self.stored)
