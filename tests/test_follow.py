@@ -321,3 +321,71 @@ def test_a_scene_without_a_time_log_is_a_scene_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "[time] log" in err and "Traceback" not in err
     assert not list(tmp_path.glob("*.h5"))
+
+
+ALARM = "sigma = 0.0005                     # 0.5 mm\nalarm = 4.0"
+
+
+@pytest.mark.parametrize("written, said", [
+    ("alarm = 4.0", "alarm = 4 is a number of sigmas: it needs a positive value and the "
+                    "measurement's sigma"),
+    ("sigma = 0.0005\nalarm = -1.0", "alarm = -1 is a number of sigmas"),
+])
+def test_an_alarm_needs_the_measurement_sigma_and_a_positive_value(rig, written, said):
+    from linkpipe import SceneError, parse_scene
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
+    text = scene.read_text()
+    assert text.count(ALARM) == 1
+    with pytest.raises(SceneError) as err:
+        parse_scene(text.replace(ALARM, written), str(scene))
+    assert said in str(err.value) and err.value.key == "alarm"
+    assert err.value.table == 'measurements "p_height"'
+
+
+def test_a_port_in_use_is_one_message_before_any_file(rig, capsys):
+    import socket
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["follow", str(scene), "--out", str(out), "--serve", "--port", str(port),
+                     "--idle", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert f"--serve: port {port} is in use" in err and "Traceback" not in err
+    assert not list(out.glob("*.h5"))
+
+
+def test_a_window_resumed_after_stored_rows_takes_the_rows_in_any_pieces(rig):
+    """Resuming after 700 stored rows, the log read in pieces of 37 rows (fewer than the rows
+    stored): the blocks are the batch's rows 700.. (the window keeps the settling rows before
+    them, and the rows it forgets are never needed)."""
+    import linkpipe
+    from linkpipe.follow.blocks import Window
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 1000, "--seconds", 1, "--fast").wait(30) == 0
+    whole = linkpipe.load_scene(str(scene))
+    batch = linkpipe.solve(whole)
+    data = whole.logs[0]
+    window = Window(whole, last_angles=batch.link_angle[699])
+    window.stored = 700
+    parts = []
+    for lo in range(0, 1000, 37):
+        window.add(data.t[lo:lo + 37], {c: data.columns[c][lo:lo + 37] for c in window.columns})
+        window.skip_to(window.stored)
+        while (part := window.block()) is not None:
+            parts.append(part)
+    while (part := window.block(final=True)) is not None:
+        parts.append(part)
+    steps = np.concatenate([p.step_numbers for p in parts])
+    np.testing.assert_array_equal(steps, np.arange(700, 1000))
+    for name in ("position", "velocity", "acceleration", "link_angle", "driver_acceleration"):
+        got = np.concatenate([getattr(p, name) for p in parts])
+        np.testing.assert_allclose(got, getattr(batch, name)[700:], rtol=0, atol=TOL, err_msg=name)
+    got = np.concatenate([p.forces["input_force"][1] for p in parts])
+    np.testing.assert_allclose(got, batch.forces["input_force"][1][700:], rtol=0, atol=TOL)

@@ -109,7 +109,7 @@ class Window:
 
     def skip_to(self, row: int) -> None:
         """Forget rows before ``row - settle`` (resuming after ``row``: rows already stored)."""
-        cut = max(0, row - self.settle - self.first)
+        cut = min(max(0, row - self.settle - self.first), len(self.t))
         if cut:
             self.t = self.t[cut:]
             self.data = {c: v[cut:] for c, v in self.data.items()}

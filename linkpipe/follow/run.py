@@ -274,9 +274,8 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
     if len(first) < 2:
         raise first.fault
     template = solve(window_scene(scene, first.t[:2], {c: v[:2] for c, v in first.columns.items()}))
-    writer = GrowingWriter(path, template, before)
     recording = None
-    if serve or connect or rrd:
+    if serve or connect or rrd:  # first: a port in use is said before any file is made
         from ..stores.rrd.live import SERVER_MEMORY, LiveRecording
 
         recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY,
@@ -286,6 +285,12 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         outcome.address = recording.address
         if serve:
             say(f"serving the recording: rerun {recording.address}")
+    try:
+        writer = GrowingWriter(path, template, before)
+    except BaseException:
+        if recording is not None:
+            recording.close()
+        raise
     reports = Reports(scene, say, recording)
     seconds: dict[str, float] = {}
     checked = before is None or before.rows == 0
@@ -365,7 +370,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
 def _check_resume(window: Window, before, log) -> None:
     """The log holds the rows the file holds: the last stored row's time is the log's."""
     i = before.rows - 1 - window.first
-    t = window.t[i] if 0 <= i < len(window.t) else np.nan
+    t = float(window.t[i]) if 0 <= i < len(window.t) else float("nan")
     if before.time == before.time and t != before.time:
         raise LogFault(f"{log}: row {before.rows} is at t = {t!r} s, but the stored file's last "
                        f"row is at t = {before.time!r} s: the log was replaced; the stored rows "

@@ -7,12 +7,14 @@ and level)."""
 from __future__ import annotations
 
 import queue
+import socket
 import threading
 import uuid
 
 import numpy as np
 import rerun as rr
 
+from ...errors import LinkpipeError
 from . import APPLICATION_ID, log_result
 from .layout import blueprint
 
@@ -38,6 +40,7 @@ class LiveRecording:
         self.address = None
         sinks = []
         if serve:
+            _check_port(port or 9876)
             server = rr.GrpcServerSink(port=port or 9876, server_memory_limit=memory)
             self.address = server.uri.replace("0.0.0.0", "127.0.0.1")
             sinks.append(server)
@@ -95,3 +98,15 @@ class LiveRecording:
         self._thread.join()
         self.stream.flush()
         self.stream.disconnect()
+
+
+def _check_port(port: int) -> None:
+    """One message (exit 2) where ``port`` is taken: Rerun's server would log the failure to
+    listen and shut down at the first row."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(("0.0.0.0", port))
+        except OSError:
+            raise LinkpipeError(f"--serve: port {port} is in use (another viewer or server "
+                                "listens there); give --port another one") from None
