@@ -17,6 +17,7 @@ its stored rows into a new file and goes on.
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -26,6 +27,8 @@ import numpy as np
 from ..result import Result, Totals, Variable, combine_flags
 from .hdf5 import _PHANTOM, _array, _set_attr, _write_coordinate, _write_variable
 
+#: seconds the end waits for readers that hold the file to let it go (then: without the lock)
+LOCK_WAIT = 5.0
 #: rows read at a time where the whole file is read back (totals, RMS, a copy)
 READ_ROWS = 1 << 20
 #: bytes of chunk cache per dataset: the rows go in order, so the chunk being filled is all a
@@ -140,7 +143,7 @@ class GrowingWriter:
             self._datasets()
             os.replace(tmp, self.path)
         elif not self.resume.killed:
-            self._file = h5py.File(self.path, "r+", libver="latest", rdcc_nbytes=CHUNK_CACHE)
+            self._file = _writable(self.path, libver="latest", rdcc_nbytes=CHUNK_CACHE)
             self._file.attrs["complete"] = np.int8(0)
             self._datasets()
         else:
@@ -205,7 +208,7 @@ class GrowingWriter:
         self.close()
         if not self.path.exists():
             return
-        with h5py.File(self.path, "r+") as f:
+        with _writable(self.path) as f:
             self._finish(f, seconds, extra)
 
     def _finish(self, f: h5py.File, seconds, extra) -> None:
@@ -249,6 +252,25 @@ class GrowingWriter:
         for key, value in (extra or {}).items():
             _set_attr(f.attrs, key, value)
         f.attrs["complete"] = np.int8(1)
+
+
+def _writable(path: Path, **options) -> h5py.File:
+    """``path`` opened to write outside SWMR (its end, or a clean file resumed). HDF5's lock
+    keeps readers out meanwhile (one that opens then is refused, and tries again: a reader
+    of a file changing under it outside SWMR was seen to loop for ever); a reader that holds
+    the file already makes the lock fail: tried again for :data:`LOCK_WAIT` seconds, then
+    opened without the lock (the file must end complete; the reader holding it reads what
+    it had)."""
+    end = time.monotonic() + LOCK_WAIT
+    while True:
+        try:
+            return h5py.File(path, "r+", **options)
+        except OSError as exc:
+            if "lock" not in str(exc):
+                raise
+        if time.monotonic() > end:
+            return h5py.File(path, "r+", locking=False, **options)
+        time.sleep(0.05)
 
 
 def _rows_of(template: Result, arrays: dict, first: int) -> Result:
