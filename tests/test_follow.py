@@ -410,3 +410,32 @@ def test_a_reader_holding_the_file_does_not_keep_it_from_completing(rig, tmp_pat
     assert follower.returncode == 0, stderr
     with _batch(scene, tmp_path) as batch:
         _assert_equal_to_batch(h5, batch)
+
+
+def test_a_no_input_stretch_is_reported_as_it_happens(rig, tmp_path):
+    """Ten empty crank readings (rows 300..309) written by the logger mid-run: follow says
+    when the no_input stretch begins and ends, with its steps and times, and the statuses
+    equal the batch run's."""
+    scene, log, out = rig
+    code = textwrap.dedent(f"""
+        import time
+        with open({str(log)!r}, "w") as f:
+            f.write({HEADER!r})
+            for i in range(600):
+                t = i * 0.002
+                crank = "" if 300 <= i < 310 else f"{{720.0 * t:.6f}}"
+                f.write(f"{{t:.6f}},{{crank}},100.0,1700.0\\n")
+                if i % 50 == 49:
+                    f.flush(); time.sleep(0.05)
+    """)
+    writer = subprocess.Popen([sys.executable, "-c", code])
+    _wait_for(lambda: log.exists())
+    follower = _follow(scene, out, "--idle", 1.0)
+    assert writer.wait(30) == 0
+    stdout, stderr = follower.communicate(timeout=60)
+    assert follower.returncode == 0, stderr
+    assert "no_input from step 300 (t = 0.6 s)" in stdout
+    assert "no_input ended at step 310 (t = 0.62 s): 10 step(s) from step 300 (t = 0.6 s)" in stdout
+    with _batch(scene, tmp_path) as batch:
+        assert (batch["status"][300:310] == 4).all()
+        _assert_equal_to_batch(out / "fourbar_live.h5", batch)
