@@ -83,6 +83,21 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     _executor_options(opt)
     opt.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
     opt.add_argument("--quiet", action="store_true", help="print only errors")
+    fol = sub.add_parser("follow", help="follow a log while it is written: <name>.h5 grows, "
+                         "the viewer streams")
+    fol.add_argument("scene", help="a scene with [time] log = <the growing log>")
+    fol.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    view = fol.add_mutually_exclusive_group()
+    view.add_argument("--serve", action="store_true", help="serve the recording over gRPC; "
+                      "viewers that connect late get the history")
+    view.add_argument("--connect", metavar="ADDR", help="stream to a running viewer "
+                      "(rerun+http://host:9876/proxy)")
+    fol.add_argument("--port", type=_positive, default=None, help="--serve's port (default 9876)")
+    fol.add_argument("--rrd", action="store_true", help="also write <name>.rrd as it grows")
+    fol.add_argument("--idle", type=_megabytes, default=None, metavar="S",
+                     help="end after S seconds without a new row (default: follow until "
+                          "Ctrl-C or SIGTERM)")
+    fol.add_argument("--quiet", action="store_true", help="print only errors and alarms")
     return p
 
 
@@ -148,7 +163,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m linkpipe") -> int
     if args.command == "run":
         args.rrd_max_steps, args.rrd_max_mb = recording_caps(args.rrd_max_steps, args.rrd_max_mb)
     command = {"run": _run, "check": _check, "accuracy": _accuracy, "fit": _fit,
-               "study": _study, "optimize": _optimize, "report": _report}[args.command]
+               "study": _study, "optimize": _optimize, "report": _report,
+               "follow": _follow}[args.command]
     previous = _signals_as_interrupts()
     try:
         with using(getattr(args, "chunk_threads", 0)):
@@ -621,6 +637,32 @@ def _optimize(args) -> int:
         if not args.quiet:
             print(optimize_table(found, time.perf_counter() - t0))
             print("  wrote " + ", ".join(map(str, paths)))
+def _follow(args) -> int:
+    """``follow``: Ctrl-C and SIGTERM end it as --idle does (the held-back rows solved, the
+    file complete), exit 0; a fault of the log ends it likewise, exit 1."""
+    from .follow import follow
+
+    stop = threading.Event()
+    signals = {}
+    if threading.current_thread() is threading.main_thread():
+        signals = {s: signal.signal(s, lambda signum, frame: stop.set())
+                   for s in (signal.SIGINT, signal.SIGTERM)}
+    outcome = _Outcome()
+    try:
+        with _reporting(args.scene, outcome):
+            done = follow(args.scene, args.out, serve=args.serve, connect=args.connect,
+                          port=args.port, idle=args.idle, stop=stop, rrd=args.rrd,
+                          say=(lambda text: None) if args.quiet else print)
+            if done.code:
+                print(f"error: {done.why}", file=sys.stderr)
+            alarms = ", ".join(f"{name} {k:,} row(s)" for name, k in done.alarms.items())
+            print(f"{done.path}: {done.rows:,} rows ({done.new:,} new), complete"
+                  + (f"; alarms: {alarms}" if alarms else "")
+                  + (f"; ended: {done.why}" if done.why and not done.code else ""))
+            outcome.code = done.code
+    finally:
+        for s, handler in signals.items():
+            signal.signal(s, handler)
     return outcome.code
 
 

@@ -17,3 +17,12 @@ def derived(owner, name: str, build):
     return _DERIVED[key]
 
 
+
+
+def forget(owner) -> None:
+    """Drop what was derived from ``owner`` now. A derived object that refers back to its owner
+    (a model's step kernels hold the model) keeps it alive through this module's table, so
+    the finaliser never runs: a process that makes many short-lived owners (``follow``: a
+    model per block) forgets each one when it is done with it."""
+    for key in [k for k in _DERIVED if k[0] == id(owner)]:
+        _DERIVED.pop(key, None)

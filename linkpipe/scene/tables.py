@@ -208,6 +208,7 @@ class Measurement:
     offset: float = 0.0
     #: (S, n) each column in the scene's units at the steps: ``values = parts @ scales + offset``
     parts: np.ndarray = field(default=None, compare=False, repr=False)
+    alarm: float | None = None  # follow: a residual beyond alarm x sigma is an alarm
 
     @property
     def address(self) -> str:

@@ -328,6 +328,11 @@ class MeasurementTables:
             if sigma is not None and not sigma > 0:
                 raise table.error("sigma", f"must be positive, got {sigma:g}",
                                   "the measurement's standard deviation, in its scaled unit")
+            alarm = table.number("alarm", None)
+            if alarm is not None and not (alarm > 0 and sigma is not None):
+                raise table.error("alarm", f"alarm = {alarm:g} is a number of sigmas: it needs "
+                                  "a positive value and the measurement's sigma",
+                                  "give sigma (the measurement's standard deviation) and alarm > 0")
             need = MEASURED_NEEDS.get(of[0])
             if need == "forces" and not effects or need == "springs" and "springs" not in effects:
                 what = ('"springs" in [analysis] effects' if need == "springs" else
@@ -339,7 +344,7 @@ class MeasurementTables:
                                   '[analysis] effects = ["gravity"]')
             (log, column), scale = columns[0], scales[0]
             out.append(Measurement(table.data["name"], log, column, scale, of, sigma, values,
-                                   columns, scales, offset, parts))
+                                   columns, scales, offset, parts, alarm))
         return tuple(out)
 
     def measured_columns(self, table: _Table, of: tuple) -> tuple:

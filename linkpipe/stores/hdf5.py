@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import os
+import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
@@ -337,10 +338,31 @@ def read(path: str | os.PathLike, form: str = "dataset"):
     try:
         import xarray as xr
     except ImportError:
-        with h5py.File(path, "r") as f:
+        with _open(path) as f:
             return {name: _decoded(ds[()]) for name, ds in f.items()}
-    with xr.open_dataset(path, engine="h5netcdf", decode_timedelta=False) as ds:
-        return ds.load()
+    try:
+        with xr.open_dataset(path, engine="h5netcdf", decode_timedelta=False) as ds:
+            return ds.load()
+    except OSError:  # a file ``follow`` is writing (HDF5 SWMR): read as a SWMR reader
+        pass
+    for attempt in range(50):
+        with _open(path) as f:
+            try:
+                with xr.open_dataset(f, engine="h5netcdf", decode_timedelta=False) as ds:
+                    return ds.load()
+            except ValueError:  # a variable longer than step by the block being written
+                if attempt == 49:
+                    raise
+        time.sleep(0.02)
+
+
+def _open(path) -> h5py.File:
+    """``path`` read-only; a file that ``follow`` is growing (HDF5 SWMR, still open for
+    writing) as a SWMR reader."""
+    try:
+        return h5py.File(path, "r")
+    except OSError:
+        return h5py.File(path, "r", swmr=True)
 
 
 def _decoded(arr: np.ndarray) -> np.ndarray:
@@ -360,7 +382,7 @@ def _read_dataframe(path):
 
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
-    with h5py.File(path, "r") as f:
+    with _open(path) as f:
         step = f["step"][()]
         labels = {name: _decoded(ds[()]) for name, ds in f.items()
                   if ds.is_scale and ds.ndim == 1 and name != "step"}
@@ -368,7 +390,7 @@ def _read_dataframe(path):
             dims = dimensions(ds)
             if ds.is_scale or not dims or dims[0] != "step":
                 continue
-            data = ds[()]
+            data = ds[:len(step)]  # (a growing file's variables may hold a block more)
             unit = _text(ds.attrs.get("units", ""))
             if data.ndim == 1:
                 columns[name], units[name] = data, unit

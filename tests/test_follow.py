@@ -1,0 +1,441 @@
+"""``follow``: a real logger process appends to a real file while ``python -m linkpipe follow``
+runs in its own process; the final ``.h5`` is compared with a batch ``run`` of the complete
+log, read while it grows by this (second) process, killed and resumed, and fed each fault of
+a live source.
+
+Exact answers: the batch run of the same complete log (linkpipe's own v2 pipeline, right to
+1e-9 against references); a followed row's spline has at least 24 samples on either side of
+it (or the log's end, as the batch's), so its values agree with the batch's to rounding
+(0.268^24 ~ 2e-14 of the end condition's change reaches it): 1e-9 in the scene's units (m,
+rad, N) is a bound far above that and far below any modelling difference. Rows stored at an
+earlier end, whose spline ended there, keep those values (docs/follow.md): their positions
+agree to 1e-9, their rates as the settling bound says.
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from linkpipe.__main__ import main
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+LOGGER = ROOT / "configs" / "logged" / "rig_logger.py"
+SCENE = ROOT / "configs" / "logged" / "fourbar_live.toml"
+#: agreement with the batch run (m, m/s, rad, N, ...): see the module's docstring
+TOL = 1e-9
+
+
+@pytest.fixture
+def rig(tmp_path):
+    """(scene path, log path, out folder) in a fresh folder."""
+    (tmp_path / "logs").mkdir()
+    scene = tmp_path / "fourbar_live.toml"
+    shutil.copy(SCENE, scene)
+    return scene, tmp_path / "logs" / "live_rig.csv", tmp_path / "out"
+
+
+def _logger(log, *args) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, str(LOGGER), str(log), *map(str, args)])
+
+
+def _follow(scene, out, *args) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "linkpipe", "follow", str(scene), "--out",
+                             str(out), *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT)
+
+
+def _batch(scene, tmp_path) -> h5py.File:
+    """The batch ``run`` of the scene on its (now complete) log."""
+    batch = tmp_path / "batch"
+    assert main(["run", str(scene), "--out", str(batch), "--no-rrd", "--quiet"]) == 0
+    return h5py.File(batch / "fourbar_live.h5", "r")
+
+
+def _assert_equal_to_batch(path, batch, rows: slice = slice(None), tol: float = TOL) -> None:
+    with h5py.File(path, "r") as f:
+        assert f.attrs["complete"] == 1
+        np.testing.assert_array_equal(f["step"][()], np.arange(len(batch["step"])))
+        for name, ds in batch.items():
+            if ds.dtype.kind == "f" and ds.dims[0] and ds.ndim and len(ds.dims[0]) \
+                    and ds.dims[0][0].name == "/step":
+                np.testing.assert_allclose(f[name][rows], ds[rows], rtol=0, atol=tol,
+                                           err_msg=name)
+            elif ds.dtype.kind in "iu" and ds.ndim == 1 and len(ds) == len(batch["step"]):
+                np.testing.assert_array_equal(f[name][rows], ds[rows], err_msg=name)
+        for key in ("steps_ok", "steps_failed", "newton_iterations_max"):
+            assert f.attrs[key] == batch.attrs[key], key
+        np.testing.assert_allclose(f["measured_residual"].attrs["rms"],
+                                   batch["measured_residual"].attrs["rms"], rtol=1e-12)
+
+
+def _wait_for(predicate, seconds=60.0, every=0.05):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(every)
+    raise AssertionError("timed out")
+
+
+def _rows(path) -> int:
+    """The rows a second process reads in the growing file (0 before it exists)."""
+    try:
+        with h5py.File(path, "r", swmr=True) as f:
+            return int(f["step"].shape[0])
+    except (OSError, KeyError):
+        return 0
+
+
+def test_a_followed_log_is_read_while_it_grows_and_ends_equal_to_a_batch_run(rig, tmp_path):
+    scene, log, out = rig
+    # 8 s of logging: follow starts in a second or three on a busy machine, then reads along
+    writer = _logger(log, "--rate", 500, "--seconds", 8, "--burst", 5, "--jam-at", 4)
+    follower = _follow(scene, out, "--idle", 1.5)
+    h5 = out / "fourbar_live.h5"
+    seen = []  # (rows, complete, position rows finite) read by this process while it grows
+    while follower.poll() is None and len(seen) < 50:
+        try:
+            with h5py.File(h5, "r", swmr=True) as f:
+                n = int(f["step"].shape[0])
+                if n and (not seen or n > seen[-1][0]):
+                    assert f["position"].shape[0] >= n  # the block being written, or equal
+                    seen.append((n, int(f.attrs["complete"]), bool(np.isfinite(
+                        f["position"][n - 1]).all()), f["time"][n - 1]))
+        except (OSError, KeyError):
+            pass
+        time.sleep(0.1)
+    assert writer.wait(30) == 0
+    stdout, stderr = follower.communicate(timeout=60)
+    assert follower.returncode == 0, stderr
+    growing = [s for s in seen if s[1] == 0]
+    assert len(growing) >= 3, seen  # read at least three times while it grew
+    assert all(ok for _, _, ok, _ in growing)
+    assert [n for n, *_ in growing] == sorted({n for n, *_ in growing})
+    with _batch(scene, tmp_path) as batch:
+        _assert_equal_to_batch(h5, batch)
+        # the times read while it grew are the log's rows (nothing shifted)
+        t = batch["time"][()]
+        for n, _, _, last in growing:
+            assert last == t[n - 1]
+        # the alarm: the rocker encoder slips 2 degrees (40 sigma) at t = 4 s, to the end
+        r = batch["measured_residual"][:, 0] / np.radians(0.05)
+        expected = int((np.abs(r) > 4.0).sum())
+    assert f"rocker_angle {expected:,} row(s)" in stdout
+    assert "alarm rocker_angle from step 2000 (t = 4 s)" in stdout
+
+
+def test_sigkill_then_restart_loses_and_duplicates_no_row(rig, tmp_path):
+    scene, log, out = rig
+    writer = _logger(log, "--rate", 1000, "--seconds", 4, "--burst", 20)
+    follower = _follow(scene, out)
+    h5 = out / "fourbar_live.h5"
+    _wait_for(lambda: _rows(h5) > 500)
+    follower.send_signal(signal.SIGKILL)
+    follower.wait(10)
+    killed_rows = _rows(h5)
+    with pytest.raises(OSError):  # a killed SWMR writer's file: SWMR reads only
+        h5py.File(h5, "r").close()
+    time.sleep(0.3)
+    again = _follow(scene, out, "--idle", 1.5)
+    assert writer.wait(30) == 0
+    stdout, stderr = again.communicate(timeout=60)
+    assert again.returncode == 0, stderr
+    assert f"after its {killed_rows:,} stored rows" in stdout
+    with _batch(scene, tmp_path) as batch:
+        _assert_equal_to_batch(h5, batch)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_ends_follow_with_every_row_and_a_complete_file(rig, tmp_path, signum):
+    scene, log, out = rig
+    writer = _logger(log, "--rate", 1000, "--seconds", 1.5, "--burst", 10)
+    follower = _follow(scene, out)  # no --idle: only the signal ends it
+    assert writer.wait(30) == 0
+    h5 = out / "fourbar_live.h5"
+    _wait_for(lambda: _rows(h5) >= 1500 - 24)  # every row but the settling window
+    follower.send_signal(signum)
+    stdout, stderr = follower.communicate(timeout=30)
+    assert follower.returncode == 0, stderr
+    assert "Traceback" not in stderr and "ended: stopped" in stdout
+    with _batch(scene, tmp_path) as batch:
+        _assert_equal_to_batch(h5, batch)
+
+
+def test_follow_resumes_after_a_clean_end_and_the_rows_stored_then_keep_their_values(rig, tmp_path):
+    scene, log, out = rig
+    assert _logger(log, "--rate", 1000, "--seconds", 1, "--fast").wait(30) == 0
+    first = _follow(scene, out, "--idle", 0.5)
+    assert first.wait(60) == 0
+    h5 = out / "fourbar_live.h5"
+    with h5py.File(h5, "r") as f:
+        assert f.attrs["complete"] == 1 and f["step"].shape == (1000,)
+    assert _logger(log, "--rate", 1000, "--seconds", 1, "--fast", "--append").wait(30) == 0
+    second = _follow(scene, out, "--idle", 0.5)
+    stdout, stderr = second.communicate(timeout=60)
+    assert second.returncode == 0, stderr
+    assert "after its 1,000 stored rows" in stdout
+    with _batch(scene, tmp_path) as batch:
+        # rows before the first end's settling window, and every row after it: the batch's
+        _assert_equal_to_batch(h5, batch, slice(0, 1000 - 24))
+        _assert_equal_to_batch(h5, batch, slice(1000, None))
+        # the settling window of the first end: positions exact, rates as their spline gave
+        with h5py.File(h5, "r") as f:
+            np.testing.assert_allclose(f["position"][976:1000], batch["position"][976:1000],
+                                       rtol=0, atol=TOL)
+            dv = np.abs(f["driver_velocity"][976:1000] - batch["driver_velocity"][976:1000])
+            assert dv[-1].max() > TOL  # the end condition did move the last row's rate
+            assert dv[0].max() < TOL   # and 24 rows before, not measurably
+
+
+# ------------------------------------------------------------------------------- faults
+HEADER = "t,crank_deg,rocker_deg,p_height_mm\n"
+
+
+def _row(i: int, t: float | None = None) -> str:
+    t = i * 0.002 if t is None else t
+    return f"{t:.6f},{720.0 * t:.6f},{100.0:.3f},{1700.0:.3f}\n"
+
+
+def _fault_writer(log, fault: str) -> subprocess.Popen:
+    """A logger that writes 300 good rows (0.002 s apart), then, once the file ``<log>.go``
+    exists (follow has stored what it can), the ``fault``."""
+    code = textwrap.dedent(f"""
+        import os, sys, time
+        rows = {[_row(i) for i in range(300)]!r}
+        log = {str(log)!r}
+        with open(log, "w") as f:
+            f.write({HEADER!r})
+            for k in range(0, 300, 50):
+                f.write("".join(rows[k:k + 50])); f.flush(); time.sleep(0.05)
+        while not os.path.exists(log + ".go"):
+            time.sleep(0.02)
+        fault = {fault!r}
+        if fault == "backwards":
+            open(log, "a").write({_row(0, 0.3)!r})
+        elif fault == "column":
+            open(log, "a").write("0.602000,433.44,100.0\\n")
+        elif fault == "rotated":
+            os.replace(log, log + ".1")
+            open(log, "w").write({HEADER + _row(0) + _row(1)!r})
+        elif fault == "truncated":
+            open(log, "r+").truncate(100)
+        elif fault == "mid-line":
+            f = open(log, "a"); f.write("0.602000,433.4"); f.flush()
+            time.sleep(30)
+    """)
+    return subprocess.Popen([sys.executable, "-c", code])
+
+
+@pytest.mark.parametrize("fault, code, said", [
+    ("backwards", 1, "row 301 (line 302 of the file): time 0.3 s goes backwards"),
+    ("column", 1, "row 301 (line 302 of the file) has 3 fields, the header 4: a column disappeared"),
+    ("rotated", 1, "was replaced by another file (a rotation)"),
+    ("truncated", 1, "was truncated to 100 bytes"),
+    ("mid-line", 0, "the log ends mid-line (14 bytes without an end of line, not taken)"),
+])
+def test_each_fault_of_a_live_source_is_one_message_and_a_clean_end(rig, tmp_path, fault, code,
+                                                                   said):
+    scene, log, out = rig
+    writer = _fault_writer(log, fault)
+    _wait_for(lambda: log.exists())
+    follower = _follow(scene, out, "--idle", 2.5)
+    h5 = out / "fourbar_live.h5"
+    _wait_for(lambda: _rows(h5) >= 300 - 24)  # all but the settling window stored
+    pathlib.Path(str(log) + ".go").touch()
+    stdout, stderr = follower.communicate(timeout=90)
+    writer.kill()
+    writer.wait()
+    assert follower.returncode == code, stderr
+    assert said in (stderr + stdout)
+    assert "Traceback" not in stderr and len(stderr.strip().splitlines()) <= 1
+    with h5py.File(h5, "r") as f:  # every good row stored, the file complete
+        assert f.attrs["complete"] == 1
+        np.testing.assert_array_equal(f["step"][()], np.arange(300))
+        np.testing.assert_allclose(f["time"][()], np.arange(300) * 0.002, atol=1e-12)
+
+
+def test_a_parquet_log_growing_by_new_files_equals_the_batch_run_of_its_rows(tmp_path):
+    pd = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    text = SCENE.read_text().replace('file = "logs/live_rig.csv"', 'file = "logs/part_*.parquet"')
+    scene = tmp_path / "fourbar_live.toml"
+    scene.write_text(text)
+    csv = tmp_path / "all.csv"
+    assert _logger(csv, "--rate", 500, "--seconds", 2, "--fast").wait(30) == 0
+    frame = pd.read_csv(csv)
+    code = textwrap.dedent(f"""
+        import time, pandas as pd
+        frame = pd.read_csv({str(csv)!r})
+        for k, lo in enumerate(range(0, len(frame), 100)):
+            tmp = {str(logs)!r} + f"/.part_{{k:03d}}.tmp"
+            frame.iloc[lo:lo + 100].to_parquet(tmp, index=False)
+            __import__("os").replace(tmp, {str(logs)!r} + f"/part_{{k:03d}}.parquet")
+            time.sleep(0.1)
+    """)
+    writer = subprocess.Popen([sys.executable, "-c", code])
+    _wait_for(lambda: list(logs.glob("part_*.parquet")))
+    follower = _follow(scene, tmp_path / "out", "--idle", 1.5)
+    assert writer.wait(60) == 0
+    stdout, stderr = follower.communicate(timeout=60)
+    assert follower.returncode == 0, stderr
+    batch_scene = tmp_path / "batch.toml"
+    batch_scene.write_text(text.replace('file = "logs/part_*.parquet"', f'file = "{csv}"'))
+    with _batch(batch_scene, tmp_path) as batch:
+        assert len(batch["step"]) == len(frame)
+        _assert_equal_to_batch(tmp_path / "out" / "fourbar_live.h5", batch)
+
+
+def test_alarms_and_stretches_go_to_the_recording(rig, tmp_path):
+    from test_rrd import Recording
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 500, "--seconds", 2, "--fast", "--jam-at", 1).wait(30) == 0
+    follower = _follow(scene, out, "--idle", 0.5, "--rrd")
+    stdout, stderr = follower.communicate(timeout=60)
+    assert follower.returncode == 0, stderr
+    rec = Recording(out / "fourbar_live.rrd")
+    assert "/alarms" in rec.entities
+    frame = rec.steps("/alarms").dropna(subset=["/alarms:TextLog:text"])
+    texts = [str(t[0]) for t in frame["/alarms:TextLog:text"]]
+    assert any(t.startswith("alarm rocker_angle from step 500 (t = 1 s)") for t in texts)
+    assert list(frame["step"]) == [500]
+    assert "/mechanism/points" in rec.entities
+    assert len(rec.steps("/mechanism/points").dropna(subset=["step"])) == 1000
+
+
+def test_a_scene_without_a_time_log_is_a_scene_error(tmp_path, capsys):
+    assert main(["follow", str(ROOT / "configs" / "fourbar_crank_rocker.toml"), "--out",
+                 str(tmp_path), "--idle", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "[time] log" in err and "Traceback" not in err
+    assert not list(tmp_path.glob("*.h5"))
+
+
+ALARM = "sigma = 0.0005                     # 0.5 mm\nalarm = 4.0"
+
+
+@pytest.mark.parametrize("written, said", [
+    ("alarm = 4.0", "alarm = 4 is a number of sigmas: it needs a positive value and the "
+                    "measurement's sigma"),
+    ("sigma = 0.0005\nalarm = -1.0", "alarm = -1 is a number of sigmas"),
+])
+def test_an_alarm_needs_the_measurement_sigma_and_a_positive_value(rig, written, said):
+    from linkpipe import SceneError, parse_scene
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
+    text = scene.read_text()
+    assert text.count(ALARM) == 1
+    with pytest.raises(SceneError) as err:
+        parse_scene(text.replace(ALARM, written), str(scene))
+    assert said in str(err.value) and err.value.key == "alarm"
+    assert err.value.table == 'measurements "p_height"'
+
+
+def test_a_port_in_use_is_one_message_before_any_file(rig, capsys):
+    import socket
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["follow", str(scene), "--out", str(out), "--serve", "--port", str(port),
+                     "--idle", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert f"--serve: port {port} is in use" in err and "Traceback" not in err
+    assert not list(out.glob("*.h5"))
+
+
+def test_a_window_resumed_after_stored_rows_takes_the_rows_in_any_pieces(rig):
+    """Resuming after 700 stored rows, the log read in pieces of 37 rows (fewer than the rows
+    stored): the blocks are the batch's rows 700.. (the window keeps the settling rows before
+    them, and the rows it forgets are never needed)."""
+    import linkpipe
+    from linkpipe.follow.blocks import Window
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 1000, "--seconds", 1, "--fast").wait(30) == 0
+    whole = linkpipe.load_scene(str(scene))
+    batch = linkpipe.solve(whole)
+    data = whole.logs[0]
+    window = Window(whole, last_angles=batch.link_angle[699])
+    window.stored = 700
+    parts = []
+    for lo in range(0, 1000, 37):
+        window.add(data.t[lo:lo + 37], {c: data.columns[c][lo:lo + 37] for c in window.columns})
+        window.skip_to(window.stored)
+        while (part := window.block()) is not None:
+            parts.append(part)
+    while (part := window.block(final=True)) is not None:
+        parts.append(part)
+    steps = np.concatenate([p.step_numbers for p in parts])
+    np.testing.assert_array_equal(steps, np.arange(700, 1000))
+    for name in ("position", "velocity", "acceleration", "link_angle", "driver_acceleration"):
+        got = np.concatenate([getattr(p, name) for p in parts])
+        np.testing.assert_allclose(got, getattr(batch, name)[700:], rtol=0, atol=TOL, err_msg=name)
+    got = np.concatenate([p.forces["input_force"][1] for p in parts])
+    np.testing.assert_allclose(got, batch.forces["input_force"][1][700:], rtol=0, atol=TOL)
+
+
+def test_a_reader_holding_the_file_does_not_keep_it_from_completing(rig, tmp_path):
+    scene, log, out = rig
+    assert _logger(log, "--rate", 1000, "--seconds", 1, "--fast").wait(30) == 0
+    follower = _follow(scene, out, "--idle", 1.0)
+    h5 = out / "fourbar_live.h5"
+    _wait_for(lambda: _rows(h5) > 0)
+    with h5py.File(h5, "r", swmr=True) as held:  # held open across follow's end
+        assert held.attrs["complete"] == 0
+        import linkpipe
+
+        growing = linkpipe.read(h5, "dataframe")  # linkpipe.read of a growing file too
+        np.testing.assert_array_equal(growing.index, np.arange(len(growing)))
+        assert len(growing) >= 1 and np.isfinite(growing["position.P.y"]).all()
+        assert linkpipe.read(h5).sizes["step"] >= len(growing)
+        stdout, stderr = follower.communicate(timeout=60)
+    assert follower.returncode == 0, stderr
+    with _batch(scene, tmp_path) as batch:
+        _assert_equal_to_batch(h5, batch)
+
+
+def test_a_no_input_stretch_is_reported_as_it_happens(rig, tmp_path):
+    """Ten empty crank readings (rows 300..309) written by the logger mid-run: follow says
+    when the no_input stretch begins and ends, with its steps and times, and the statuses
+    equal the batch run's."""
+    scene, log, out = rig
+    code = textwrap.dedent(f"""
+        import time
+        with open({str(log)!r}, "w") as f:
+            f.write({HEADER!r})
+            for i in range(600):
+                t = i * 0.002
+                crank = "" if 300 <= i < 310 else f"{{720.0 * t:.6f}}"
+                f.write(f"{{t:.6f}},{{crank}},100.0,1700.0\\n")
+                if i % 50 == 49:
+                    f.flush(); time.sleep(0.05)
+    """)
+    writer = subprocess.Popen([sys.executable, "-c", code])
+    _wait_for(lambda: log.exists())
+    follower = _follow(scene, out, "--idle", 1.0)
+    assert writer.wait(30) == 0
+    stdout, stderr = follower.communicate(timeout=60)
+    assert follower.returncode == 0, stderr
+    assert "no_input from step 300 (t = 0.6 s)" in stdout
+    assert "no_input ended at step 310 (t = 0.62 s): 10 step(s) from step 300 (t = 0.6 s)" in stdout
+    with _batch(scene, tmp_path) as batch:
+        assert (batch["status"][300:310] == 4).all()
+        _assert_equal_to_batch(out / "fourbar_live.h5", batch)
