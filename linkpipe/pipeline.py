@@ -158,10 +158,10 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     else:
         result = finish(scene, model, kinematics, wanted=wanted, reused=True, seconds=seconds,
                         tell=tell)
-    return _with_measurements(result) if scene.measurements else result
+    return with_measurements(result) if scene.measurements else result
 
 
-def _with_measurements(result: Result) -> Result:
+def with_measurements(result: Result) -> Result:
     """The result with its measurements beside their computed counterparts (linkpipe.measure);
     a measurement of a quantity the run did not compute is the scene's mistake."""
     from dataclasses import replace
