@@ -206,21 +206,27 @@ def disk_floor(n_bytes: int, folder: pathlib.Path, repeats: int) -> float:
 
 def run_targets(S: int, repeats: int, pylinkage_seconds: float | None):
     """Issue 29's targets at S steps: run's marginal against pylinkage's warm kernel, the .h5
-    write's marginal against the disk's floor."""
+    write's marginal against the disk's floor. The runs with and without the .h5 alternate
+    (pairs of one each): the write's marginal is the median of the pairs' differences, and
+    their spread says how far the machine's noise reaches."""
     folder = scratch()
     small = run_cli(361, folder, False, repeats)
-    bare = run_cli(S, folder, False, repeats)
-    with_h5 = run_cli(S, folder, True, repeats)
+    run_cli(S, folder, True, 1)  # warm: the file's folder, the writer's thread
+    pairs = [(run_cli(S, folder, False, 1), run_cli(S, folder, True, 1))
+             for _ in range(max(3, repeats))]
+    bare, with_h5 = min(p[0] for p in pairs), min(p[1] for p in pairs)
+    diffs = sorted(h - b for b, h in pairs)
     n_bytes = (folder / "out" / f"crank_rocker_{S}.h5").stat().st_size
     floor = disk_floor(n_bytes, folder, repeats)
     return dict(steps=S, run_361=small, run=bare, run_h5=with_h5, h5_bytes=n_bytes,
-                floor=floor, pylinkage=pylinkage_seconds)
+                floor=floor, pylinkage=pylinkage_seconds, write=diffs[len(diffs) // 2],
+                write_spread=(diffs[0], diffs[-1]))
 
 
 def print_run_targets(r) -> str:
     S = r["steps"]
     marginal = r["run"] - r["run_361"]
-    write = r["run_h5"] - r["run"]
+    write = r["write"]
     lines = [f"`run` end to end, crank-rocker {S:,} steps, positions + velocities + "
              f"accelerations (`main([...])` in this process, best of several):", "",
              "| what is timed | seconds |", "|---|---:|",
@@ -229,7 +235,9 @@ def print_run_targets(r) -> str:
              f"| run --no-rrd (.h5 written, {r['h5_bytes'] / 2**20:.1f} MiB), {S:,} steps | "
              f"{r['run_h5']:.4f} |",
              f"| the sweep's marginal (run at {S:,} less run at 361) | {marginal:.4f} |",
-             f"| the .h5 write's marginal (with .h5 less without) | {write:.4f} |",
+             f"| the .h5 write's marginal (with .h5 less without: median of alternating "
+             f"pairs; spread {r['write_spread'][0]:+.4f} .. {r['write_spread'][1]:+.4f}) | "
+             f"{write:.4f} |",
              f"| the disk's floor: write + fsync + rename of {r['h5_bytes'] / 2**20:.1f} MiB | "
              f"{r['floor']:.4f} |", ""]
     if r["pylinkage"] is not None:
@@ -240,8 +248,12 @@ def print_run_targets(r) -> str:
     else:
         lines.append("- run's marginal vs pylinkage+numba: pylinkage not installed, not measured")
     y = write / r["floor"]
+    lo, hi = r["write_spread"]
+    resolved = hi - lo < 0.5 * r["floor"]
     lines.append(f"- .h5 write's marginal / the disk's floor = {y:.2f}x (target <= 1.25x): "
-                 f"{'met' if y <= 1.25 else 'MISSED'}")
+                 + (("met" if y <= 1.25 else "MISSED") if resolved else
+                    "not resolved (the pairs' spread is more than half the floor: "
+                    "re-run on a quiet machine)"))
     return "\n".join(lines)
 
 
