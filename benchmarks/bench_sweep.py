@@ -1,6 +1,7 @@
 """Sweep speed of linkpipe against a hand-written closed form and pylinkage+numba, in one run.
 
-    .venv/bin/python benchmarks/bench_sweep.py            # everything (about 15 s)
+    .venv/bin/python benchmarks/bench_sweep.py            # everything (about 30 s on a quiet machine)
+    .venv/bin/python benchmarks/bench_sweep.py --write-docs  # and into docs/performance.md
     .venv/bin/python benchmarks/bench_sweep.py --quick    # 36k steps only, no pipeline runs
 
 Part 1, the crank-rocker of ``configs/fourbar_crank_rocker.toml`` (crank 1, coupler 3.5, rocker
@@ -557,33 +558,53 @@ def print_part2(runs, cli):
     return "\n".join(lines)
 
 
+#: where ``--write-docs`` puts this benchmark's output in docs/performance.md
+DOCS = ROOT / "docs" / "performance.md"
+BEGIN, END = "<!-- bench_sweep.py output: begin -->", "<!-- bench_sweep.py output: end -->"
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--quick", action="store_true", help="36k steps only, no pipeline runs")
     p.add_argument("--child", help=argparse.SUPPRESS)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--write-docs", action="store_true",
+                   help="also put this run's output into docs/performance.md (between its markers)")
     args = p.parse_args(argv)
     if args.child:
         return pipeline_child(args.child)
-    print(f"linkpipe sweep benchmark, {datetime.date.today()}, {platform.python_version()}, "
-          f"numpy {np.__version__}, {os.cpu_count()} cores, {platform.machine()}")
-    print()
+    printed = []
+
+    def say(text=""):
+        print(text, flush=True)
+        printed.append(text)
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    say(f"linkpipe sweep benchmark, {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} "
+        f"UTC, Python {platform.python_version()}, numpy {np.__version__}, {os.cpu_count()} cores, "
+        f"{platform.machine()}, load average {load:.1f} at the start")
+    say()
     sizes = (36_000,) if args.quick else (36_000, 360_000)
     rows, pyl, first = part1(sizes, args.repeats)
-    print(print_part1(rows, pyl, first))
-    print()
+    say(print_part1(rows, pyl, first))
+    say()
     big = max(rows, key=lambda r: r["steps"])
-    print(print_run_targets(run_targets(big["steps"], args.repeats, big.get("pylinkage"))))
-    if args.quick:
-        return 0
-    print()
-    cases = ["crank_rocker_100k"]
-    if (ROOT / "configs" / "jansen.toml").exists():
-        cases += ["jansen", "jansen_100k"]
-    else:
-        print("(configs/jansen.toml is missing: no Jansen case)")
-    runs = [run_child(c) for c in cases]
-    print(print_part2(runs, cli_cold()))
+    say(print_run_targets(run_targets(big["steps"], args.repeats, big.get("pylinkage"))))
+    if not args.quick:
+        say()
+        cases = ["crank_rocker_100k"]
+        if (ROOT / "configs" / "jansen.toml").exists():
+            cases += ["jansen", "jansen_100k"]
+        else:
+            say("(configs/jansen.toml is missing: no Jansen case)")
+        runs = [run_child(c) for c in cases]
+        say(print_part2(runs, cli_cold()))
+    if args.write_docs:
+        text = DOCS.read_text()
+        head, rest = text.split(BEGIN, 1)
+        _, tail = rest.split(END, 1)
+        DOCS.write_text(head + BEGIN + "\n\n" + "\n".join(printed).strip() + "\n\n" + END + tail)
+        print(f"(written into {DOCS.relative_to(ROOT)})")
     return 0
 
 
