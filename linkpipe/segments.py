@@ -31,7 +31,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .model import build_model
-from .pipeline import DEFAULT_THREADS, bytes_per_step, check_memory, with_measurements
+from .pipeline import DEFAULT_THREADS, bytes_per_step, check_memory
 from .result import Result, Totals, combine_flags
 from .scene import Scene
 from .spine import finished
@@ -168,8 +168,7 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
                 tell("the general path, from the first step", 0)
                 continue
             if whole:  # the sweep's own Result, every row (as solve gives it)
-                part = replace(part, seconds=dict(seconds))
-                result = with_measurements(part) if scene.measurements else part
+                result = replace(part, seconds=dict(seconds))
                 _hand(sinks, "add", result, seconds, tell)
                 _hand(sinks, "finish", result, seconds, tell)
                 return replace(result, seconds=seconds)
