@@ -8,8 +8,9 @@ The cylinder-driven rocker is ``configs/dump_truck.toml`` (body hinged at H, cyl
 with its sweep resampled to S steps; every tool returns positions, velocities and
 accelerations of every point, arrays (S, n_points, 2):
 
-* linkpipe fast path: ``kinematics.solve_sweep`` (``method = "auto"``: the cylinder closes as a
-  circle of the dyad chain) with order 2, as the pipeline's stage 1 runs it;
+* linkpipe dyads kernel: ``kinematics.solve_sweep`` alone (``method = "auto"``: the cylinder
+  closes as a circle of the dyad chain) with order 2: the positions part of stage 1, without
+  its link angles, condition estimate and link rates;
 * linkpipe general path: ``method = "newton"`` positions, then ``kinematics.derivatives``;
 * the closed form: the law of cosines for the body's angle and its two time derivatives, in
   plain numpy for this one machine.
@@ -138,8 +139,8 @@ def main(argv=None):
         t_cf, ref = best_of(lambda: tipper_closed_form(fast, s), args.repeats)
         t_fast, got_fast = best_of(lambda: linkpipe_run(fast, s, "dyads"), args.repeats)
         t_newton, got_newton = best_of(lambda: linkpipe_run(newton, s, "newton"), args.repeats)
-        for name, t, got in (("linkpipe fast path (dyads)", t_fast, got_fast),
-                             ("linkpipe general path (Newton + derivatives)", t_newton, got_newton),
+        for name, t, got in (("linkpipe dyads kernel (kinematics.solve_sweep alone)", t_fast, got_fast),
+                             ("linkpipe general path kernel (Newton + derivatives)", t_newton, got_newton),
                              ("closed form, plain numpy", t_cf, ref)):
             e = " / ".join(f"{x:.1e}" for x in rel_err(got, ref))
             print(f"| {name} | {S:,} | {t:.4f} | {S / t / 1e6:.2f} M | {t_cf / t:.2f}x | {e} |")

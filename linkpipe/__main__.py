@@ -249,20 +249,12 @@ def _load_all(paths, outcome: _Outcome, out="outputs") -> list:
     the same outputs, or a name too long for a file name in ``out``, are an error before any
     work (exit 2, naming the file)."""
     from .scene import load_scene
-    from .stores import longest_output_name
 
     scenes, first_path = [], {}
     for path in paths:
         with _reporting(path, outcome):
             scene = _read_scene(load_scene, path)
-            longest, limit = longest_output_name(out)
-            if len(scene.name.encode("utf-8")) > longest:
-                raise SceneError(path, "scene", "name", f"{len(scene.name.encode('utf-8'))} bytes "
-                                 f"long: the files named after it in {out} (its .h5, .rrd, "
-                                 f"lock and temporaries) would be longer than the file "
-                                 f"system's limit of {limit} bytes for a file name",
-                                 f"give [scene] name at most {longest} bytes (characters, "
-                                 "in plain ASCII)")
+            _name_fits(path, scene.name, out)
             if scene.name in first_path:
                 outcome.duplicate_names = True
                 raise SceneError(path, "scene", "name", f"the name {scene.name!r} is also the name "
@@ -271,6 +263,20 @@ def _load_all(paths, outcome: _Outcome, out="outputs") -> list:
             first_path[scene.name] = path
             scenes.append(scene)
     return scenes
+
+
+def _name_fits(path, name: str, out) -> None:
+    """SceneError where the files named after ``name`` in ``out`` (outputs, lock, temporaries)
+    would pass the file system's limit on a file name."""
+    from .stores import longest_output_name
+
+    longest, limit = longest_output_name(out)
+    size = len(name.encode("utf-8"))
+    if size > longest:
+        raise SceneError(path, "scene", "name", f"{size} bytes long: the files named after it "
+                         f"in {out} (its .h5, .rrd, lock and temporaries) would be longer than "
+                         f"the file system's limit of {limit} bytes for a file name",
+                         f"give [scene] name at most {longest} bytes (characters, in plain ASCII)")
 
 
 def _read_scene(load, path):
@@ -483,7 +489,8 @@ def _fit(args) -> int:
 
     outcome = _Outcome()
     with _reporting(args.scene, outcome):
-        scene = load_scene(args.scene)
+        scene = _read_scene(load_scene, args.scene)
+        _name_fits(args.scene, scene.name, args.out)
         from .fit import fit_parameters
         from .stores import output_folder
 

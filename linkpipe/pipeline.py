@@ -14,7 +14,7 @@ from .model import build_model
 from .result import Result
 from .spine import Stages, finish, finished
 from .stage1 import Kinematics, mobility_of
-from .errors import MemoryRefused, SceneError
+from .errors import MemoryRefused
 from .scene import Scene, load_scene
 
 
@@ -149,15 +149,14 @@ def solve(scene: Scene | str, progress=None, threads: int | None = DEFAULT_THREA
 def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
            wanted: frozenset | None = None) -> Result:
     """The spine over one segment (:func:`linkpipe.spine.finished`), or :func:`finish` on a
-    reused stage 1."""
+    reused stage 1 (measurements compared there)."""
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
     if scene.dynamics is not None:  # another producer of a solved motion, the same finish
         from .dynamics import simulate
 
         check_memory(scene)
-        result = simulate(scene, tell, seconds)
-        return _with_measurements(result) if scene.measurements else result
+        return simulate(scene, tell, seconds)  # finished by spine.finish (measurements too)
     t0 = _time.perf_counter()
     if kinematics is None:  # a reused stage 1 was checked when it was solved
         check_memory(scene)
@@ -168,21 +167,4 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     else:
         result = finish(scene, model, kinematics, wanted=wanted, reused=True, seconds=seconds,
                         tell=tell)
-    return _with_measurements(result) if scene.measurements else result
-
-
-def _with_measurements(result: Result) -> Result:
-    """The result with its measurements beside their computed counterparts (linkpipe.measure);
-    a measurement of a quantity the run did not compute is the scene's mistake."""
-    from dataclasses import replace
-
-    from .measure import compare
-
-    try:
-        return replace(result, measurements=compare(result))
-    except KeyError as missing:
-        m = next(m for m in result.scene.measurements if m.of[0] == missing.args[0])
-        raise SceneError(result.scene.path, f'measurements "{m.name}"', "of",
-                         f'"{m.of[0]}" is not computed by this scene',
-                         "turn on what computes it: [analysis] effects for forces, "
-                         '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None
+    return result

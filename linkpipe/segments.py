@@ -31,7 +31,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .model import build_model
-from .pipeline import DEFAULT_THREADS, bytes_per_step, check_memory, solve
+from .pipeline import DEFAULT_THREADS, bytes_per_step, check_memory
 from .result import Result, Totals, combine_flags
 from .scene import Scene
 from .spine import finished
@@ -145,23 +145,19 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
     recording's stride of steps (``linkpipe.stores.rrd.plan`` with the CLI's caps), or None
     for no recording (one row kept).
 
-    A sweep solved whole (one segment, :func:`why_whole`) is :func:`linkpipe.solve`'s Result:
-    every row, its measurements compared. ``between``: called after each segment (the CLI
-    stops there on a signal whose exception a finaliser swallowed). ``check``: the memory
-    check first (the CLI makes it itself, before its progress bar)."""
+    A sweep of one segment (short, or solved whole: :func:`why_whole`) comes from the same
+    loop as :func:`linkpipe.solve`'s Result (the spine over one segment): every row, its
+    measurements compared. ``between``: called after each segment (the CLI stops there on a
+    signal whose exception a finaliser swallowed). ``check``: the memory check first (the CLI
+    makes it itself, before its progress bar)."""
     segment = segment or steps_per_segment(scene)
     S = scene.n_steps
     seconds: dict[str, float] = {}
     tell = progress if callable(progress) else (lambda stage, done=None: None)
     stages = {sink.stage for sink in sinks}
-    if segment >= S:
-        result = solve(scene, progress=progress, threads=threads)
-        seconds = dict(result.seconds)
-        _hand(sinks, "add", result, seconds, tell)
-        _hand(sinks, "finish", result, seconds, tell)
-        return replace(result, seconds=seconds)
+    whole = segment >= S
     if check:
-        check_memory(scene, segment, S if recording is not None else 0)
+        check_memory(scene, segment, S if recording is not None and not whole else 0)
     kept = Sampled(S, recording if recording is not None else (lambda part, n_steps: (n_steps, "")))
     pools = (contextlib.nullcontext() if threads is None
              else threadpool_limits(limits=threads, user_api="blas"))
@@ -173,6 +169,11 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
                     sink.restart()
                 tell("the general path, from the first step", 0)
                 continue
+            if whole:  # the sweep's own Result, every row (as solve gives it)
+                result = replace(part, seconds=dict(seconds))
+                _hand(sinks, "add", result, seconds, tell)
+                _hand(sinks, "finish", result, seconds, tell)
+                return replace(result, seconds=seconds)
             kept.add(part)
             _hand(sinks, "add", part, seconds, tell)
             if between is not None:

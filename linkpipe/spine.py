@@ -11,14 +11,16 @@ for.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from . import kinematics as kin
 from . import stroke
 from .forces import LAGRANGE_VARIABLES, compute_forces
+from .errors import SceneError
 from .forces.constants import ForceConstants
+from .measure import compare
 from .output_units import units_of
 from .result import Result
 from .scene import Scene
@@ -109,7 +111,8 @@ def finish(scene: Scene, model, motion: Kinematics, constants: ForceConstants | 
     A step's status is decided once (:func:`linkpipe.status.assign`): the stages' verdicts,
     the residual against the tolerance (of the mechanism's size, per row with ``constants``),
     and whether the stored kinematic arrays (:meth:`Kinematics.stored`) and the forces' arrays
-    are finite.
+    are finite. A whole sweep's ``[[measurements]]`` are compared with their computed
+    counterparts (a scene with measurements is never solved in segments).
     """
     seconds = seconds if seconds is not None else {}
     if forces is None and Stages.of(scene).forces:
@@ -129,8 +132,9 @@ def finish(scene: Scene, model, motion: Kinematics, constants: ForceConstants | 
                     + ([strokes] if strokes is not None else []),
                     motion.sweep.residual, model.tolerance(size=size),
                     forces.defined_arrays() if forces else [], finite=motion.finite)
-    return _result(scene, model, motion, forces, status, seconds, time_axis, step_numbers,
-                   margin)
+    result = _result(scene, model, motion, forces, status, seconds, time_axis, step_numbers,
+                     margin)
+    return _with_measurements(result) if scene.measurements and step_numbers is None else result
 
 
 def _result(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
@@ -158,3 +162,16 @@ def _result(scene: Scene, model, k: Kinematics, forces, status, seconds: dict,
         solver_method_used=k.sweep.method, solver_note=k.sweep.note,
         linear_algebra_used=kin.linear_algebra_used(model) if k.sweep.method == "newton" else "",
         kinematics=k, step_numbers=step_numbers, stroke_margin=stroke_margin)
+
+
+def _with_measurements(result: Result) -> Result:
+    """The result with its measurements beside their computed counterparts (linkpipe.measure);
+    a measurement of a quantity the run did not compute is the scene's mistake."""
+    try:
+        return replace(result, measurements=compare(result))
+    except KeyError as missing:
+        m = next(m for m in result.scene.measurements if m.of[0] == missing.args[0])
+        raise SceneError(result.scene.path, f'measurements "{m.name}"', "of",
+                         f'"{m.of[0]}" is not computed by this scene',
+                         "turn on what computes it: [analysis] effects for forces, "
+                         '[outputs] kinematics = ["velocity", "acceleration"] for rates') from None

@@ -112,7 +112,7 @@ class Stage1:
     the positions are found (:class:`linkpipe.kinematics.Plan`: the method, the start, the
     dyads' branches, carried across segments; it switches itself to Newton where auto must
     leave the dyads, and :meth:`parts` then starts again from the first segment). Link angles
-    are unwrapped across segments (:class:`~linkpipe.kinematics.rates.AngleCarry`), torsion
+    are unwrapped across segments (:class:`~linkpipe.kinematics.angles.AngleCarry`), torsion
     springs' turns set at the sweep's first solved step.
     """
 

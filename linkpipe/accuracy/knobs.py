@@ -5,6 +5,7 @@ import dataclasses as dc
 
 import numpy as np
 
+from ..kinematics.plan import METHODS
 from ..scene import Scene
 from ..scene.tables import LogData, TimeSweep
 from ..scene.timing import MIN_SMOOTHING_SAMPLES
@@ -130,7 +131,7 @@ def settings(scene: Scene, quick: bool = False, knobs=KNOBS) -> list[tuple[str, 
                 out.append(("predictor", pred, _with_steps(_with_solver(newton, predictor=pred),
                                                            n + 1), "kinematics"))
     if "method" in knobs:
-        for method in ("auto", "newton", "dyads"):
+        for method in METHODS:  # every [solver] method (kinematics.plan)
             out.append(("method", method, _with_solver(base, method=method), "kinematics"))
     if "log" in knobs:
         out += log_settings(base, quick)

@@ -74,8 +74,8 @@ class Method:
 
 #: ``[solver] method`` -> how the positions are found; the scene's choices
 #: (``linkpipe.scene.tables``) are these keys
-METHODS = {"auto": Method(dyads=True), "dyads": Method(dyads=True, forced=True),
-           "newton": Method(dyads=False)}
+METHODS = {"auto": Method(dyads=True), "newton": Method(dyads=False),
+           "dyads": Method(dyads=True, forced=True)}
 
 #: why auto leaves the dyads for Newton when a step fails the branch check
 DYADS_LEFT = ("auto: a dyad passes near its singular configuration or cannot be assembled at "

@@ -177,7 +177,7 @@ def test_a_scene_nested_too_deeply_is_one_message_exit_2(tmp_path, capsys):
 
 def test_a_scene_name_too_long_for_a_file_name_is_one_message_exit_2(tmp_path, capsys):
     """A [scene] name of 300 characters: its lock, outputs and temporaries would pass the file
-    system's 255-byte limit on a file name. run and check refuse it in one line naming
+    system's 255-byte limit on a file name. run, check and fit refuse it in one line naming
     [scene] name and the longest name allowed, exit 2, nothing written; a name of exactly that
     length runs and leaves its files (and no lock)."""
     from linkpipe.stores import longest_output_name
@@ -192,7 +192,8 @@ def test_a_scene_name_too_long_for_a_file_name_is_one_message_exit_2(tmp_path, c
                                                          f'name = "{"n" * n}"'))
         return path
 
-    for argv in (["run", str(named(300)), "--out", str(out)], ["check", str(named(300))]):
+    for argv in (["run", str(named(300)), "--out", str(out)], ["check", str(named(300))],
+                 ["fit", str(named(300)), "--out", str(out)]):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "[scene] name: 300 bytes long" in err
