@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.sparse import diags
 
 from .errors import MemoryRefused, SceneError
 from .pipeline import solve
@@ -534,13 +535,29 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
 
 def covariance(J, residual: np.ndarray, sigma_given: bool):
     """Return (covariance (p, p), identifiable (p,) bool) of the parameters from the weighted
-    Jacobian ``J`` (n, p; dense or scipy.sparse) at the solution: ``pinv(J^T J)`` over the
-    identifiable directions, times ``cost / (N - p)`` when no sigma is given. With a robust
+    Jacobian ``J`` (n, p; dense, or scipy.sparse: then from the eigenvectors of J^T J with
+    J's columns scaled to unit length, which keeps the singular values to about 1e-8 of the
+    largest) at the solution: ``pinv(J^T J)`` over the identifiable directions, times
+    ``cost / (N - p)`` when no sigma is given. With a robust
     loss ``J`` is scipy's loss-weighted Jacobian (``J^T J`` the Gauss-Newton Hessian of the
     robust cost): the standard errors are those of the loss used."""
-    if hasattr(J, "toarray"):
-        J = J.toarray()
     n, p = J.shape
+    if hasattr(J, "toarray"):  # sparse (a joint fit's): from J^T J of unit columns, (p, p)
+        norms = np.sqrt(np.asarray(J.multiply(J).sum(axis=0)).ravel())
+        scale = np.where(norms > 0, norms, 1.0)
+        unit = J @ diags(1.0 / scale)
+        eig, V = np.linalg.eigh((unit.T @ unit).toarray())
+        order = np.argsort(eig)[::-1]
+        sv, Vt = np.sqrt(np.maximum(eig[order], 0.0)), V[:, order].T
+        small = sv < IDENTIFIABLE_RCOND * (sv[0] if len(sv) and sv[0] > 0 else 1.0)
+        identifiable = np.ones(p, dtype=bool)
+        for k in np.flatnonzero(small):
+            identifiable &= ~(np.abs(Vt[k]) > 0.1)
+        inv_sv2 = np.where(small, 0.0, 1.0 / np.where(small, 1.0, sv) ** 2)
+        cov = ((Vt.T * inv_sv2) @ Vt) / np.outer(scale, scale)
+        if not sigma_given:
+            cov = cov * (float(residual @ residual) / max(n - p, 1))
+        return cov, identifiable & (norms > 0)
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     small = sv < IDENTIFIABLE_RCOND * (sv[0] if len(sv) and sv[0] > 0 else 1.0)
     identifiable = np.ones(p, dtype=bool)
