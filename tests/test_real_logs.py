@@ -542,3 +542,9 @@ def test_the_shipped_rig_logs_are_what_their_script_writes(tmp_path):
     runpy.run_path(str(tmp_path / "make_slider_crank_logs.py"), run_name="__main__")
     for name in [f"rig/run{k}" for k in range(1, 7)] + ["rig_laser/run1.csv"]:
         assert (tmp_path / name).read_text() == (LOGGED / name).read_text(), name
+
+
+def test_a_tab_delimiter_on_a_comma_file_names_the_comma(tmp_path, capsys):
+    write_run(tmp_path / "run1.csv", sep=",")
+    err = _run_fails(tmp_path, rig_scene(tmp_path, RIG_LOG.format(file="run1.csv")), capsys)
+    assert 'line 1: delimiter "\\t" leaves the header' in err and 'write delimiter = ","' in err
