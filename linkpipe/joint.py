@@ -202,11 +202,14 @@ def _joint_fit(scene, pattern, log_name, progress, max_evaluations, sparse, t0) 
     rms_before = np.stack([pr.before.measurements["rms"] for pr in problems])
     names = [p.address for p in shared] + [f"{p.address}[{label}]" for label in labels
                                            for p in per_log]
+    outliers = (int((np.abs(sol.fun) > 3.0 * options.f_scale).sum())
+                if options.loss != "linear" else 0)
     return JointFit(scene, paths, labels, shared, per_log, sol.x[:s], se[:s],
                     sol.x[s:].reshape(L, q), se[s:].reshape(L, q), x0,
                     correlation(cov, identifiable), names, cost, rms_before, rms_after, options,
                     str(sol.message), int(sol.nfev), sum(pr.solves for pr in problems), chi2,
-                    warnings, time.perf_counter() - t0, int(sol.njev or 0), setup)
+                    warnings, time.perf_counter() - t0, int(sol.njev or 0), setup,
+                    {"outliers": outliers})
 
 
 def joint_table(fit: JointFit, units: dict) -> str:
@@ -222,7 +225,9 @@ def joint_table(fit: JointFit, units: dict) -> str:
              + (f", f_scale {fit.options.f_scale:g}" if fit.options.loss != "linear" else "")
              + f"): {fit.message}",
              f"  {fit.n_evaluations} evaluations of every log ({fit.solves} solves), "
-             f"{fit.seconds:.3g} s; reduced chi-square {fit.reduced_chi_square:.4g}"]
+             f"{fit.seconds:.3g} s; reduced chi-square {fit.reduced_chi_square:.4g}"
+             + (f" ({fit.extra['outliers']} residuals beyond 3 f_scale: outliers the "
+                f"{fit.options.loss} loss weighs down)" if fit.extra.get("outliers") else "")]
     for p, v, e, v0 in zip(fit.shared, fit.fitted, fit.standard_error, fit.initial):
         lines.append(f"  {p.address}  {v0:.6g} -> {v:.6g} ± {e:.4g} {unit[p.address]}".rstrip())
     width = max(len(label) for label in fit.labels)
@@ -301,6 +306,7 @@ def write_joint(fit: JointFit, pattern: str, out) -> str:
                              "optimizer_message": fit.message,
                              "evaluations": fit.n_evaluations, "solves": fit.solves,
                              "reduced_chi_square": float(fit.reduced_chi_square),
+                             "outliers": int(fit.extra.get("outliers", 0)),
                              "warnings": "\n".join(fit.warnings)},
                       labels, columns, units, attrs)
     return str(path)
