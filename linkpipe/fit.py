@@ -515,10 +515,10 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
     as true; the warning gives them scaled by the residuals, as a fit without sigma would."""
     if dof <= 0:
         return ()
-    from scipy.stats import chi2
+    from scipy.special import chdtr, chdtrc  # chi-square's cdf and sf (scipy.stats: 1 s to import)
 
     ratio = cost / dof
-    if chi2.sf(cost, dof) < SIGMA_TAIL and ratio > SIGMA_FACTOR ** 2:
+    if chdtrc(dof, cost) < SIGMA_TAIL and ratio > SIGMA_FACTOR ** 2:
         scaled = ", ".join(f"{v:.4g}" if np.isfinite(v) else "not identifiable"
                            for v in se * math.sqrt(ratio))
         return (f"the residuals are {math.sqrt(ratio):.3g} times what the sigmas allow (cost / "
@@ -526,7 +526,7 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
                 "expected): a sigma, a measurement's scale or the model is off, and the standard "
                 "errors, which take the sigmas as true, are too small; scaled by the residuals "
                 f"they would be {scaled}",)
-    if chi2.cdf(cost, dof) < SIGMA_TAIL and ratio < SIGMA_FACTOR ** -2:
+    if chdtr(dof, cost) < SIGMA_TAIL and ratio < SIGMA_FACTOR ** -2:
         return (f"the residuals are {math.sqrt(ratio):.3g} times the sigmas (cost / (N - p) = "
                 f"{ratio:.4g} over {dof} degrees of freedom, where about 1 is expected): the "
                 "sigmas overstate the noise, and the standard errors with them",)
