@@ -482,10 +482,12 @@ def _fit(scene, data, params, options, x0, progress, max_evaluations) -> FitResu
                      f_scale=options.f_scale)
 
 
-def _fit_warnings(fun: np.ndarray, penalty: float, n_params: int, se: np.ndarray,
+def _fit_warnings(fun: np.ndarray, penalty, n_params: int, se: np.ndarray,
                   sigma_given: bool, options: FitOptions) -> tuple[float, tuple]:
-    """(reduced chi-square over the steps that do not fail, what the fit warns of)."""
+    """(reduced chi-square over the steps that do not fail, what the fit warns of);
+    ``penalty`` a number, or one per residual (a joint fit: each log's)."""
     failing = fun == penalty  # steps that fail at the fitted values (counted as penalty)
+    penalty = float(np.max(penalty))
     real = fun[~failing]
     dof = real.size - n_params
     chi2 = float(real @ real) / dof if dof > 0 else math.nan

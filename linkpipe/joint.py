@@ -195,8 +195,8 @@ def _joint_fit(scene, pattern, log_name, progress, max_evaluations, sparse, t0) 
     sigma_given = all(pr.sigma_given for pr in problems)
     cov, identifiable = covariance(sol.jac, sol.fun, sigma_given)
     se = np.where(identifiable, np.sqrt(np.maximum(np.diag(cov), 0.0)), np.nan)
-    chi2, warnings = _fit_warnings(sol.fun, max(pr.penalty for pr in problems), len(x0), se,
-                                   sigma_given, options)
+    penalties = np.concatenate([np.full(pr.size, pr.penalty) for pr in problems])
+    chi2, warnings = _fit_warnings(sol.fun, penalties, len(x0), se, sigma_given, options)
     rms_after = np.stack([pr.after(sol.x[cols]).measurements["rms"]
                           for pr, cols in zip(problems, index)])
     rms_before = np.stack([pr.before.measurements["rms"] for pr in problems])
