@@ -91,13 +91,12 @@ def groups_of(index: np.ndarray, n_shared: int) -> list[np.ndarray]:
             + [index[:, j] for j in range(n_shared, index.shape[1])])
 
 
-def grouped_jacobian(problems, index: np.ndarray, sizes: list[int], x: np.ndarray,
-                     f0: np.ndarray, lower, upper, diff_step: float) -> np.ndarray:
+def grouped_jacobian(problems, index: np.ndarray, n_shared: int, sizes: list[int],
+                     x: np.ndarray, f0: np.ndarray, lower, upper, diff_step: float) -> np.ndarray:
     """The joint Jacobian (N, s + L q) by forward differences over the groups of
     :func:`groups_of`: s + q evaluations of every log, each column's step ``diff_step x
     max(1, |x|)`` (backwards where a bound is near), as scipy's "2-point" takes it; the
     entries outside each log's block stay 0."""
-    n_shared = int((index == index[0]).all(axis=0).sum())
     h = diff_step * np.where(x >= 0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
     h = np.where((x + h > upper) | (x + h < lower), -h, h)
     h = (x + h) - x  # the step as represented
@@ -181,7 +180,7 @@ def _joint_fit(scene, pattern, log_name, progress, max_evaluations, sparse, t0) 
 
         def jacobian(x):
             f0 = last["f"] if "x" in last and np.array_equal(last["x"], x) else residuals(x)
-            return csr_matrix(grouped_jacobian(problems, index, sizes, x, f0, lower, upper,
+            return csr_matrix(grouped_jacobian(problems, index, s, sizes, x, f0, lower, upper,
                                                settings["diff_step"]))
 
         # a sparse Jacobian: the trust-region steps by lsmr (an SVD of the dense (N, s + L q)
