@@ -5,7 +5,6 @@ configs/logged/make_slider_crank_logs.py (written without linkpipe), from unit d
 and from a least squares built by hand on that closed form."""
 import importlib.util
 import math
-import os
 import pathlib
 
 import numpy as np
@@ -16,7 +15,6 @@ from hypothesis import strategies as st
 
 import linkpipe
 from linkpipe.__main__ import main
-from linkpipe.errors import SceneError
 from linkpipe.fit import fit
 from linkpipe.scene import load_scene
 from linkpipe.scene import units as unit_table
