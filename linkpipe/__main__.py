@@ -574,6 +574,9 @@ def _joint(scene, args, outcome) -> int:
     from .joint import joint_fit, joint_table, write_joint
     from .output_units import measured_units, parameter_units
 
+    if args.workers or args.scheduler:
+        print("note: a joint fit ([fit] per_log) runs in this process; --workers and "
+              "--scheduler spread a fleet's separate fits", file=sys.stderr)
     bar = tqdm(desc=f"fit {scene.name} (joint)", unit=" evaluations", disable=None, leave=False)
     try:
         result = joint_fit(scene, args.logs, args.log_name,

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.sparse import diags
 
 from .errors import MemoryRefused, SceneError
 from .pipeline import solve
@@ -481,10 +482,12 @@ def _fit(scene, data, params, options, x0, progress, max_evaluations) -> FitResu
                      f_scale=options.f_scale)
 
 
-def _fit_warnings(fun: np.ndarray, penalty: float, n_params: int, se: np.ndarray,
+def _fit_warnings(fun: np.ndarray, penalty, n_params: int, se: np.ndarray,
                   sigma_given: bool, options: FitOptions) -> tuple[float, tuple]:
-    """(reduced chi-square over the steps that do not fail, what the fit warns of)."""
+    """(reduced chi-square over the steps that do not fail, what the fit warns of);
+    ``penalty`` a number, or one per residual (a joint fit: each log's)."""
     failing = fun == penalty  # steps that fail at the fitted values (counted as penalty)
+    penalty = float(np.max(penalty))
     real = fun[~failing]
     dof = real.size - n_params
     chi2 = float(real @ real) / dof if dof > 0 else math.nan
@@ -514,10 +517,10 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
     as true; the warning gives them scaled by the residuals, as a fit without sigma would."""
     if dof <= 0:
         return ()
-    from scipy.stats import chi2
+    from scipy.special import chdtr, chdtrc  # chi-square's cdf and sf (scipy.stats: 1 s to import)
 
     ratio = cost / dof
-    if chi2.sf(cost, dof) < SIGMA_TAIL and ratio > SIGMA_FACTOR ** 2:
+    if chdtrc(dof, cost) < SIGMA_TAIL and ratio > SIGMA_FACTOR ** 2:
         scaled = ", ".join(f"{v:.4g}" if np.isfinite(v) else "not identifiable"
                            for v in se * math.sqrt(ratio))
         return (f"the residuals are {math.sqrt(ratio):.3g} times what the sigmas allow (cost / "
@@ -525,7 +528,7 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
                 "expected): a sigma, a measurement's scale or the model is off, and the standard "
                 "errors, which take the sigmas as true, are too small; scaled by the residuals "
                 f"they would be {scaled}",)
-    if chi2.cdf(cost, dof) < SIGMA_TAIL and ratio < SIGMA_FACTOR ** -2:
+    if chdtr(dof, cost) < SIGMA_TAIL and ratio < SIGMA_FACTOR ** -2:
         return (f"the residuals are {math.sqrt(ratio):.3g} times the sigmas (cost / (N - p) = "
                 f"{ratio:.4g} over {dof} degrees of freedom, where about 1 is expected): the "
                 "sigmas overstate the noise, and the standard errors with them",)
@@ -534,13 +537,29 @@ def sigma_warnings(cost: float, dof: int, se: np.ndarray) -> tuple[str, ...]:
 
 def covariance(J, residual: np.ndarray, sigma_given: bool):
     """Return (covariance (p, p), identifiable (p,) bool) of the parameters from the weighted
-    Jacobian ``J`` (n, p; dense or scipy.sparse) at the solution: ``pinv(J^T J)`` over the
-    identifiable directions, times ``cost / (N - p)`` when no sigma is given. With a robust
+    Jacobian ``J`` (n, p; dense, or scipy.sparse: then from the eigenvectors of J^T J with
+    J's columns scaled to unit length, which keeps the singular values to about 1e-8 of the
+    largest) at the solution: ``pinv(J^T J)`` over the identifiable directions, times
+    ``cost / (N - p)`` when no sigma is given. With a robust
     loss ``J`` is scipy's loss-weighted Jacobian (``J^T J`` the Gauss-Newton Hessian of the
     robust cost): the standard errors are those of the loss used."""
-    if hasattr(J, "toarray"):
-        J = J.toarray()
     n, p = J.shape
+    if hasattr(J, "toarray"):  # sparse (a joint fit's): from J^T J of unit columns, (p, p)
+        norms = np.sqrt(np.asarray(J.multiply(J).sum(axis=0)).ravel())
+        scale = np.where(norms > 0, norms, 1.0)
+        unit = J @ diags(1.0 / scale)
+        eig, V = np.linalg.eigh((unit.T @ unit).toarray())
+        order = np.argsort(eig)[::-1]
+        sv, Vt = np.sqrt(np.maximum(eig[order], 0.0)), V[:, order].T
+        small = sv < IDENTIFIABLE_RCOND * (sv[0] if len(sv) and sv[0] > 0 else 1.0)
+        identifiable = np.ones(p, dtype=bool)
+        for k in np.flatnonzero(small):
+            identifiable &= ~(np.abs(Vt[k]) > 0.1)
+        inv_sv2 = np.where(small, 0.0, 1.0 / np.where(small, 1.0, sv) ** 2)
+        cov = ((Vt.T * inv_sv2) @ Vt) / np.outer(scale, scale)
+        if not sigma_given:
+            cov = cov * (float(residual @ residual) / max(n - p, 1))
+        return cov, identifiable & (norms > 0)
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     small = sv < IDENTIFIABLE_RCOND * (sv[0] if len(sv) and sv[0] > 0 else 1.0)
     identifiable = np.ones(p, dtype=bool)

@@ -5,6 +5,7 @@ the key, the row and column where it applies, and what to do."""
 from __future__ import annotations
 
 import difflib
+import json
 import math
 import re
 from pathlib import Path
@@ -100,7 +101,7 @@ def read_frame(table: _Table, path: Path, skip_rows: int = 0, fmt: str | None = 
             raise table.error("file", f'cannot read "{path}": line {line} has {saw} fields, '
                               f"the header {want}", "give every row the header's columns (a "
                               + {",": "comma", "\t": "tab", ";": "semicolon", " ": "space"}.get(
-                                  delimiter, f"delimiter {_show(delimiter)}")
+                                  delimiter, f"delimiter {json.dumps(delimiter)}")
                               + " inside a value needs quotes)") from None
         raise table.error("file", f'cannot read "{path}" as {fmt}: {type(exc).__name__}: {text}',
                           "write the log as delimited text with a header row (format = "
@@ -108,7 +109,7 @@ def read_frame(table: _Table, path: Path, skip_rows: int = 0, fmt: str | None = 
     if fmt == "csv" and len(frame.columns) == 1:
         header = str(frame.columns[0])
         found = [shown for d, shown in COMMON_DELIMITERS.items() if d != delimiter and d in header]
-        raise table.error("delimiter", f'"{path}" line 1: delimiter {_show(delimiter)} leaves '
+        raise table.error("delimiter", f'"{path}" line 1: delimiter {json.dumps(delimiter)} leaves '
                           f"the header {_show(header)} one column",
                           (f"the header holds {found[0]}: write delimiter = {found[0]}" if found
                            else 'give the delimiter the file uses ("\\t" for tabs, " " for runs '

@@ -4,6 +4,8 @@ pandas, :mod:`.logs`) so that every problem in them is a scene error before any 
 motion itself (laws, splines) is computed in :mod:`linkpipe.model.drive`."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from . import logs as logfiles
@@ -44,7 +46,7 @@ class TimeTables:
                                   'format = "parquet"')
             delimiter = table.string("delimiter", ",")
             if not delimiter or delimiter in ('"', "\n", "\r"):
-                raise table.error("delimiter", f"{_show(delimiter)} cannot separate fields",
+                raise table.error("delimiter", f"{json.dumps(delimiter)} cannot separate fields",
                                   'write the character between fields: "," ";" "\\t" or " " '
                                   "(runs of spaces)")
             if table.has("delimiter") and logfiles.format_of(path, fmt) != "csv":
