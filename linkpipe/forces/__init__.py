@@ -339,7 +339,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
     extra_status = None
     if layout is not None:
         case, extra_status = _with_friction(model, ctx, motion, units, influence, terms, Xz,
-                                            layout, seal, base, kept, factors)
+                                            layout, seal, base, kept, factors, wanted)
     else:
         case = base
     variables, coords = _effect_variables(terms, motion, units)
@@ -366,11 +366,12 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
 
 
 def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal, base,
-                   kept=None, factors=None):
+                   kept=None, factors=None, wanted: bool = True):
     """Solve the pins' and sliders' friction with the forces they change: one load case per
     unknown, the magnitudes iterated per step; returns (the total case, status (S,) with
     not_converged where the iteration did not converge). ``kept``: (a fit's cache, chunk key):
-    the unit load cases depend on the kinematics alone and are solved once per stage 1."""
+    the unit load cases depend on the kinematics alone and are solved once per stage 1;
+    ``wanted`` False: the Lagrange side's variables are not stored (the base case returned)."""
     rates = friction.Rates.of(ctx, layout, Xz)
     if not layout.coupled:
         _friction_term(ctx, influence, terms, layout, seal, None, rates, Xz)
@@ -390,7 +391,7 @@ def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal
     _friction_term(ctx, influence, terms, layout, seal, (torque, force, couples), rates, Xz)
     u = np.concatenate([couples, -force], axis=1)
     status = np.where(base.ok & ~converged, NOT_CONVERGED, OK).astype(np.int8)
-    return base.plus(u, resp), status
+    return (base.plus(u, resp) if wanted else base), status
 
 
 def _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors) -> dict:

@@ -206,9 +206,12 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok, rows=None, only
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):  # Phi_X term by term: never formed densely
         ii = idx[lo:lo + CHUNK]
+        n = len(ii)
+        if only is not None and n and ii[-1] - ii[0] + 1 == n:
+            ii = slice(int(ii[0]), int(ii[-1]) + 1)  # contiguous: views, not copies
         lam_c = lam[ii]
         Rc = -point_forces[ii][:, fixed]
-        Fc = np.zeros((len(ii), len(pairs), 2))
+        Fc = np.zeros((n, len(pairs), 2))
         rows_c = None if rows is None else rows.take(ii)
         extra = motor_terms(model, X[ii], s[ii], lam_c, rows_c)
         for (li, p), k in pair_slot.items():
