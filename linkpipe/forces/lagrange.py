@@ -97,9 +97,9 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):
         ii = idx[lo:lo + CHUNK]
-        if len(ii) and ii[-1] - ii[0] + 1 == len(ii):  # contiguous: views, not copies
+        n = len(ii)
+        if n and ii[-1] - ii[0] + 1 == n:  # contiguous: views, not copies
             ii = slice(int(ii[0]), int(ii[-1]) + 1)
-        n = len(range(S)[ii])
         lam_c = np.moveaxis(lam[:, ii], 2, 0)  # (n_rows, K, n): each row's cases contiguous
         lam_c = np.ascontiguousarray(lam_c)
         Rc = np.moveaxis(-point_forces[:, ii][:, :, fixed], (2, 3), (0, 1)).copy()
