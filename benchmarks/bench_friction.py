@@ -82,7 +82,8 @@ def best_of(fn, n=3):
 def excavator():
     text = (ROOT / "configs/excavator_arm.toml").read_text()
     text = text.replace("steps = 201", "steps = 100001").replace('center = "G"\n', MASSES)
-    plain = text.replace('effects = ["gravity", "loads"]', 'effects = ["gravity", "inertia", "loads"]')
+    plain = text.replace('effects = ["gravity", "loads"]',
+                         'effects = ["gravity", "inertia", "loads"]')
     with_friction = plain.replace('"inertia", "loads"]', '"inertia", "loads", "friction"]') + FRICTION
     path = str(ROOT / "configs/excavator_arm.toml")
     a, b = parse_scene(plain, path), parse_scene(with_friction, path)

@@ -354,7 +354,8 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
             failed_steps_as_nan(variables, extra_status)
         return Forces(variables=variables, coords=coords, status=status)
     variables["input_force_lagrange"] = (("step", "driver"), case.input_force_lagrange, unit)
-    internal, internal_coords, undefined = internal_forces(model, case.lam, case.undetermined, units)
+    internal, internal_coords, undefined = internal_forces(model, case.lam, case.undetermined,
+                                                           units)
     variables.update(internal)
     coords.update(internal_coords)
     pins, pin_coords = _reactions(model, ctx, case, Xz)

@@ -55,7 +55,8 @@ def seal_law(entry, v, scale):
     """The seal's signed friction (S,) at rates ``v`` (S,): positive opposes a positive rate."""
     level = entry.coulomb
     if entry.stribeck_peak is not None:
-        level = level + (entry.stribeck_peak - entry.coulomb) * np.exp(-(v / entry.stribeck_velocity) ** 2)
+        breakaway = entry.stribeck_peak - entry.coulomb
+        level = level + breakaway * np.exp(-(v / entry.stribeck_velocity) ** 2)
     return level * smooth_sign(v, scale) + entry.viscous * v
 
 
@@ -93,7 +94,8 @@ class Layout:
                 for name in fr.joints:
                     p = names.index(name)
                     bodies = ([-1] if model.fixed[p] else []) + [
-                        li for li, ln in enumerate(scene.links) if name in ln.points and li in with_rows]
+                        li for li, ln in enumerate(scene.links)
+                        if name in ln.points and li in with_rows]
                     pairs += [(e, p, bodies[i], bodies[j]) for i in range(len(bodies))
                               for j in range(i + 1, len(bodies))]
             elif fr.kind == "slider":
@@ -114,8 +116,8 @@ class Layout:
 
 def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
     """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies)``, the
-    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``) and, for a driver whose row
-    acts on bodies (an angle on one link, a relative angle), each body's part."""
+    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``)
+    and, for a driver whose row acts on bodies (an angle on one link, a relative angle), each body's part."""
     model, X = ctx.model, ctx.position
     scale = velocity_scale(model, ctx.constants.size)
     points, bodies = ctx.zeros_points(), {}
