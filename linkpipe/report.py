@@ -21,6 +21,26 @@ def headline(result) -> str:
     return result.totals.message + slip_clause(drawing_slip(result.model))
 
 
+def _out_of_stroke(result) -> list[str]:
+    """One line per actuator or gas spring that leaves its stroke: by how much at most, and
+    where (a streamed sweep: over the rows its recording keeps)."""
+    margin = result.stroke_margin
+    if margin is None or not (result.status == 7).any():
+        return []
+    from .stroke import names, units
+
+    steps = result.step_numbers if result.step_numbers is not None else np.arange(result.n_steps)
+    out = []
+    for j, (name, unit) in enumerate(zip(names(result.scene), units(result.scene,
+                                                                     result.units()["length"]))):
+        column = np.where(np.isfinite(margin[:, j]), margin[:, j], np.inf)
+        k = int(np.argmin(column))
+        if column[k] < 0:
+            out.append(f"  out_of_stroke: {name} beyond its stroke by up to {-column[k]:.4g} "
+                       f"{unit} (step {int(steps[k])}; stroke_margin holds every step's)")
+    return out
+
+
 def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
     """Return the short per-scene report printed by ``run`` (``written``: the files' paths)."""
     sc, totals = result.scene, result.totals
@@ -33,6 +53,7 @@ def summary(result, written=(), seconds_total=None, recording_kept=None) -> str:
         lines.append(f"  non_finite: first at step {totals.first_non_finite}"
                      + (f"; {'; '.join(causes)}" if causes else "")
                      + (f"; not finite there: {shown}" if shown else ""))
+    lines += _out_of_stroke(result)
     if np.isfinite(totals.max_residual_solved):
         how = ("closed-form dyads, no iterations" if result.solver_method_used == "dyads" else
                f"Newton iterations mean {totals.iterations_sum / totals.n_steps:.2f} max "

@@ -274,8 +274,9 @@ def test_h5_holds_what_measure_returned(tmp_path):
 def test_every_knob_has_rows_and_dyads_never_crash():
     ladder = accuracy.measure(str(CONFIGS / "shear_press.toml"), quick=True, repeats=1)
     knobs = {r.knob for r in ladder.rows}
-    # every knob but the log knobs, which need a [time] scene driven by motion laws (below)
-    assert knobs == set(accuracy.KNOBS) - {"log"}
+    # every knob but the log knobs, which need a [time] scene driven by motion laws (below),
+    # and friction_velocity_scale, which needs friction (tests/test_friction.py)
+    assert knobs == set(accuracy.KNOBS) - {"log", "friction_velocity_scale"}
     methods = {r.value: r for r in rows(ladder, "method")}
     assert set(methods) == {"auto", "newton", "dyads"}
     assert methods["auto"].available and methods["newton"].available

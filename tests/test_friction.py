@@ -423,6 +423,11 @@ def test_stroke_margin_of_a_cylinder_against_its_stroke():
     names = {v.name: v for v in r.variables()}
     assert names["stroke_margin"].dims == ("step", "stroke")
     assert "out_of_stroke" in names["status"].attrs["flag_meanings"].split()
+    from linkpipe.report import summary
+
+    worst = int(np.argmin(margin))  # 2.4 m against the longest 2.2 m: 0.2 m beyond
+    assert (f"  out_of_stroke: cyl beyond its stroke by up to {-margin[worst]:.4g} m "
+            f"(step {worst}; stroke_margin holds every step's)") in summary(r).splitlines()
 
 
 def test_the_raise_lower_demo_fit_recovers_mass_and_seal_friction(tmp_path):
@@ -503,3 +508,55 @@ def test_the_accuracy_ladder_of_friction_velocity_scale_against_the_sign_law():
         assert r.relative_error_away == pytest.approx(gap[away].max(), rel=1e-6, abs=1e-13)
         assert r.relative_error_near == pytest.approx(gap[near].max(), rel=1e-6, abs=1e-13)
         assert np.isfinite(r.seconds) and r.stage == "forces"
+
+
+def _with_friction_everywhere(path):
+    """A shipped scene with friction at every pin, slider and driver (a rate where it has none)."""
+    import pathlib
+    import tomllib
+
+    import tomli_w
+
+    data = tomllib.loads(pathlib.Path(path).read_text())
+    points, links = data["points"], data["links"]
+
+    def moving(link):
+        return not all(points[q].get("fixed", False) for q in link["points"])
+
+    joints = [p for p in points if any(p in ln["points"] and moving(ln) for ln in links)
+              and sum(p in ln["points"] and moving(ln) for ln in links)
+              + points[p].get("fixed", False) >= 2]
+    analysis = data.setdefault("analysis", {})
+    analysis["effects"] = list(analysis.get("effects", [])) + ["friction"]
+    friction = [{"name": "pins", "joints": joints, "mu": 0.2, "pin_radius": 0.02, "viscous": 0.1}]
+    friction += [{"name": f"guide_{s['name']}", "slider": s["name"], "mu": 0.3, "viscous": 0.5}
+                 for s in data.get("sliders", [])]
+    for d in data["drivers"]:
+        friction.append({"name": f"seal_{d['name']}", "driver": d["name"], "coulomb": 5.0,
+                         "viscous": 1.0})
+        if data.get("time") is None and "rate" not in d:
+            d["rate"] = 10.0
+    data["friction"] = friction
+    return parse_scene(tomli_w.dumps(data), str(path))
+
+
+@pytest.mark.parametrize("name", ["basketball_goal", "dump_truck", "excavator_arm", "five_bar",
+                                  "fourbar_crank_encoder", "fourbar_crank_rocker",
+                                  "hatch_gas_spring", "jansen", "shear_press", "slider_crank"])
+def test_every_shipped_scene_with_friction_everywhere_balances(name):
+    """Virtual work (friction's power included) against the Lagrange multipliers (the friction's
+    loads in Q), and where no driver pushes (``input``) the power balance, at every ok step."""
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parent.parent / "configs" / f"{name}.toml"
+    r = linkpipe.solve(_with_friction_everywhere(path))
+    ok = r.status == OK
+    assert ok.sum() >= r.n_steps - 1
+    f = r.forces
+    vw, lg = f["input_force"][1][ok], f["input_force_lagrange"][1][ok]
+    assert np.abs(vw - lg).max() <= 1e-12 * np.abs(vw).max()
+    assert (f["friction_force"][1][ok] > 0).any(axis=0).all()  # every entry acts somewhere
+    if not any(d.input is not None for d in r.scene.drivers):
+        rate = r.kinematics.s_dot[ok]
+        balance = (vw * rate).sum(axis=1) + f["power"][1][ok].sum(axis=1)
+        assert np.abs(balance).max() <= 1e-12 * np.abs(vw * rate).max()

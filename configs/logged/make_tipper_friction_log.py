@@ -19,7 +19,6 @@ Raising, the pressure carries the load plus the friction; lowering, the load min
 difference at one stroke is twice the friction. Run from the repository root:
 python configs/logged/make_tipper_friction_log.py
 """
-import math
 import pathlib
 import sys
 

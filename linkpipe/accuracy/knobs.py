@@ -82,8 +82,8 @@ def _all_orders(scene: Scene) -> Scene:
                                                 kinematics=("velocity", "acceleration")))
 
 
-KNOBS = ("tol", "max_iter", "jacobian", "linear_algebra", "derivatives", "predictor", "method", "log",
-         "friction_velocity_scale")
+KNOBS = ("tol", "max_iter", "jacobian", "linear_algebra", "derivatives", "predictor", "method",
+         "log", "friction_velocity_scale")
 
 #: the log knobs (a [time] scene driven by motion laws: each driver replaced by a log of its own
 #: law): keep every k-th sample; smoothing lam in units of h^3 (h: the mean sample spacing)

@@ -27,7 +27,8 @@ from . import friction
 from .applied import Applied, couple_as_body, merge_bodies, with_couples_as_pairs
 from .constants import ForceConstants
 from .effects import EFFECTS, Context, Effect, applies
-from .lagrange import body_rows, internal_forces, joints, multipliers, reactions
+from .lagrange import (body_rows, internal_forces, joints, multipliers, reactions,
+                       stacked_multipliers, stacked_reactions)
 from .virtual_work import Influence, actuator_forces, along_input_directions
 
 __all__ = ["compute_forces", "EFFECTS"]
@@ -279,13 +280,12 @@ class _Case:
     ok: np.ndarray
     q_minus_m_qdd: np.ndarray
 
-    def plus(self, u: np.ndarray, cases: list) -> "_Case":
-        """This case plus ``u[:, k]`` (S,) times each of ``cases``."""
+    def plus(self, u: np.ndarray, cases: dict) -> "_Case":
+        """This case plus ``u[:, k]`` (S,) times each of ``cases`` ({name: (K, S, ...)})."""
         out = {}
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
             total = getattr(self, name).copy()
-            for k, case in enumerate(cases):
-                part = getattr(case, name)
+            for k, part in enumerate(cases[name]):
                 total += u[:, k].reshape((-1,) + (1,) * (part.ndim - 1)) * part
             out[name] = total
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
@@ -339,7 +339,7 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
     extra_status = None
     if layout is not None:
         case, extra_status = _with_friction(model, ctx, motion, units, influence, terms, Xz,
-                                            layout, seal, base, kept, factors)
+                                            layout, seal, base, kept, factors, wanted)
     else:
         case = base
     variables, coords = _effect_variables(terms, motion, units)
@@ -354,7 +354,8 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
             failed_steps_as_nan(variables, extra_status)
         return Forces(variables=variables, coords=coords, status=status)
     variables["input_force_lagrange"] = (("step", "driver"), case.input_force_lagrange, unit)
-    internal, internal_coords, undefined = internal_forces(model, case.lam, case.undetermined, units)
+    internal, internal_coords, undefined = internal_forces(model, case.lam, case.undetermined,
+                                                           units)
     variables.update(internal)
     coords.update(internal_coords)
     pins, pin_coords = _reactions(model, ctx, case, Xz)
@@ -366,36 +367,66 @@ def _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout=None,
 
 
 def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal, base,
-                   kept=None, factors=None):
+                   kept=None, factors=None, wanted: bool = True):
     """Solve the pins' and sliders' friction with the forces they change: one load case per
     unknown, the magnitudes iterated per step; returns (the total case, status (S,) with
     not_converged where the iteration did not converge). ``kept``: (a fit's cache, chunk key):
-    the unit load cases depend on the kinematics alone and are solved once per stage 1."""
+    the unit load cases depend on the kinematics alone and are solved once per stage 1;
+    ``wanted`` False: the Lagrange side's variables are not stored (the base case returned)."""
     rates = friction.Rates.of(ctx, layout, Xz)
     if not layout.coupled:
         _friction_term(ctx, influence, terms, layout, seal, None, rates, Xz)
         return base, None
     pin_index = {pair: k for k, pair in enumerate(joints(model))}
     key = None if kept is None else (kept[1], "friction_cases", repr(layout))
-    cases = kept[0].get(key) if kept is not None else None
-    if cases is None:
-        cases = []
-        for applied, bodies in friction.unit_loads(ctx, layout, Xz):
-            rhs = with_couples_as_pairs(model, applied.point_forces, applied.couples, Xz)
-            cases.append(_case(model, ctx, motion, units, influence, rhs, bodies,
-                               influence.generalized(applied), Xz, factors))
+    resp = kept[0].get(key) if kept is not None else None
+    if resp is None:
+        resp = _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors)
         if kept is not None:
-            kept[0][key] = cases
-    stack = lambda f: np.stack([f(c) for c in cases])  # noqa: E731
+            kept[0][key] = resp
     torque, force, couples, converged = friction.solve_magnitudes(
         ctx, layout, rates, friction.pair_forces(layout, pin_index, base.pins),
         friction.normal_forces(ctx, layout, base.lam, Xz),
-        stack(lambda c: friction.pair_forces(layout, pin_index, c.pins)),
-        stack(lambda c: friction.normal_forces(ctx, layout, c.lam, Xz)), base.ok)
+        friction.pair_forces(layout, pin_index, resp["pins"]),
+        friction.normal_forces(ctx, layout, resp["lam"], Xz), base.ok)
     _friction_term(ctx, influence, terms, layout, seal, (torque, force, couples), rates, Xz)
     u = np.concatenate([couples, -force], axis=1)
     status = np.where(base.ok & ~converged, NOT_CONVERGED, OK).astype(np.int8)
-    return base.plus(u, cases), status
+    return (base.plus(u, resp) if wanted else base), status
+
+
+def _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors) -> dict:
+    """The unknowns' unit load cases (:func:`.friction.unit_loads`), K along a leading axis:
+    {input_force, input_force_lagrange (K, S, nd), lam (K, S, n_rows), pins (K, S, n_joints,
+    2), ground (K, S, n_fixed, 2)}. Solved together (one pass of the block solves and of
+    Phi_X's terms) where no driver pushes (``input``) and the model has a sparse engine; else
+    case by case (:func:`_case`)."""
+    loads = list(friction.unit_loads(ctx, layout, influence, Xz))
+    names = ("input_force", "input_force_lagrange", "lam", "pins", "ground")
+    if any(d.input is not None for d in model.scene.drivers):
+        cases = [_case(model, ctx, motion, units, influence, rhs, bodies, work, Xz, factors)
+                 for rhs, work, bodies in loads]
+        return {name: np.stack([getattr(c, name) for c in cases]) for name in names}
+    n_steps = ctx.n_steps
+    rhs = np.stack([r for r, _, _ in loads])
+    generalized = np.stack([w for _, w, _ in loads])
+    ok = motion.status == OK
+    lam = stacked_multipliers(model, Xz, motion.s,
+                              rhs[:, :, model.moving].reshape(len(loads), n_steps, -1), ok,
+                              ctx.constants.pivots, ctx.constants.model_rows, factors)
+    if lam is None:  # no sparse engine: case by case
+        lam = np.stack([multipliers(model, Xz, motion.s,
+                                    r[:, model.moving].reshape(n_steps, -1), ok,
+                                    ctx.constants.pivots, ctx.constants.model_rows)[0]
+                        for r in rhs])
+    input_force = -generalized
+    input_force_lagrange = lam[:, :, model.driver_rows] * influence.phi_s
+    input_force[:, ~ok] = np.nan
+    input_force_lagrange[:, ~ok] = np.nan
+    ground, pins = stacked_reactions(model, lam, rhs, [b for _, _, b in loads], Xz, motion.s, ok,
+                                     ctx.constants.model_rows)
+    return dict(input_force=input_force, input_force_lagrange=input_force_lagrange, lam=lam,
+                pins=pins, ground=ground)
 
 
 def _reactions(model: Model, ctx: Context, case: "_Case", Xz) -> tuple[dict, dict]:

@@ -55,7 +55,8 @@ def seal_law(entry, v, scale):
     """The seal's signed friction (S,) at rates ``v`` (S,): positive opposes a positive rate."""
     level = entry.coulomb
     if entry.stribeck_peak is not None:
-        level = level + (entry.stribeck_peak - entry.coulomb) * np.exp(-(v / entry.stribeck_velocity) ** 2)
+        breakaway = entry.stribeck_peak - entry.coulomb
+        level = level + breakaway * np.exp(-(v / entry.stribeck_velocity) ** 2)
     return level * smooth_sign(v, scale) + entry.viscous * v
 
 
@@ -93,7 +94,8 @@ class Layout:
                 for name in fr.joints:
                     p = names.index(name)
                     bodies = ([-1] if model.fixed[p] else []) + [
-                        li for li, ln in enumerate(scene.links) if name in ln.points and li in with_rows]
+                        li for li, ln in enumerate(scene.links)
+                        if name in ln.points and li in with_rows]
                     pairs += [(e, p, bodies[i], bodies[j]) for i in range(len(bodies))
                               for j in range(i + 1, len(bodies))]
             elif fr.kind == "slider":
@@ -114,8 +116,8 @@ class Layout:
 
 def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
     """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies)``, the
-    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``) and, for a driver whose row
-    acts on bodies (an angle on one link, a relative angle), each body's part."""
+    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``)
+    and, for a driver whose row acts on bodies (an angle on one link, a relative angle), each body's part."""
     model, X = ctx.model, ctx.position
     scale = velocity_scale(model, ctx.constants.size)
     points, bodies = ctx.zeros_points(), {}
@@ -149,23 +151,27 @@ def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
     return signed, Applied(points, ctx.zeros_links()), bodies
 
 
-def unit_loads(ctx, layout: Layout, Xz):
+def unit_loads(ctx, layout: Layout, influence, Xz):
     """The unknowns' unit loads, one per response: a unit couple (CCW) on each link of
-    ``layout.links``, then a unit force along each friction slider's guide (on its point, minus
-    on the moving guide's first point). Yields ``(Applied, bodies)``."""
+    ``layout.links`` (as its force pair on the link's first two points), then a unit force
+    along each friction slider's guide (on its point, minus on the moving guide's first point).
+    Yields ``(Q at every point (S, P, 2), its virtual work per driver (S, nd), bodies)``."""
     model = ctx.model
     for li in layout.links:
-        couples = ctx.zeros_links()
-        couples[:, li] = 1.0
-        body = {li: merge_bodies({}, couple_as_body(model, np.ones(ctx.n_steps), li, Xz), -1.0)}
-        yield Applied(ctx.zeros_points(), couples), body
+        body = couple_as_body(model, np.ones(ctx.n_steps), li, Xz)  # {b: f, a: -f}
+        points = ctx.zeros_points()
+        for p, f in body.items():
+            points[:, p] += f
+        yield points, influence.link_angles[:, li, :], {li: merge_bodies({}, body, -1.0)}
     for _, _, p, d, _ in layout.slides:
         points = ctx.zeros_points()
         t = guide_direction(ctx, layout, p, d, Xz)
         points[:, p] += t
+        work = np.einsum("sx,sxd->sd", t, influence.points[:, p])
         if d >= 0:
             points[:, d] -= t
-        yield Applied(points, ctx.zeros_links()), {}
+            work = work - np.einsum("sx,sxd->sd", t, influence.points[:, d])
+        yield points, work, {}
 
 
 def guide_direction(ctx, layout, p, d, Xz):
@@ -211,11 +217,13 @@ def pair_forces(layout: Layout, pin_index: dict, pins):
     """(..., n_pairs, 2) the force between each pair's bodies from the pins' forces on bodies
     ``pins`` (..., n_joints, 2): the moving body's where the other is ground, else half the
     difference (second minus first)."""
-    out = []
-    for _, p, i, j in layout.pairs:
-        fj = pins[..., pin_index[(j, p)], :]
-        out.append(fj if i < 0 else 0.5 * (fj - pins[..., pin_index[(i, p)], :]))
-    return np.stack(out, axis=-2) if out else np.zeros(pins.shape[:-2] + (0, 2))
+    if not layout.pairs:
+        return np.zeros(pins.shape[:-2] + (0, 2))
+    second = [pin_index[(j, p)] for _, p, i, j in layout.pairs]
+    first = [pin_index[(i, p)] if i >= 0 else pin_index[(j, p)] for _, p, i, j in layout.pairs]
+    ground = np.array([i < 0 for _, _, i, _ in layout.pairs])[:, None]
+    fj, fi = pins[..., second, :], pins[..., first, :]
+    return np.where(ground, fj, 0.5 * (fj - fi))
 
 
 def normal_forces(ctx, layout: Layout, lam, Xz):
@@ -261,25 +269,42 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     sgn_pair = smooth_sign(rates.pairs, _column(scale / size))
     sgn_slide = smooth_sign(rates.slides, _column(scale))
     visc_pair, visc_slide = c_pair * rates.pairs, c_slide * rates.slides
-    torque = np.zeros_like(rates.pairs)
-    force = np.zeros_like(rates.slides)
+    n_pairs, n_slides = len(layout.pairs), len(layout.slides)
+    m, S = n_pairs + n_slides, len(ok)
+    C = np.zeros((m, n_links + n_slides))  # the unit loads' multiples u = x C, x = (torques,
+    C[:n_pairs, :n_links] = A  # slider forces): link couples A^T torques, minus each force
+    C[n_pairs:, n_links:] = -np.eye(n_slides)
+    resp = np.concatenate([resp_pairs.reshape(resp_pairs.shape[:2] + (-1,)),
+                           resp_normals.reshape(resp_normals.shape[:2] + (-1,))], axis=2)
+    M = np.einsum("ksd,mk->sdm", resp, C)  # (S, 2m, m): forces per unit of each unknown
+    g0 = np.concatenate([base_pairs.reshape(S, -1), base_normals.reshape(S, -1)], axis=1)
+    coef = np.concatenate([mu_r, mu_s])
+    sgn = np.concatenate([sgn_pair, sgn_slide], axis=1)
+    visc = np.concatenate([visc_pair, visc_slide], axis=1)
+    x = np.zeros((S, m))
     tol = scene.solver.tol
-    converged = ~ok  # failed steps are not iterated
+    work = np.flatnonzero(ok)  # the steps the working arrays hold (failed steps never)
+    Mw, gw, sw, vw = (a if len(work) == S else a[work] for a in (M, g0, sgn, visc))
+    live = np.arange(len(work))  # their rows still iterated: converged steps leave
     for _ in range(scene.solver.max_iter + 1):
-        u = np.concatenate([torque @ A, -force], axis=1)  # (S, n_unknowns): unit loads' multiples
-        F = base_pairs + np.einsum("sk,ks...->s...", u, resp_pairs)
-        N = base_normals + np.einsum("sk,ks...->s...", u, resp_normals)
-        new_t = mu_r * np.hypot(F[..., 0], F[..., 1]) * sgn_pair + visc_pair
-        new_f = mu_s * np.hypot(N[..., 0], N[..., 1]) * sgn_slide + visc_slide
-        change = np.concatenate([np.abs(new_t - torque), np.abs(new_f - force)], axis=1)
-        level = np.concatenate([np.abs(new_t), np.abs(new_f)], axis=1).max(axis=1, initial=0.0)
-        torque = np.where(converged[:, None], torque, new_t)
-        force = np.where(converged[:, None], force, new_f)
-        with np.errstate(invalid="ignore"):
-            converged = converged | (change.max(axis=1, initial=0.0) <= tol * level)
-        if converged.all():
+        if not len(live):
             break
-    return torque, force, torque @ A, converged & ok
+        at = slice(None) if len(live) == len(work) else live
+        steps = work[at]
+        G = gw[at] + np.einsum("sdm,sm->sd", Mw[at], x[steps])
+        new = coef * np.hypot(G[:, 0::2], G[:, 1::2]) * sw[at] + vw[at]
+        with np.errstate(invalid="ignore"):
+            done = (np.abs(new - x[steps]).max(axis=1, initial=0.0)
+                    <= tol * np.abs(new).max(axis=1, initial=0.0))
+        x[steps] = new
+        live = np.arange(len(work))[at][~done]
+        if len(live) < 0.5 * len(work):  # compact the working arrays to the live steps
+            work, Mw, gw, sw, vw = work[live], Mw[live], gw[live], sw[live], vw[live]
+            live = np.arange(len(work))
+    converged = ok.copy()
+    converged[work[live]] = False
+    torque, force = x[:, :n_pairs], x[:, n_pairs:]
+    return torque, force, torque @ A, converged
 
 
 def _column(x):

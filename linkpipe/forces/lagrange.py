@@ -55,6 +55,78 @@ def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, ro
     return lam, undetermined_rows(J)
 
 
+def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False,
+                        rows=None, factors: dict | None = None):
+    """λ (K, S, n_rows) of K load cases at once, ``generalized_q`` (K, S, n_q), NaN where not
+    ok, through the sparse engine's block solves (each right-hand side a (K, chunk) array;
+    dense blocks by their inverses, kept in ``factors``); None where the model has no sparse
+    engine (the caller solves case by case)."""
+    eng = engine(model)
+    if eng is None:
+        return None
+    K, n_steps = generalized_q.shape[:2]
+    lam = np.full((K, n_steps, model.n_rows), np.nan)
+    factors = {} if factors is None else factors
+    idx = np.flatnonzero(ok)
+    for lo in range(0, len(idx), CHUNK):
+        ii = idx[lo:lo + CHUNK]
+        key = (len(Xz), lo, len(ii), hash(ok.tobytes()))
+        if key not in factors:
+            E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
+                 if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
+            factors[key] = E, eng.block_inverses(E)
+        E, inverses = factors[key]
+        rhs = list(np.ascontiguousarray(generalized_q[:, ii].transpose(2, 0, 1)))
+        lam[:, ii] = np.stack(eng.solve_transpose(E, rhs, inverses), axis=-1)
+    return lam
+
+
+def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, rows=None):
+    """:func:`reactions` of K load cases at once: ``lam`` (K, S, n_rows), ``point_forces``
+    (K, S, P, 2), ``bodies`` one dict per case; returns (K, S, n_fixed, 2), (K, S, n_joints, 2),
+    Phi_X's terms computed once for all cases."""
+    fixed = np.flatnonzero(model.fixed)
+    fixed_slot = {int(p): k for k, p in enumerate(fixed)}
+    pairs = joints(model)
+    pair_slot = {(li, p): k for k, (li, p) in enumerate(pairs)}
+    row_link = body_rows(model).tolist()
+    K, S = lam.shape[:2]
+    R = np.full((K, S, len(fixed), 2), np.nan)
+    F = np.full((K, S, len(pairs), 2), np.nan)
+    relative = bool((model.drv_kind == eq.RELATIVE).any())
+    idx = np.flatnonzero(ok)
+    for lo in range(0, len(idx), CHUNK):
+        ii = idx[lo:lo + CHUNK]
+        n = len(ii)
+        if n and ii[-1] - ii[0] + 1 == n:  # contiguous: views, not copies
+            ii = slice(int(ii[0]), int(ii[-1]) + 1)
+        lam_c = np.moveaxis(lam[:, ii], 2, 0)  # (n_rows, K, n): each row's cases contiguous
+        lam_c = np.ascontiguousarray(lam_c)
+        Rc = np.moveaxis(-point_forces[:, ii][:, :, fixed], (2, 3), (0, 1)).copy()
+        Fc = np.zeros((len(pairs), 2, K, n))  # slot, axis, case, step
+        rows_c = None if rows is None else rows.take(ii)
+        Xc, sc = X[ii], s[ii]
+        for k, case_bodies in enumerate(bodies):
+            extra = motor_terms(model, Xc, sc, lam[k, ii], rows_c) if relative else {}
+            for (li, p), slot in pair_slot.items():
+                for part in (extra.get(li, {}).get(p), case_bodies.get(li, {}).get(p)):
+                    if part is not None:
+                        Fc[slot, :, k] += (part if part.shape[0] == n else part[ii]).T
+        for r, p, gx, gy in model.jacobian_terms(Xc, sc, rows_c):
+            lr = lam_c[r]
+            k = fixed_slot.get(p)
+            if k is not None:
+                Rc[k, 0] += lr * gx
+                Rc[k, 1] += lr * gy
+            k = pair_slot.get((row_link[r], p))
+            if k is not None:
+                Fc[k, 0] += lr * gx
+                Fc[k, 1] += lr * gy
+        R[:, ii] = np.moveaxis(Rc, (0, 1), (2, 3))
+        F[:, ii] = np.moveaxis(Fc, (0, 1), (2, 3))
+    return R, F
+
+
 def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:
     """Return (n_rows,) True for multipliers that redundant constraints leave undetermined.
 
@@ -134,9 +206,12 @@ def reactions(model: Model, lam, point_forces, bodies, X, s, ok, rows=None, only
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):  # Phi_X term by term: never formed densely
         ii = idx[lo:lo + CHUNK]
+        n = len(ii)
+        if only is not None and n and ii[-1] - ii[0] + 1 == n:
+            ii = slice(int(ii[0]), int(ii[-1]) + 1)  # contiguous: views, not copies
         lam_c = lam[ii]
         Rc = -point_forces[ii][:, fixed]
-        Fc = np.zeros((len(ii), len(pairs), 2))
+        Fc = np.zeros((n, len(pairs), 2))
         rows_c = None if rows is None else rows.take(ii)
         extra = motor_terms(model, X[ii], s[ii], lam_c, rows_c)
         for (li, p), k in pair_slot.items():

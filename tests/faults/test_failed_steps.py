@@ -79,7 +79,7 @@ name = "gas"
 between = ["C", "A"]
 kind = "gas"
 force_extended = 40.0
-extended_length = 3.0
+extended_length = 5.0   # longer than the strut ever gets: in its stroke (version 3) at every step
 dead_length = 0.5
 
 [[springs]]

@@ -64,7 +64,14 @@ def test_assign_is_the_one_rule():
     np.testing.assert_array_equal(got, [st.NO_LEVERAGE, st.NOT_CONVERGED, st.NON_FINITE,
                                         st.SINGULAR, st.NO_ASSEMBLY])
     assert st.FLAG_MEANINGS == ("ok", "no_assembly", "singular", "not_converged", "no_input",
-                                "no_leverage", "non_finite")
+                                "no_leverage", "non_finite", "out_of_stroke")
+    # out_of_stroke (version 3) keeps its step's values: above a lack of leverage or an
+    # overflow, below every verdict that leaves the step without positions or derivatives
+    stroke = np.full(5, st.OUT_OF_STROKE, dtype=np.int8)
+    np.testing.assert_array_equal(
+        st.worst(np.array([st.OK, st.NO_LEVERAGE, st.NON_FINITE, st.SINGULAR, st.NO_ASSEMBLY]),
+                 stroke),
+        [st.OUT_OF_STROKE, st.OUT_OF_STROKE, st.OUT_OF_STROKE, st.SINGULAR, st.NO_ASSEMBLY])
 
 
 def test_a_quantity_the_scene_does_not_define_does_not_fail_its_steps():
