@@ -86,9 +86,6 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     atol = np.concatenate([rtol * sc, rtol * sc, [1e300, 1e300]])
     y0 = np.concatenate([s0, sd0, [0.0, 0.0]])
     instants = np.asarray(dyn.instants, float)
-    first = rhs(0.0, y0)
-    if not np.isfinite(first).all():
-        raise NoAssembly(0.0)
     options = {"jac": finite_jacobian(rhs, nd, atol / rtol)} if method == "Radau" else {}
     sol = solve_ivp(rhs, (0.0, dyn.to), y0, method=method, rtol=rtol, atol=atol,
                     dense_output=True, **options)
