@@ -54,23 +54,31 @@ def equations_of(scene, model=None) -> MotionEquations:
 
 def simulate(scene, tell=lambda stage: None, seconds: dict | None = None):
     """Integrate ``scene``'s [dynamics] and return its Result (failed steps are data)."""
-    from ..spine import finish
-    from ..stage1 import mobility_of
-    from .finish import describe, forces_of, kinematics_of
-
     seconds = {} if seconds is None else seconds
     t0 = _time.perf_counter()
     model = build_model(scene)
-    mobility = mobility_of(model)
     eqs = equations_of(scene, model)
     seconds["model"] = _time.perf_counter() - t0
     tell("integration")
     t0 = _time.perf_counter()
     traj = integrate(scene, eqs)
     seconds["integration"] = _time.perf_counter() - t0
+    return finished(eqs, traj, tell, seconds)
+
+
+def finished(eqs: MotionEquations, traj: Trajectory, tell=lambda stage: None,
+             seconds: dict | None = None):
+    """The Result of a trajectory of ``eqs``' scene: its output instants finished as any sweep
+    (:mod:`.finish`: positions, rates, the force stage; then :func:`linkpipe.spine.finish`)."""
+    from ..spine import finish
+    from ..stage1 import mobility_of
+    from .finish import describe, forces_of, kinematics_of
+
+    seconds = {} if seconds is None else seconds
+    scene, model = eqs.scene, eqs.model
     tell("positions")
     t0 = _time.perf_counter()
-    k, F, state = kinematics_of(eqs, traj, mobility)
+    k, F, state = kinematics_of(eqs, traj, mobility_of(model))
     seconds["positions"] = _time.perf_counter() - t0
     tell("forces")
     t0 = _time.perf_counter()

@@ -86,9 +86,6 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     atol = np.concatenate([rtol * sc, rtol * sc, [1e300, 1e300]])
     y0 = np.concatenate([s0, sd0, [0.0, 0.0]])
     instants = np.asarray(dyn.instants, float)
-    first = rhs(0.0, y0)
-    if not np.isfinite(first).all():
-        raise NoAssembly(0.0)
     options = {"jac": finite_jacobian(rhs, nd, atol / rtol)} if method == "Radau" else {}
     sol = solve_ivp(rhs, (0.0, dyn.to), y0, method=method, rtol=rtol, atol=atol,
                     dense_output=True, **options)
@@ -98,7 +95,7 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
         at = ", ".join(f"{d.name} {v:.9g} {'deg' if d.kind == 'angle' else 'length units'}"
                        for d, v in zip(scene.drivers, sol.y[:nd, -1] / scale))
         event = (f"out of assembly (no assembled, non-singular position beyond it; {at})"
-                 if failed and max(failed) >= end else f"the integrator stopped: {sol.message}")
+                 if at_event(failed, end) else f"the integrator stopped: {sol.message}")
     solved = instants <= end * (1 + 1e-15) if event else np.ones(len(instants), bool)
     Y = np.full((len(instants), len(y0)), np.nan)
     if solved.any():
@@ -106,6 +103,17 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     Y[0] = y0  # the start exactly as given
     return Trajectory(instants, Y[:, :nd], Y[:, nd:2 * nd], Y[:, 2 * nd], Y[:, 2 * nd + 1],
                       solved, end, event, len(sol.t) - 1, int(sol.nfev), method, rtol)
+
+
+#: how far past the last instant reached a failed evaluation shows the event that stopped the
+#: solver (its last attempts are ~1e-15 x t long; a failure farther on was a rejected trial)
+EVENT_WINDOW = 1e-9
+
+
+def at_event(failures, end: float) -> bool:
+    """Whether one of the times ``failures`` at which the mechanism could not be evaluated lies
+    just past ``end`` (within EVENT_WINDOW of it, relative): the event the solver closed in on."""
+    return any(end <= t <= end + EVENT_WINDOW * max(abs(end), 1e-3) for t in failures)
 
 
 def finite_jacobian(rhs, nd: int, scale: np.ndarray):
