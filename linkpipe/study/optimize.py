@@ -46,7 +46,7 @@ from .problem import FAILED, Problem
 #: fraction of its bound's width
 HANDOVER = 1e-3
 #: the polish's first step and its end (fractions of each bound's width), its most iterations
-STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-6, 1e-9
+STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-4, 1e-9
 #: CMA-ES runs a polish pass may start (each from the last one's best) and their iterations
 CMA_RUNS, CMA_ITERATIONS = 6, 100
 #: the search's box reaches this far (a fraction of each bound's width) beyond the bounds;
@@ -331,7 +331,7 @@ def _polish(problem: Problem, ev: Evaluator, judge: _Judge, merit, x0, rng) -> N
         ev(lo + u * width)
         if not free.any():
             break
-        _cma(problem, ev, judge, merit, u, free, rng, STEP_MIDDLE * 100 if fine else STEP_START,
+        _cma(problem, ev, judge, merit, u, free, rng, STEP_MIDDLE * 10 if fine else STEP_START,
              STEP_END if fine else STEP_MIDDLE)
         u = (ev.arrays()[0][_best_of(judge, merit, np.arange(ev.n)), :problem.n_free] - lo) / width
         reached = (free & ((u < BOUND_SNAP) | (u > 1 - BOUND_SNAP))).any()
