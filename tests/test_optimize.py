@@ -347,3 +347,23 @@ def test_the_recording_marks_the_best_and_shows_the_progress(tmp_path):
     titles = rec.view_titles()
     assert {"springs.balancer.k [force/length]", "points.S.x [length]"} <= titles
     assert "/mechanism/links/lever" in rec.entities  # the best variant's motion
+
+
+@pytest.mark.parametrize("tie, says", [
+    ('{ "springs.right.k" = "springs.left.kk" }', "which no parameter varies"),
+    ('{ "springs.right.k" = "springs.right.free_length", "springs.right.free_length" = '
+     '"springs.right.k" }', "a cycle of ties"),
+    ('{ "points.S1.y" = "springs.left.k" }', "is varied itself"),
+    ('"springs.left.k"', "expected a table of addresses"),
+])
+def test_a_bad_tie_in_a_study_is_one_message(tmp_path, capsys, tie, says):
+    path = tmp_path / "tie.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"springs.left.k" = { from = 0.0, to = 3000.0, steps = 3 }\n'
+                    '"points.S1.y" = { from = -0.9, to = -0.1, steps = 2 }\n'
+                    f'tie = {tie}\n')
+    out = tmp_path / "out"
+    assert main(["study", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and "study.parameters" in err
+    assert not out.exists() or not any(p for p in out.iterdir() if not p.name.startswith("."))
