@@ -48,7 +48,8 @@ from .problem import FAILED, Problem
 #: the search hands over when every parameter's spread in the population is below this
 #: fraction of its bound's width
 HANDOVER = 1e-3
-#: the polish's first step and its end (fractions of each bound's width), its most iterations
+#: the polish's first step, where a coarse pass ends and where the fine one ends (fractions
+#: of each bound's width)
 STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-4, 1e-9
 #: CMA-ES runs a polish pass may start (each from the last one's best) and their iterations
 CMA_RUNS, CMA_ITERATIONS = 6, 100
@@ -349,7 +350,8 @@ def _polish(problem: Problem, ev: Evaluator, judge: _Judge, merit, x0, rng) -> N
             rest[j] = False
             ev(lo + face * width)
             if rest.any():
-                _cma(problem, ev, judge, merit, face, rest, rng, STEP_START, STEP_MIDDLE, runs=1)
+                _cma(problem, ev, judge, merit, face, rest, rng, STEP_START, STEP_MIDDLE,
+                     runs=1)
             b, ub = best_u()
             tried[j] = True
             if tuple(_key(judge, merit, np.array([b]))[0]) < tuple(before) and ub[j] == face[j]:
