@@ -367,3 +367,21 @@ def test_a_bad_tie_in_a_study_is_one_message(tmp_path, capsys, tie, says):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err and "study.parameters" in err
     assert not out.exists() or not any(p for p in out.iterdir() if not p.name.startswith("."))
+
+
+def test_an_optimum_on_a_bound_is_reported_there(tmp_path, capsys):
+    """Rates up to 80 N/m cannot reach the balance (98.1): the best rate is the bound, and the
+    peak is the torque at 0 deg, |k a b - m g L| (the sin term vanishes there)."""
+    text = LEVER.format(name="capped", minimize='"peak"', extra="").replace(
+        '"springs.balancer.k" = [0.0, 300.0]', '"springs.balancer.k" = [0.0, 80.0]')
+    path = tmp_path / "capped.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    assert main(["optimize", str(path), "--out", str(out), "--no-rrd"]) == 0
+    assert "springs.balancer.k = 80 force/length (on its upper bound)" in capsys.readouterr().out
+    with h5py.File(out / "capped_optimize.h5", "r") as h5:
+        assert [str(a) for a in h5.attrs["on_bound"]] == ["springs.balancer.k"]
+        assert [str(a) for a in h5.attrs["on_bound_side"]] == ["upper"]
+        assert h5["best"][0] == 80.0
+        assert float(h5.attrs["best_objective"]) == pytest.approx(abs(80.0 * A * B - M * G * L),
+                                                                   rel=1e-9)
