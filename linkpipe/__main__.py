@@ -520,8 +520,20 @@ def _optimize(args) -> int:
         t0 = time.perf_counter()
         problem = load_problem(args.file)
         out = output_folder(args.out)  # a wrong --out before the search
-        with Pool(args.workers, args.scheduler) as pool:
-            found = optimize(problem, pool)  # Infeasible: exit 1, nothing written
+        from tqdm import tqdm
+
+        bar = tqdm(desc=f"optimize {problem.study.name}", unit=" generations", leave=False,
+                   disable=True if args.quiet else None)  # None: on a terminal only
+
+        def progress(generation, best):
+            bar.update(1)
+            bar.set_postfix_str(f"best {best:.6g}")
+
+        try:
+            with Pool(args.workers, args.scheduler) as pool:
+                found = optimize(problem, pool, progress)  # Infeasible: exit 1, nothing written
+        finally:
+            bar.close()
         name = problem.study.name
         paths = [out / f"{name}_optimize.h5", out / f"{name}_optimize.toml"]
         store.write_h5(found, paths[0])

@@ -113,7 +113,7 @@ def optimize_table(outcome, seconds: float | None = None) -> str:
     for m in study.metrics:
         if m.name.startswith("_"):
             continue
-        unit = f" {m_units[m.name]}" if m_units[m.name] else ""
+        unit = f" {m_units[m.name]}" if m_units[m.name] not in ("", "1") else ""
         mark = "  <- objective" if m.name in problem.objectives else ""
         lines.append(f"    {m.name} = {outcome.metrics[m.name][outcome.best]:.10g}{unit}{mark}")
     for c in problem.constraints:
