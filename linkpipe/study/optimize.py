@@ -24,7 +24,8 @@ A global search, then a local polish, both over the study's vectorised variants
   valley that runs into a bound is not crawled down); then a coarse pass (to ``STEP_MIDDLE``
   of each bound's width) and a fine one (to ``STEP_END``), each face reached on the way
   tried the same way. A pass that stops short of its tolerance starts again from its best
-  (``CMA_RUNS`` runs of ``CMA_ITERATIONS``).
+  (``CMA_RUNS`` runs of ``CMA_ITERATIONS``); one whose best has not improved in
+  ``CMA_STALL`` iterations ends.
 
 Every evaluated variant is kept (:class:`Outcome`): values, metrics, failed steps, which
 generation (-1: the polish). Two objectives: the search runs once per weight of a
@@ -53,6 +54,9 @@ HANDOVER = 1e-3
 STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-4, 1e-9
 #: CMA-ES runs a polish pass may start (each from the last one's best) and their iterations
 CMA_RUNS, CMA_ITERATIONS = 6, 100
+#: iterations without a better best after which a CMA-ES pass ends (values the objective does
+#: not depend on, where it sits, never reach the step tolerance)
+CMA_STALL = 50
 #: the search's box reaches this far (a fraction of each bound's width) beyond the bounds;
 #: a value there is evaluated at the bound: scipy puts a trial outside its box anywhere in
 #: it at random, which keeps a population from settling on a bound; here the bound is a
@@ -389,21 +393,22 @@ def _cma(problem: Problem, ev: Evaluator, judge: _Judge, merit, u0, free, rng, s
                    "popsize": max(16, 8 * n), "seed": int(rng.integers(1, 2**31 - 1)),
                    "verbose": -9}
         es = cma.CMAEvolutionStrategy(list(u[free]), sigma, options)
-        best = (np.inf, np.inf)
-        while not es.stop():
+        best, since = (np.inf, np.inf), 0
+        while not es.stop() and since < CMA_STALL:
             trial = np.clip(np.array(es.ask()), 0.0, 1.0)
             full = np.tile(u, (len(trial), 1))
             full[:, free] = trial
             keys = _key(judge, merit, ev(lo + full * width))
             order = np.lexsort((keys[:, 1], keys[:, 0]))
+            since += 1
             if tuple(keys[order[0]]) < best:
-                best, top = tuple(keys[order[0]]), full[order[0]]
+                best, top, since = tuple(keys[order[0]]), full[order[0]], 0
             rank = np.empty(len(keys))
             rank[order] = np.arange(len(keys))
             es.tell(list(trial), list(rank))
         if best < (np.inf, np.inf):
             u = top
-        if "tolx" in es.stop():
+        if "tolx" in es.stop() or since >= CMA_STALL:  # converged, or no better in CMA_STALL
             return
 
 
