@@ -448,10 +448,16 @@ def _check(args) -> int:
 
     outcome = _Outcome()
     kinds = {p: study_kind(p) for p in args.scenes}
+    from .study.problem import has_optimize, load_problem
+    from .study.report import describe_problem
+
     for path in args.scenes:  # [study] checked as `study` would (its base solved once)
-        if kinds[path]:
+        if kinds[path] or has_optimize(path):
             with _reporting(path, outcome):
-                print(describe_study(load_study(path)))
+                if has_optimize(path):  # and [study.parameters] too, where it has them
+                    print(describe_problem(load_problem(path)))
+                if kinds[path] and (not has_optimize(path) or _has_study_parameters(path)):
+                    print(describe_study(load_study(path)))
     for scene in _load_all([p for p in args.scenes if kinds[p] != "study"], outcome):
         with _reporting(scene.path, outcome):
             # memory (as run's defaults need it), degrees of freedom, the start assembles
@@ -466,6 +472,13 @@ def _check(args) -> int:
             print(describe(scene, mob, scene_warnings(model) + reach,
                            declared_fit_parameters(scene), drawing_slip(model)))
     return outcome.code
+
+
+def _has_study_parameters(path) -> bool:
+    import tomllib
+
+    with open(path, "rb") as f:
+        return "parameters" in tomllib.load(f).get("study", {})
 
 
 def _accuracy(args) -> int:
@@ -632,8 +645,20 @@ def _optimize(args) -> int:
         t0 = time.perf_counter()
         problem = load_problem(args.file)
         out = output_folder(args.out)  # a wrong --out before the search
-        with Pool(args.workers, args.scheduler) as pool:
-            found = optimize(problem, pool)  # Infeasible: exit 1, nothing written
+        from tqdm import tqdm
+
+        bar = tqdm(desc=f"optimize {problem.study.name}", unit=" generations", leave=False,
+                   disable=True if args.quiet else None)  # None: on a terminal only
+
+        def progress(generation, best):
+            bar.update(1)
+            bar.set_postfix_str(f"best {best:.6g}")
+
+        try:
+            with Pool(args.workers, args.scheduler) as pool:
+                found = optimize(problem, pool, progress)  # Infeasible: exit 1, nothing written
+        finally:
+            bar.close()
         name = problem.study.name
         paths = [out / f"{name}_optimize.h5", out / f"{name}_optimize.toml"]
         store.write_h5(found, paths[0])

@@ -347,3 +347,41 @@ def test_the_recording_marks_the_best_and_shows_the_progress(tmp_path):
     titles = rec.view_titles()
     assert {"springs.balancer.k [force/length]", "points.S.x [length]"} <= titles
     assert "/mechanism/links/lever" in rec.entities  # the best variant's motion
+
+
+@pytest.mark.parametrize("tie, says", [
+    ('{ "springs.right.k" = "springs.left.kk" }', "which no parameter varies"),
+    ('{ "springs.right.k" = "springs.right.free_length", "springs.right.free_length" = '
+     '"springs.right.k" }', "a cycle of ties"),
+    ('{ "points.S1.y" = "springs.left.k" }', "is varied itself"),
+    ('"springs.left.k"', "expected a table of addresses"),
+])
+def test_a_bad_tie_in_a_study_is_one_message(tmp_path, capsys, tie, says):
+    path = tmp_path / "tie.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"springs.left.k" = { from = 0.0, to = 3000.0, steps = 3 }\n'
+                    '"points.S1.y" = { from = -0.9, to = -0.1, steps = 2 }\n'
+                    f'tie = {tie}\n')
+    out = tmp_path / "out"
+    assert main(["study", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and "study.parameters" in err
+    assert not out.exists() or not any(p for p in out.iterdir() if not p.name.startswith("."))
+
+
+def test_an_optimum_on_a_bound_is_reported_there(tmp_path, capsys):
+    """Rates up to 80 N/m cannot reach the balance (98.1): the best rate is the bound, and the
+    peak is the torque at 0 deg, |k a b - m g L| (the sin term vanishes there)."""
+    text = LEVER.format(name="capped", minimize='"peak"', extra="").replace(
+        '"springs.balancer.k" = [0.0, 300.0]', '"springs.balancer.k" = [0.0, 80.0]')
+    path = tmp_path / "capped.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    assert main(["optimize", str(path), "--out", str(out), "--no-rrd"]) == 0
+    assert "springs.balancer.k = 80 force/length (on its upper bound)" in capsys.readouterr().out
+    with h5py.File(out / "capped_optimize.h5", "r") as h5:
+        assert [str(a) for a in h5.attrs["on_bound"]] == ["springs.balancer.k"]
+        assert [str(a) for a in h5.attrs["on_bound_side"]] == ["upper"]
+        assert h5["best"][0] == 80.0
+        assert float(h5.attrs["best_objective"]) == pytest.approx(abs(80.0 * A * B - M * G * L),
+                                                                   rel=1e-9)

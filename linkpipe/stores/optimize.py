@@ -9,7 +9,9 @@ The HDF5 (netCDF-4 layout like ``<name>.h5``): ``best``, ``initial``, ``lower``,
 ``generation``; ``best_metric`` on ``metric``; with two objectives ``objective_value``
 (evaluation, objective) and the Pareto set ``pareto_evaluation``, ``pareto_objective``,
 ``pareto_parameter_value`` on ``pareto``. Root attributes ``active_constraints``,
-``on_bound`` (lists of strings), ``objective_name``, ``best_objective``, ``best_evaluation``.
+``on_bound`` (lists of strings: the constraints as written, the addresses of the values on a
+bound) and ``on_bound_side`` ("lower" / "upper" for each), ``objective_name``,
+``best_objective``, ``best_evaluation``.
 
 The TOML is the base scene's own text edited with tomlkit (comments and layout kept): the
 best values in place and the ``[[logs]]`` file paths rewritten to work from the output folder.
@@ -129,7 +131,8 @@ def write_h5(outcome, path: str | os.PathLike) -> None:
              "best_objective": float(outcome.objective[best]), "best_evaluation": int(best),
              "constraints": [c.text for c in problem.constraints],
              "active_constraints": list(outcome.active),
-             "on_bound": [f"{a} ({side})" for a, side in outcome.on_bound],
+             "on_bound": [a for a, _ in outcome.on_bound],
+             "on_bound_side": [side for _, side in outcome.on_bound],
              "seed": problem.seed, "seconds": float(outcome.seconds),
              "search_message": list(outcome.messages), "solved": study.path_note}
     n_bytes = sum(np.asarray(v.data).nbytes for v in variables) + (1 << 16)

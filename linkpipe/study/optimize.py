@@ -17,11 +17,15 @@ A global search, then a local polish, both over the study's vectorised variants
 - **polish**: CMA-ES (:mod:`cma`, ask/tell: each iteration's population one batch, ranked
   by the same feasibility rules; CMA-ES needs only the ranks, and its covariance follows a
   curved valley and the kinks of a peak ``max(abs(..))``, where a gradient method stops
-  short) in the bounds scaled to [0, 1], from the search's best: a coarse pass (to
-  ``STEP_MIDDLE`` of each bound's width); every value then within ``BOUND_SNAP`` of a bound
-  is put on it and held, and a coarse pass runs on the others (an optimum on a bound is
-  reached exactly); then a fine pass (to ``STEP_END``). A pass that stops short of its
-  tolerance starts again from its best (``CMA_RUNS`` runs of ``CMA_ITERATIONS``).
+  short) in the bounds scaled to [0, 1], from the search's best. Values within
+  ``BOUND_TRY`` of a bound are tried on it, the nearest first, one at a time (one CMA-ES run
+  over the others): where that face
+  holds a better best they stay there (an optimum on a bound is reached exactly, and a
+  valley that runs into a bound is not crawled down); then a coarse pass (to ``STEP_MIDDLE``
+  of each bound's width) and a fine one (to ``STEP_END``), each face reached on the way
+  tried the same way. A pass that stops short of its tolerance starts again from its best
+  (``CMA_RUNS`` runs of ``CMA_ITERATIONS``); one whose best has not improved in
+  ``CMA_STALL`` iterations ends.
 
 Every evaluated variant is kept (:class:`Outcome`): values, metrics, failed steps, which
 generation (-1: the polish). Two objectives: the search runs once per weight of a
@@ -45,10 +49,14 @@ from .problem import FAILED, Problem
 #: the search hands over when every parameter's spread in the population is below this
 #: fraction of its bound's width
 HANDOVER = 1e-3
-#: the polish's first step and its end (fractions of each bound's width), its most iterations
-STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-6, 1e-9
+#: the polish's first step, where a coarse pass ends and where the fine one ends (fractions
+#: of each bound's width)
+STEP_START, STEP_MIDDLE, STEP_END = 1e-2, 1e-4, 1e-9
 #: CMA-ES runs a polish pass may start (each from the last one's best) and their iterations
 CMA_RUNS, CMA_ITERATIONS = 6, 100
+#: iterations without a better best after which a CMA-ES pass ends (values the objective does
+#: not depend on, where it sits, never reach the step tolerance)
+CMA_STALL = 50
 #: the search's box reaches this far (a fraction of each bound's width) beyond the bounds;
 #: a value there is evaluated at the bound: scipy puts a trial outside its box anywhere in
 #: it at random, which keeps a population from settling on a bound; here the bound is a
@@ -59,8 +67,9 @@ MARGIN = 0.1
 RECOMBINATION = 0.9
 #: generations without a better best (or less violation) after which the search hands over
 STALL, STALL_GAIN = 30, 1e-3
-#: the polish tries the values this close to a bound (a fraction of its width) on the bound
-BOUND_SNAP = 1e-2
+#: the polish tries the values this close to a bound (a fraction of its width) on the bound,
+#: and keeps them there where that face holds a better best
+BOUND_TRY = 0.2
 #: a constraint within this fraction of its metric's spread over the evaluations is active;
 #: a parameter within this fraction of its bound's width of a bound sits on it
 ACTIVE, ON_BOUND = 1e-6, 1e-7
@@ -322,26 +331,50 @@ def _polish(problem: Problem, ev: Evaluator, judge: _Judge, merit, x0, rng) -> N
     """From ``x0`` (free values): see the module doc. Its evaluations are generation -1."""
     lo, width = problem.lower, problem.upper - problem.lower
     keep, ev.generation = ev.generation, -1
+    every = np.arange
     u = np.clip((np.asarray(x0) - lo) / width, 0.0, 1.0)
-    free, fine = np.ones(problem.n_free, dtype=bool), False
-    while True:  # at most one pass per bound reached, and a fine one
-        near = free & ((u < BOUND_SNAP) | (u > 1 - BOUND_SNAP))
-        if near.any():  # a new face: those values on their bounds, a coarse pass on the rest
-            u, free, fine = np.where(near, np.round(u), u), free & ~near, False
-        ev(lo + u * width)
+    ev(lo + u * width)
+    free = np.ones(problem.n_free, dtype=bool)
+    tried = np.zeros(problem.n_free, dtype=bool)
+    fine = False
+
+    def best_u():
+        b = _best_of(judge, merit, every(ev.n))
+        return b, (ev.arrays()[0][b, :problem.n_free] - lo) / width
+
+    while True:  # each face tried once; a face that holds a better best is kept
+        distance = np.minimum(u, 1 - u)
+        near = free & ~tried & (distance < BOUND_TRY)
+        if near.any():  # the nearest bound first, one value at a time
+            j = int(np.flatnonzero(near)[np.argmin(distance[near])])
+            before = _key(judge, merit, np.array([best_u()[0]]))[0]
+            face = u.copy()
+            face[j] = np.round(u[j])
+            rest = free.copy()
+            rest[j] = False
+            ev(lo + face * width)
+            if rest.any():
+                _cma(problem, ev, judge, merit, face, rest, rng, STEP_START, STEP_MIDDLE,
+                     runs=1)
+            b, ub = best_u()
+            tried[j] = True
+            if tuple(_key(judge, merit, np.array([b]))[0]) < tuple(before) and ub[j] == face[j]:
+                u, free, fine = ub, rest, False
+            continue
         if not free.any():
             break
-        _cma(problem, ev, judge, merit, u, free, rng, STEP_MIDDLE * 100 if fine else STEP_START,
+        _cma(problem, ev, judge, merit, u, free, rng, STEP_MIDDLE * 10 if fine else STEP_START,
              STEP_END if fine else STEP_MIDDLE)
-        u = (ev.arrays()[0][_best_of(judge, merit, np.arange(ev.n)), :problem.n_free] - lo) / width
-        reached = (free & ((u < BOUND_SNAP) | (u > 1 - BOUND_SNAP))).any()
-        if fine and not reached:
+        u = best_u()[1]
+        new = (free & ~tried & ((u < BOUND_TRY) | (u > 1 - BOUND_TRY))).any()
+        if fine and not new:
             break
-        fine = fine or not reached
+        fine = fine or not new
     ev.generation = keep
 
 
-def _cma(problem: Problem, ev: Evaluator, judge: _Judge, merit, u0, free, rng, sigma, tolx) -> None:
+def _cma(problem: Problem, ev: Evaluator, judge: _Judge, merit, u0, free, rng, sigma, tolx,
+         runs: int = CMA_RUNS) -> None:
     """CMA-ES over the parameters ``free`` (a mask) from ``u0`` (scaled to the bounds' [0,
     1]), the others held; each iteration's population one batch, ranked by the feasibility
     rules (CMA-ES needs only the ranks)."""
@@ -354,27 +387,28 @@ def _cma(problem: Problem, ev: Evaluator, judge: _Judge, merit, u0, free, rng, s
     lo, width = problem.lower, problem.upper - problem.lower
     n = int(free.sum())
     u = np.array(u0, dtype=float)
-    for _ in range(CMA_RUNS):  # a run that stops short of tolx starts again from its best
+    for _ in range(runs):  # a run that stops short of tolx starts again from its best
         options = {"bounds": [0.0, 1.0], "tolx": tolx, "tolfun": 0.0, "tolfunhist": 0.0,
                    "tolflatfitness": 20, "tolupsigma": 1e300, "maxiter": CMA_ITERATIONS,
                    "popsize": max(16, 8 * n), "seed": int(rng.integers(1, 2**31 - 1)),
                    "verbose": -9}
         es = cma.CMAEvolutionStrategy(list(u[free]), sigma, options)
-        best = (np.inf, np.inf)
-        while not es.stop():
+        best, since = (np.inf, np.inf), 0
+        while not es.stop() and since < CMA_STALL:
             trial = np.clip(np.array(es.ask()), 0.0, 1.0)
             full = np.tile(u, (len(trial), 1))
             full[:, free] = trial
             keys = _key(judge, merit, ev(lo + full * width))
             order = np.lexsort((keys[:, 1], keys[:, 0]))
+            since += 1
             if tuple(keys[order[0]]) < best:
-                best, top = tuple(keys[order[0]]), full[order[0]]
+                best, top, since = tuple(keys[order[0]]), full[order[0]], 0
             rank = np.empty(len(keys))
             rank[order] = np.arange(len(keys))
             es.tell(list(trial), list(rank))
         if best < (np.inf, np.inf):
             u = top
-        if "tolx" in es.stop():
+        if "tolx" in es.stop() or since >= CMA_STALL:  # converged, or no better in CMA_STALL
             return
 
 

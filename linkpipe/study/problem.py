@@ -156,7 +156,7 @@ def _names(metrics) -> list[str]:
 
 def _objectives(path, raw, metrics) -> tuple[str, ...]:
     names = _names(metrics)
-    hint = ('name a metric of [study.metrics] (' + ", ".join(names) + ')' if names else
+    hint = ('name a metric of [study.metrics], or add one there' if names else
             'add [study.metrics] with e.g. peak = "max(abs(input_force.<driver>))" and name it')
     value = raw.get("minimize")
     if value is None:

@@ -134,7 +134,7 @@ def optimize_table(outcome, seconds: float | None = None) -> str:
     for m in study.metrics:
         if m.name.startswith("_"):
             continue
-        unit = f" {m_units[m.name]}" if m_units[m.name] else ""
+        unit = f" {m_units[m.name]}" if m_units[m.name] not in ("", "1") else ""
         mark = "  <- objective" if m.name in problem.objectives else ""
         lines.append(f"    {m.name} = {outcome.metrics[m.name][outcome.best]:.10g}{unit}{mark}")
     for c in problem.constraints:
@@ -149,4 +149,30 @@ def optimize_table(outcome, seconds: float | None = None) -> str:
         lines.append(f"  Pareto set: {len(outcome.pareto)} variants, {a} {fa.min():.6g} .. "
                      f"{fa.max():.6g} while {b} {fb.max():.6g} .. {fb.min():.6g} (the best: "
                      f"the lowest {a})")
+    return "\n".join(lines)
+
+
+def describe_problem(problem) -> str:
+    """What ``check`` prints for a file with ``[optimize]``: the base scene, what is minimised,
+    each searched value's bounds (and the tied ones), the constraints and the search's
+    settings, and the path that will solve each generation."""
+    study = problem.study
+    units = study.parameter_units()
+    lines = [f"{study.name}: optimisation of {study.scene.name} ({study.scene.path}): minimise "
+             + " and ".join(problem.objectives) + f" over {problem.n_free} value(s), "
+             f"{study.scene.n_steps} steps each; {problem.population} variants a generation, "
+             f"at most {problem.generations} generations, seed {problem.seed}"]
+    for j, p in enumerate(study.parameters):
+        unit = f" {units[j]}" if units[j] else ""
+        lines.append(f"  parameter {p.address} = {p.initial:g} in the base: "
+                     + (f"tied to {p.spec[0]}" if p.kind == "tie" else
+                        f"{p.spec[0]:g} .. {p.spec[1]:g}{unit}"))
+    m_units = study.metric_units()
+    for m in study.metrics:
+        if not m.name.startswith("_"):
+            lines.append(f"  metric {m.name} = {m.text}" + (f" [{m_units[m.name]}]"
+                                                              if m_units[m.name] else ""))
+    for c in problem.constraints:
+        lines.append(f"  constraint {c.text}: {c.metric} {c.op} {c.limit:g}")
+    lines.append(f"  will solve {study.path_note}")
     return "\n".join(lines)

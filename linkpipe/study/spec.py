@@ -315,7 +315,7 @@ def tied(path, table: str, tie, scene: Scene, base: dict, params) -> tuple[Study
         where = (path, f"{table}.tie", address)
         if address in varied:
             raise SceneError(*where, "is varied itself; a tied value follows another and is "
-                             "not varied", f"remove it from the parameters, or from tie")
+                             "not varied", "remove it from the parameters, or from tie")
         root, seen = target, [address]
         while root in tie and root not in varied:
             if root in seen:
