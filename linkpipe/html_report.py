@@ -214,7 +214,6 @@ def _key_numbers(root, variables, scene, counts, n) -> list:
                                         f"{_num(np.nanmax(dv[:, j]))} {u}"))
     if "input_force" in variables:
         F = np.asarray(variables["input_force"]["data"], float)
-        funits = _unit(variables, "input_force").split(",")
         funits = (variables["input_force"]["attrs"].get("driver_units") or
                   _unit(variables, "input_force"))
         funits = str(funits).split(",")

@@ -1,7 +1,6 @@
 """The HTML report (`report NAME.h5`, `run --report`): a self-contained page, opened in a real
 headless Chromium for every shipped config and a study, with no console message and a
 screenshot that shows the page; its numbers are the .h5's."""
-import math
 import pathlib
 import re
 import shutil

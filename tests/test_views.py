@@ -1,15 +1,13 @@
 """Recordings a person reads at a glance (issue 34): the palette keeps links and arrow kinds
 apart, the legend is an entity, plots read in degrees against the quantity that moves the
 scene, coinciding series are one legend entry. Real .rrd files, read back."""
-import dataclasses
 import pathlib
 
 import numpy as np
-import pytest
 
 from linkpipe import solve as solve_scene
 from linkpipe.stores import rrd
-from linkpipe.stores.rrd import legend, style
+from linkpipe.stores.rrd import style
 from linkpipe.stores.rrd.series import hidden
 
 from test_rrd import Recording, _column, _write
