@@ -80,7 +80,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                       "(rerun+http://host:9876/proxy)")
     fol.add_argument("--port", type=_positive, default=None, help="--serve's port (default 9876)")
     fol.add_argument("--rrd", action="store_true", help="also write <name>.rrd as it grows")
-    fol.add_argument("--idle", type=_megabytes, default=None, metavar="S",
+    fol.add_argument("--idle", type=_seconds, default=None, metavar="S",
                      help="end after S seconds without a new row (default: follow until "
                           "Ctrl-C or SIGTERM)")
     fol.add_argument("--quiet", action="store_true", help="print only errors and alarms")
@@ -121,6 +121,11 @@ def _number(text: str, kind, low, what: str):
 def _megabytes(text: str) -> float:
     """``--rrd-max-mb``: a number of MB >= 0 (0: no cap)."""
     return _number(text, float, 0.0, "a size in MB >= 0 (0: no cap)")
+
+
+def _seconds(text: str) -> float:
+    """``--idle``: seconds >= 0."""
+    return _number(text, float, 0.0, "a number of seconds >= 0")
 
 
 def _threads(text: str) -> int:

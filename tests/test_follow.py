@@ -13,7 +13,6 @@ agree to 1e-9, their rates as the settling bound says.
 """
 from __future__ import annotations
 
-import os
 import pathlib
 import shutil
 import signal
@@ -439,3 +438,14 @@ def test_a_no_input_stretch_is_reported_as_it_happens(rig, tmp_path):
     with _batch(scene, tmp_path) as batch:
         assert (batch["status"][300:310] == 4).all()
         _assert_equal_to_batch(out / "fourbar_live.h5", batch)
+
+
+def test_a_file_that_run_wrote_is_not_followed_into(rig, tmp_path, capsys):
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.5, "--fast").wait(30) == 0
+    assert main(["run", str(scene), "--out", str(out), "--no-rrd", "--quiet"]) == 0
+    before = (out / "fourbar_live.h5").read_bytes()
+    assert main(["follow", str(scene), "--out", str(out), "--idle", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert "was written by run, not follow" in err and "Traceback" not in err
+    assert (out / "fourbar_live.h5").read_bytes() == before
