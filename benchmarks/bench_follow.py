@@ -24,13 +24,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import os
 import pathlib
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 
 import numpy as np

@@ -93,11 +93,14 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     view.add_argument("--connect", metavar="ADDR", help="stream to a running viewer "
                       "(rerun+http://host:9876/proxy)")
     fol.add_argument("--port", type=_positive, default=None, help="--serve's port (default 9876)")
+    fol.add_argument("--server-memory", default=None, metavar="SIZE",
+                     help="what --serve keeps for late viewers, the oldest rows dropped past "
+                          "it (default 512MiB; e.g. 2GiB, 25%%)")
     fol.add_argument("--rrd", action="store_true", help="also write <name>.rrd as it grows")
-    fol.add_argument("--idle", type=_megabytes, default=None, metavar="S",
+    fol.add_argument("--idle", type=_seconds, default=None, metavar="S",
                      help="end after S seconds without a new row (default: follow until "
                           "Ctrl-C or SIGTERM)")
-    fol.add_argument("--quiet", action="store_true", help="print only errors and alarms")
+    fol.add_argument("--quiet", action="store_true", help="print only the final line and errors")
     return p
 
 
@@ -135,6 +138,11 @@ def _number(text: str, kind, low, what: str):
 def _megabytes(text: str) -> float:
     """``--rrd-max-mb``: a number of MB >= 0 (0: no cap)."""
     return _number(text, float, 0.0, "a size in MB >= 0 (0: no cap)")
+
+
+def _seconds(text: str) -> float:
+    """``--idle``: seconds >= 0."""
+    return _number(text, float, 0.0, "a number of seconds >= 0")
 
 
 def _threads(text: str) -> int:
@@ -687,6 +695,7 @@ def _follow(args) -> int:
         with _reporting(args.scene, outcome):
             done = follow(args.scene, args.out, serve=args.serve, connect=args.connect,
                           port=args.port, idle=args.idle, stop=stop, rrd=args.rrd,
+                          memory=args.server_memory,
                           say=(lambda text: None) if args.quiet else print)
             if done.code:
                 print(f"error: {done.why}", file=sys.stderr)

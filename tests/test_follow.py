@@ -13,7 +13,6 @@ agree to 1e-9, their rates as the settling bound says.
 """
 from __future__ import annotations
 
-import os
 import pathlib
 import shutil
 import signal
@@ -265,34 +264,52 @@ def test_each_fault_of_a_live_source_is_one_message_and_a_clean_end(rig, tmp_pat
         np.testing.assert_allclose(f["time"][()], np.arange(300) * 0.002, atol=1e-12)
 
 
-def test_a_parquet_log_growing_by_new_files_equals_the_batch_run_of_its_rows(tmp_path):
+PARQUET_WRITERS = {
+    # a new file per 100 rows, each written under a temporary name and renamed
+    "files": """
+        for k, lo in enumerate(range(0, len(frame), 100)):
+            tmp = logs + f"/.part_{k:03d}.tmp"
+            frame.iloc[lo:lo + 100].to_parquet(tmp, index=False)
+            os.replace(tmp, logs + f"/part_{k:03d}.parquet")
+            time.sleep(0.1)
+    """,
+    # one file, written again with one row group of 100 rows more each time
+    "row_groups": """
+        import pyarrow as pa, pyarrow.parquet as pq
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        for k in range(1, (len(frame) + 99) // 100 + 1):
+            with pq.ParquetWriter(logs + "/.run.tmp", table.schema) as w:
+                for g in range(k):
+                    w.write_table(table.slice(100 * g, 100))
+            os.replace(logs + "/.run.tmp", logs + "/run.parquet")
+            time.sleep(0.1)
+    """,
+}
+
+
+@pytest.mark.parametrize("how, file", [("files", "logs/part_*.parquet"),
+                                       ("row_groups", "logs/run.parquet")])
+def test_a_parquet_log_growing_equals_the_batch_run_of_its_rows(tmp_path, how, file):
     pd = pytest.importorskip("pandas")
     pytest.importorskip("pyarrow")
     logs = tmp_path / "logs"
     logs.mkdir()
-    text = SCENE.read_text().replace('file = "logs/live_rig.csv"', 'file = "logs/part_*.parquet"')
+    text = SCENE.read_text().replace('file = "logs/live_rig.csv"', f'file = "{file}"')
     scene = tmp_path / "fourbar_live.toml"
     scene.write_text(text)
     csv = tmp_path / "all.csv"
     assert _logger(csv, "--rate", 500, "--seconds", 2, "--fast").wait(30) == 0
     frame = pd.read_csv(csv)
-    code = textwrap.dedent(f"""
-        import time, pandas as pd
-        frame = pd.read_csv({str(csv)!r})
-        for k, lo in enumerate(range(0, len(frame), 100)):
-            tmp = {str(logs)!r} + f"/.part_{{k:03d}}.tmp"
-            frame.iloc[lo:lo + 100].to_parquet(tmp, index=False)
-            __import__("os").replace(tmp, {str(logs)!r} + f"/part_{{k:03d}}.parquet")
-            time.sleep(0.1)
-    """)
+    code = "import os, time, pandas as pd\n" + f"frame = pd.read_csv({str(csv)!r})\n" + \
+        f"logs = {str(logs)!r}\n" + textwrap.dedent(PARQUET_WRITERS[how])
     writer = subprocess.Popen([sys.executable, "-c", code])
-    _wait_for(lambda: list(logs.glob("part_*.parquet")))
+    _wait_for(lambda: list(logs.glob("*.parquet")))
     follower = _follow(scene, tmp_path / "out", "--idle", 1.5)
     assert writer.wait(60) == 0
     stdout, stderr = follower.communicate(timeout=60)
     assert follower.returncode == 0, stderr
     batch_scene = tmp_path / "batch.toml"
-    batch_scene.write_text(text.replace('file = "logs/part_*.parquet"', f'file = "{csv}"'))
+    batch_scene.write_text(text.replace(f'file = "{file}"', f'file = "{csv}"'))
     with _batch(batch_scene, tmp_path) as batch:
         assert len(batch["step"]) == len(frame)
         _assert_equal_to_batch(tmp_path / "out" / "fourbar_live.h5", batch)
@@ -439,3 +456,14 @@ def test_a_no_input_stretch_is_reported_as_it_happens(rig, tmp_path):
     with _batch(scene, tmp_path) as batch:
         assert (batch["status"][300:310] == 4).all()
         _assert_equal_to_batch(out / "fourbar_live.h5", batch)
+
+
+def test_a_file_that_run_wrote_is_not_followed_into(rig, tmp_path, capsys):
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.5, "--fast").wait(30) == 0
+    assert main(["run", str(scene), "--out", str(out), "--no-rrd", "--quiet"]) == 0
+    before = (out / "fourbar_live.h5").read_bytes()
+    assert main(["follow", str(scene), "--out", str(out), "--idle", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert "was written by run, not follow" in err and "Traceback" not in err
+    assert (out / "fourbar_live.h5").read_bytes() == before

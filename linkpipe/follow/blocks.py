@@ -57,10 +57,12 @@ def followed_columns(scene) -> tuple[str, ...]:
     return tuple(dict.fromkeys(cols))
 
 
-def window_scene(scene, t: np.ndarray, columns: dict):
+def window_scene(scene, t: np.ndarray, columns: dict, start_pose: np.ndarray | None = None):
     """``scene`` with its ``[time]`` log holding the rows ``t`` (n,) and ``columns`` {name:
     (n,)} alone: the instants, the log drivers' steps and value ranges, the measurements'
-    values. The time origin stays the scene's (a ``rate`` driver counts from it)."""
+    values. The time origin stays the scene's (a ``rate`` driver counts from it).
+    ``start_pose`` (n_points, 2): the pose solved before at the first row, where the start is
+    assembled from (instead of carried from the drawing: the same branch, in one Newton)."""
     name = scene.time.log
     n = len(t)
     logs = tuple(replace(log, t=t, columns={c: columns[c] for c in log.columns})
@@ -78,7 +80,8 @@ def window_scene(scene, t: np.ndarray, columns: dict):
     measurements = tuple(replace(m, values=columns[m.column] * m.scale)
                          for m in scene.measurements)
     time = replace(scene.time, to_value=float(t[-1]), steps=n, instants=t)
-    return replace(scene, logs=logs, drivers=tuple(drivers), measurements=measurements, time=time)
+    return replace(scene, logs=logs, drivers=tuple(drivers), measurements=measurements, time=time,
+                   start_pose=start_pose)
 
 
 class Window:
@@ -96,6 +99,7 @@ class Window:
         self.t = np.empty(0)
         self.data = {c: np.empty(0) for c in self.columns}
         self.last_angles = last_angles  # (n_links,) of the last stored row (whole turns)
+        self.poses = np.empty((0, len(scene.points), 2))  # positions of the last stored rows
 
     @property
     def arrived(self) -> int:
@@ -135,7 +139,9 @@ class Window:
         t = self.t[a:b]
         if len(t) < 2:
             return None
-        sub = window_scene(self.scene, t, {c: v[a:b] for c, v in self.data.items()})
+        k_pose = (self.first + a) - (self.stored - len(self.poses))  # the first row's pose
+        pose = self.poses[k_pose] if 0 <= k_pose < len(self.poses) else None
+        sub = window_scene(self.scene, t, {c: v[a:b] for c, v in self.data.items()}, pose)
         whole = solve(sub, threads=self.threads)
         k = lo - self.first - a
         rows = np.arange(k, k + n)
@@ -145,6 +151,7 @@ class Window:
         part = self._turns(part, whole, k)
         forget(whole.model)  # its engine and kernels refer back to it: freed with the block
         self.stored = lo + n
+        self.poses = np.concatenate([self.poses, part.position])[-(self.settle + 1):]
         self.last_angles = part.link_angle[-1].copy()
         self.skip_to(self.stored)
         return part

@@ -256,6 +256,9 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
     from ..stores.growing import GrowingWriter, stored
 
     before = stored(path)
+    if before is not None and not before.followed:
+        raise SceneError(scene.path, "scene", "name", f"{path} was written by run, not follow: "
+                         "its arrays cannot grow", "move it away, or give --out another folder")
     if before is not None and before.scene_toml and before.scene_toml != scene.text:
         raise SceneError(scene.path, "scene", "name", f"{path} was written by follow from "
                          "another version of this scene (its scene_toml differs)",

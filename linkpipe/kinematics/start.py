@@ -94,10 +94,26 @@ def start_state(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
     to ``s0`` by a one-driver path, dq/ds (n_q, 1) along that path's last step (a secant), else
     None. The sweep's first predictor uses it: a sweep that starts on a change point then leaves
     it on the branch the path arrived on instead of on a side chosen by rounding."""
+    given = _from_start_pose(model, s0, tol_abs, max_iter)
+    if given is not None:
+        return given, None
     carried = _carry_drawn_pose(model, s0, tol_abs, max_iter)
     if carried is not None:
         return carried
     return _assemble_directly(model, s0, tol_abs, max_iter), None
+
+
+def _from_start_pose(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int):
+    """q (n_q,) at ``s0`` by Newton from the scene's ``start_pose`` (a pose solved before at
+    that driver value: ``follow``'s blocks), or None (none given, or Newton from it fails)."""
+    pose = getattr(model.scene, "start_pose", None)
+    if pose is None or not model.n_q or not np.isfinite(pose).all():
+        return None
+    q0 = model.q_of(np.asarray(pose, dtype=float)[None])
+    fast = _step_kernels(model)
+    q, _, _, conv = (fast.newton(q0[0], s0, tol_abs, max(max_iter, 50)) if fast is not None
+                     else newton(model, q0, s0[None], tol_abs, max(max_iter, 50)))
+    return q[0] if conv[0] else None
 
 
 def _assemble_directly(model: Model, s0: np.ndarray, tol_abs: float, max_iter: int) -> np.ndarray:

@@ -384,6 +384,10 @@ class Scene:
     measurements: tuple["Measurement", ...] = ()
     friction: tuple[Friction, ...] = ()
     dynamics: Dynamics | None = None
+    #: (n_points, 2) a pose solved before at the sweep's first driver value, where the start
+    #: is assembled from instead of carried from the drawing (follow's blocks: the pose of the
+    #: row their window starts at); None: from the drawing. Not a scene key
+    start_pose: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def point_names(self) -> tuple[str, ...]:

@@ -42,7 +42,8 @@ class Stored:
     """What a file of an earlier ``follow`` holds: ``rows`` stored, the ``time`` of the last
     one (NaN: none), its ``link_angle`` (n_links,), whether it was ``complete``, whether its
     writer was killed (``open``: HDF5's flags say it is still open for writing), the scene's
-    TOML it was made from, and the per-sweep flags so far."""
+    TOML it was made from, the per-sweep flags so far, and whether ``follow`` wrote it
+    (``followed``: a ``run``'s file has fixed-size datasets, which cannot grow)."""
 
     rows: int
     time: float
@@ -51,6 +52,7 @@ class Stored:
     killed: bool
     scene_toml: str
     flags: dict
+    followed: bool = True
 
 
 def stored(path) -> Stored | None:
@@ -76,7 +78,8 @@ def stored(path) -> Stored | None:
 
                 flags[name] = (dimensions(ds), ds[()], ds.attrs.get("units", ""))
         return Stored(n, t, ang, bool(f.attrs.get("complete", 1)), killed,
-                      toml.decode() if isinstance(toml, bytes) else str(toml), flags)
+                      toml.decode() if isinstance(toml, bytes) else str(toml), flags,
+                      "complete" in f.attrs)
 
 
 class GrowingWriter:

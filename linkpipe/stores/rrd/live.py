@@ -11,15 +11,20 @@ import socket
 import threading
 import uuid
 
+from dataclasses import replace
+
 import numpy as np
 import rerun as rr
 
 from ...errors import LinkpipeError
+from ...result import Result
 from . import APPLICATION_ID, log_result
 from .layout import blueprint
 
 #: what the server keeps for late viewers by default (the oldest rows go first past it)
 SERVER_MEMORY = "512MiB"
+#: what ends the logging thread
+_END = object()
 #: the entity of alarms, no_input / no_assembly stretches and the source's faults
 ALARMS = "alarms"
 
@@ -72,7 +77,25 @@ class LiveRecording:
         self._queue.put(item)
 
     def _work(self) -> None:
-        while (item := self._queue.get()) is not None:
+        """Log what comes, in order; blocks waiting one after another go out as one (a
+        block's logging costs mostly per call: a viewer behind catches up)."""
+        pending = None
+        while True:
+            item, pending = (pending if pending is not None else self._queue.get()), None
+            if item is _END:
+                return
+            if item[0] == self._block:
+                parts = [item[1][0]]
+                while pending is None:
+                    try:
+                        following = self._queue.get_nowait()
+                    except queue.Empty:
+                        break
+                    if following is not _END and following[0] == self._block:
+                        parts.append(following[1][0])
+                    else:
+                        pending = following  # a note, or the end: after these blocks
+                item = (self._block, (_joined(parts),))
             if self._failed is None:
                 try:
                     item[0](*item[1])
@@ -94,7 +117,7 @@ class LiveRecording:
 
     def close(self) -> None:
         """Flush every row to the sinks and end them (the server with them)."""
-        self._queue.put(None)
+        self._queue.put(_END)
         self._thread.join()
         self.stream.flush()
         self.stream.disconnect()
@@ -110,3 +133,24 @@ def _check_port(port: int) -> None:
         except OSError:
             raise LinkpipeError(f"--serve: port {port} is in use (another viewer or server "
                                 "listens there); give --port another one") from None
+
+
+def _joined(parts: list) -> Result:
+    """Consecutive blocks as one Result (rows, forces, measurements concatenated)."""
+    if len(parts) == 1:
+        return parts[0]
+    first = parts[0]
+    rows = {name: np.concatenate([getattr(p, name) for p in parts])
+            for name in Result.PER_STEP if getattr(first, name) is not None}
+    forces = None
+    if first.forces:
+        forces = {name: (dims, np.concatenate([p.forces[name][1] for p in parts])
+                         if dims[:1] == ("step",) else data, unit)
+                  for name, (dims, data, unit) in first.forces.items()}
+    measurements = first.measurements
+    if measurements:
+        measurements = {k: (np.concatenate([p.measurements[k] for p in parts])
+                            if k in ("measured", "residual") else v)
+                        for k, v in measurements.items()}
+    return replace(first, **rows, forces=forces, measurements=measurements,
+                   step_numbers=np.concatenate([p.step_numbers for p in parts]))
