@@ -24,6 +24,8 @@ import hashlib
 import math
 import re
 import tomllib
+import os
+import stat
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,7 +89,14 @@ class Problem:
 
 
 def has_optimize(path) -> bool:
-    """Whether the TOML file at ``path`` holds an ``[optimize]`` table (False if unreadable)."""
+    """Whether the TOML file at ``path`` holds an ``[optimize]`` table (False if unreadable;
+    a path that is no regular file is never opened here: a FIFO would block, the scene reader
+    explains it)."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return False
+    except OSError:
+        return False
     try:
         return isinstance(spec._read(str(path))[1].get("optimize"), dict)
     except SceneError:
