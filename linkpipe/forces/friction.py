@@ -276,7 +276,7 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     C[n_pairs:, n_links:] = -np.eye(n_slides)
     resp = np.concatenate([resp_pairs.reshape(resp_pairs.shape[:2] + (-1,)),
                            resp_normals.reshape(resp_normals.shape[:2] + (-1,))], axis=2)
-    M = np.einsum("ksd,mk->sdm", resp, C)  # (S, 2m, m): forces per unit of each unknown
+    R = np.ascontiguousarray(resp.transpose(1, 0, 2))  # (S, K, 2m): per unit of each load
     g0 = np.concatenate([base_pairs.reshape(S, -1), base_normals.reshape(S, -1)], axis=1)
     coef = np.concatenate([mu_r, mu_s])
     sgn = np.concatenate([sgn_pair, sgn_slide], axis=1)
@@ -284,14 +284,14 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     x = np.zeros((S, m))
     tol = scene.solver.tol
     work = np.flatnonzero(ok)  # the steps the working arrays hold (failed steps never)
-    Mw, gw, sw, vw = (a if len(work) == S else a[work] for a in (M, g0, sgn, visc))
+    Rw, gw, sw, vw = (a if len(work) == S else a[work] for a in (R, g0, sgn, visc))
     live = np.arange(len(work))  # their rows still iterated: converged steps leave
     for _ in range(scene.solver.max_iter + 1):
         if not len(live):
             break
         at = slice(None) if len(live) == len(work) else live
         steps = work[at]
-        G = gw[at] + np.einsum("sdm,sm->sd", Mw[at], x[steps])
+        G = gw[at] + np.einsum("sk,skd->sd", x[steps] @ C, Rw[at])
         new = coef * np.hypot(G[:, 0::2], G[:, 1::2]) * sw[at] + vw[at]
         with np.errstate(invalid="ignore"):
             done = (np.abs(new - x[steps]).max(axis=1, initial=0.0)
@@ -299,7 +299,7 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
         x[steps] = new
         live = np.arange(len(work))[at][~done]
         if len(live) < 0.5 * len(work):  # compact the working arrays to the live steps
-            work, Mw, gw, sw, vw = work[live], Mw[live], gw[live], sw[live], vw[live]
+            work, Rw, gw, sw, vw = work[live], Rw[live], gw[live], sw[live], vw[live]
             live = np.arange(len(work))
     converged = ok.copy()
     converged[work[live]] = False
