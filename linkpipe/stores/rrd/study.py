@@ -208,7 +208,8 @@ def log_view(stream, view) -> None:
             stream.log(path_of("study", "spread", m), rr.BarChart(
                 counts, abscissa=centres, widths=widths.astype(np.float32),
                 color=style.colour(0)), static=True)
-    lines = ["| rank | variant | " + " | ".join(map(view.label, view.parameters)) + " | "
+    row = "variant" if view.kind == "study" else "evaluation"
+    lines = [f"| rank | {row} | " + " | ".join(map(view.label, view.parameters)) + " | "
              + " | ".join(map(view.label, view.metrics)) + " |",
              "|---" * (2 + len(view.parameters) + len(view.metrics)) + "|"]
     for rank, (v, _) in enumerate(view.best, 1):
@@ -279,10 +280,11 @@ def blueprint(view) -> rrb.Blueprint:
         v = view.best[0][0]
         tabs.append(rrb.Horizontal(
             rrb.Spatial2DView(origin="/", contents="mechanism/**",
-                              name=f"best variant {v} (y up), runners-up thin"),
+                              name=f"best variant {v} (y up), runners-up thin" if view.kind == "study"
+                              else f"best (evaluation {v}, y up)"),
             rrb.Vertical(rrb.TimeSeriesView(origin="plots/input_force", name="best variant's input force"),
                          rrb.TextDocumentView(origin="study/best", name="best variants")),
-            name=f"best variant {v}"))
+            name=f"best variant {v}" if view.kind == "study" else f"best (evaluation {v})"))
     return rrb.Blueprint(rrb.Tabs(*tabs), rrb.BlueprintPanel(state="collapsed"),
                          rrb.SelectionPanel(state="collapsed"),
                          rrb.TimePanel(timeline="step", state="collapsed"))
