@@ -81,6 +81,12 @@ def study_table(study, path, seconds: float | None = None) -> str:
             unit = force[0] if by_force else m_units.get(key_name, "")
             unit = f" {unit}" if unit else ""
             lines.append(f"    variant {v}: {key[v] + 0.0:.6g}{unit}" + (f" at {values}" if values else ""))
+        edge = [f"{p.address} at its {'lowest' if study.values[order[0], j] == p.spec[0] else 'highest'}"
+                for j, p in enumerate(study.parameters) if p.kind == "grid" and p.spec[2] > 1
+                and study.values[order[0], j] in (p.spec[0], p.spec[1])]
+        if edge:  # the best may lie beyond the grid: say so
+            lines.append("  the best sits on the grid's edge (" + ", ".join(edge) + "): the best "
+                         "design may lie beyond it; widen the grid or use optimize")
     return "\n".join(lines)
 
 
