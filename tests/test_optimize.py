@@ -385,3 +385,16 @@ def test_an_optimum_on_a_bound_is_reported_there(tmp_path, capsys):
         assert h5["best"][0] == 80.0
         assert float(h5.attrs["best_objective"]) == pytest.approx(abs(80.0 * A * B - M * G * L),
                                                                    rel=1e-9)
+
+
+def test_a_study_says_when_its_best_sits_on_the_grid_edge(tmp_path, capsys):
+    """Rates up to 50 lbf/ft cannot hold the goal up (it wants about 1,400): the lowest peak
+    is at the grid's highest rate, and the study says so."""
+    path = tmp_path / "edge.toml"
+    path.write_text(f'[study]\nbase = "{GOAL.as_posix()}"\n[study.parameters]\n'
+                    '"springs.left.k" = { from = 0.0, to = 50.0, steps = 6 }\n'
+                    '"points.S1.y" = { from = -0.8, to = -0.6, steps = 3 }\n'
+                    '[study.metrics]\npeak = "max(abs(input_force.theta3a))"\n')
+    assert main(["study", str(path), "--out", str(tmp_path / "out"), "--no-rrd"]) == 0
+    out = capsys.readouterr().out
+    assert "best on the edge: springs.left.k = " in out and "is the highest value" in out

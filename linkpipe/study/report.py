@@ -101,7 +101,7 @@ def on_the_edge(study, v: int) -> list[str]:
             if abs(value - end) <= 1e-12 * max(1.0, abs(hi - lo)):
                 out.append(f"  best on the edge: {p.address} = {value:.6g} is the {name} value "
                            f"of its range ({lo:.6g} .. {hi:.6g}); the optimum may lie beyond it: "
-                           "widen the range")
+                           "widen the range, or search it with optimize")
     return out
 
 

@@ -9,7 +9,8 @@ on top), red where some step failed; ``best`` the best variant ringed, ``pareto`
 set in orange, ``envelope`` the lowest value of the metric in each of 40 slices of the
 parameter's range: the trend a grid's stripes hide), one tab per metric with a view per
 parameter; ``study/progress/population_best`` an optimisation's best per generation (on the
-``generation`` timeline), ``study/pareto/<a>/<b>`` every variant in grey
+``generation`` timeline; ``.../after_polish`` the best, one generation after the last),
+``study/pareto/<a>/<b>`` every variant in grey
 and the Pareto set of the first two metrics as a line (the square framed on the set: from its
 lowest values to its highest plus its own range again), and the best variant (by the first
 metric) as a whole recording of its own sweep under ``mechanism/**`` and ``plots/**`` on the
@@ -185,6 +186,10 @@ def log_view(stream, view) -> None:
             if np.isfinite(value):
                 stream.set_time("generation", sequence=g)
                 stream.log("study/progress/population_best", rr.Scalars(float(value)))
+        if best is not None:  # the polish's result, one generation after the last
+            stream.set_time("generation", sequence=len(view.progress))
+            stream.log("study/progress/after_polish",
+                       rr.Scalars(float(view.metrics[view.objective][best])))
         stream.reset_time()
     (a, b), front = view.pareto
     if a:
@@ -203,7 +208,8 @@ def log_view(stream, view) -> None:
             stream.log(path_of("study", "spread", m), rr.BarChart(
                 counts, abscissa=centres, widths=widths.astype(np.float32),
                 color=style.colour(0)), static=True)
-    lines = ["| rank | variant | " + " | ".join(map(view.label, view.parameters)) + " | "
+    row = "variant" if view.kind == "study" else "evaluation"
+    lines = [f"| rank | {row} | " + " | ".join(map(view.label, view.parameters)) + " | "
              + " | ".join(map(view.label, view.metrics)) + " |",
              "|---" * (2 + len(view.parameters) + len(view.metrics)) + "|"]
     for rank, (v, _) in enumerate(view.best, 1):
@@ -274,10 +280,11 @@ def blueprint(view) -> rrb.Blueprint:
         v = view.best[0][0]
         tabs.append(rrb.Horizontal(
             rrb.Spatial2DView(origin="/", contents="mechanism/**",
-                              name=f"best variant {v} (y up), runners-up thin"),
+                              name=f"best variant {v} (y up), runners-up thin" if view.kind == "study"
+                              else f"best (evaluation {v}, y up)"),
             rrb.Vertical(rrb.TimeSeriesView(origin="plots/input_force", name="best variant's input force"),
                          rrb.TextDocumentView(origin="study/best", name="best variants")),
-            name=f"best variant {v}"))
+            name=f"best variant {v}" if view.kind == "study" else f"best (evaluation {v})"))
     return rrb.Blueprint(rrb.Tabs(*tabs), rrb.BlueprintPanel(state="collapsed"),
                          rrb.SelectionPanel(state="collapsed"),
                          rrb.TimePanel(timeline="step", state="collapsed"))
