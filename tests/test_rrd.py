@@ -474,16 +474,25 @@ def _drawn(result, at, force, scale, outward=False):
     """The arrows the recording should draw for forces ``force`` (S, k, 2) acting at ``at``
     (S, k, 2): the force times the scale, at least MIN_FRACTION of the size long where it is
     not zero (issue 34: a 2.7 lbf spring force at 1 ft = 100 lbf was an invisible dot); with
-    ``outward`` (the ground reactions) an arrow pointing towards the centre of the step's points
-    ends at its point. Returns (origins, vectors, short) as float32 arrays."""
+    ``outward`` (the ground reactions at fixed point ``outward``) an arrow pointing towards the
+    point's neighbours (the other points of its links and the other fixed points: the unit
+    vectors to them summed) ends at its point. Returns (origins, vectors, short), float32."""
     at, v = np.asarray(at, float), np.asarray(force, float) * scale
     least = rrd.MIN_FRACTION * rrd.mechanism_size(result)
     length = np.hypot(v[..., 0], v[..., 1])
     short = (length > 0) & (length < least)
     v = np.where(short[..., None], v / np.where(short, length, 1.0)[..., None] * least, v)
     if outward:
-        centre = np.nanmean(result.position, axis=1)[:, None, :]
-        inward = np.einsum("skc,skc->sk", v, centre - at) > 0
+        sc, X = result.scene, result.position
+        names = [p.name for p in sc.points]
+        k = names.index(outward)
+        near = {p for ln in sc.links if outward in ln.points for p in ln.points}
+        near |= {p.name for p in sc.points if p.fixed}
+        towards = np.zeros((len(X), 2))
+        for p in near - {outward}:
+            d = X[:, names.index(p)] - X[:, k]
+            towards += d / np.hypot(d[:, 0], d[:, 1])[:, None]
+        inward = np.einsum("skc,sc->sk", v, towards) > 0
         at = np.where(inward[..., None], at - v, at)
     return _f32(at), _f32(v), short
 
@@ -525,15 +534,16 @@ def test_force_arrows_are_the_stored_forces_times_one_scale_where_they_act(solve
         np.testing.assert_allclose(vectors, v, **close)
     # the ground's reaction at each fixed point, drawn from its point outward (one pointing
     # into the mechanism ends at its point)
-    inward = 0
+    ends = {}
     for k, name in enumerate(result.force_coords["fixed_point"]):
         origins, vectors = _arrows(rec, f"/mechanism/forces/reactions/{name}")
-        o, v, _ = _drawn(result, X[:, [i[name]]], F["ground_reaction"][1][:, k, None], scale, True)
+        o, v, _ = _drawn(result, X[:, [i[name]]], F["ground_reaction"][1][:, k, None], scale, name)
         np.testing.assert_allclose(origins, o, **close)
         np.testing.assert_allclose(vectors, v, **close)
-        ends_there = np.allclose(origins[:, 0] + vectors[:, 0], X[:, i[name]], atol=close["atol"])
-        inward += ends_there
-    assert inward >= 1   # the pole's foot: its reaction no longer runs up the pole
+        ends[name] = np.allclose(origins[:, 0] + vectors[:, 0], X[:, i[name]], atol=close["atol"])
+    # O4 and O2 on the pole: their upward reactions end at them from below instead of running
+    # up the pole through O2 and S1 (issue 34)
+    assert ends["O4"] and ends["O2"]
     # each weight m g at its centre (the backboard's centre is its point G)
     g = np.asarray(result.scene.gravity)
     for mass in result.scene.masses:

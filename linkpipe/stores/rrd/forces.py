@@ -59,7 +59,7 @@ class ForceKind:
     #                              forces (S, k, 2))]
     tag: str          # the arrows' drawn label: "<tag> <item>" ("R O2"), or the item alone
     legend: str = ""  # what the legend calls the kind ("ground reactions")
-    outward: bool = False  # drawn from its point outward: an arrow pointing into the mechanism
+    outward: bool = False  # drawn from its point outward: an arrow pointing into the bodies
     #                        ends at its point instead of starting there (:func:`placed`)
 
 
@@ -274,9 +274,9 @@ def drawn_arrows(result) -> list[tuple[ForceKind, str, np.ndarray, np.ndarray, n
     """Return [(kind, item, origins (S, k, 2), vectors (S, k, 2), short (S, k))]: every force
     arrow as drawn (length units): the force times the scale, at least :data:`MIN_FRACTION` of
     the size where it is not zero (``short``: drawn longer than its scale, its value labelled);
-    a kind drawn ``outward`` (the ground reactions) that points into the mechanism (towards the
-    centre of its points at that step) ends at its point instead of starting there, so that it
-    lies outside the body it acts on. Built once."""
+    a kind drawn ``outward`` (the ground reactions) that points towards the bodies at its point
+    (:func:`towards_neighbours`) ends at its point instead of starting there, so that it lies
+    outside them (a pole's foot: the reaction no longer runs up the pole). Built once."""
     return derived(result, "rrd_drawn_arrows", _drawn_arrows)
 
 
@@ -285,7 +285,6 @@ def _drawn_arrows(result):
     if not scale:
         return []
     least = MIN_FRACTION * mechanism_size(result)
-    centre = None
     out = []
     for kind, item, origins, vectors in arrows:
         v = vectors * scale
@@ -295,12 +294,29 @@ def _drawn_arrows(result):
             if short.any():
                 v = np.where(short[..., None], v * (least / np.where(short, length, 1.0))[..., None], v)
             if kind.outward:
-                if centre is None:
-                    with np.errstate(all="ignore"):
-                        centre = np.nanmean(result.position, axis=1)       # (S, 2)
-                inward = np.einsum("skc,skc->sk", v, centre[:, None, :] - origins) > 0
+                towards = towards_neighbours(result, item)[:, None, :]      # (S, 1, 2)
+                inward = np.einsum("skc,skc->sk", v, np.broadcast_to(towards, v.shape)) > 0
                 origins = np.where(inward[..., None], origins - v, origins)
         out.append((kind, item, origins, v, short))
+    return out
+
+
+def towards_neighbours(result, name: str) -> np.ndarray:
+    """(S, 2): the sum of unit vectors from point ``name`` to its neighbours at each step: the
+    other points of the links it is on and, for a fixed point, the other fixed points (the
+    ground is one body, drawn or not). An arrow at the point that has a positive component
+    along it points into the bodies there."""
+    X, idx = _points(result)
+    k = idx[name]
+    near = {idx[p] for ln in result.scene.links if name in ln.points for p in ln.points}
+    if result.scene.points[k].fixed:
+        near |= {i for i, p in enumerate(result.scene.points) if p.fixed}
+    near.discard(k)
+    out = np.zeros((result.n_steps, 2))
+    for n in sorted(near):
+        with np.errstate(invalid="ignore"):
+            u = _unit(X[:, n] - X[:, k])
+        out += np.where(np.isfinite(u), u, 0.0)
     return out
 
 
