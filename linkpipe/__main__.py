@@ -680,6 +680,9 @@ def _optimize(args) -> int:
         if not args.quiet:
             print(optimize_table(found, time.perf_counter() - t0))
             print("  wrote " + ", ".join(map(str, paths)))
+    return outcome.code
+
+
 def _follow(args) -> int:
     """``follow``: Ctrl-C and SIGTERM end it as --idle does (the held-back rows solved, the
     file complete), exit 0; a fault of the log ends it likewise, exit 1."""

@@ -152,11 +152,6 @@ def _solve(scene: Scene, progress, kinematics: Kinematics | None = None,
     reused stage 1 (measurements compared there)."""
     tell = progress if callable(progress) else (lambda stage: None)
     seconds: dict[str, float] = {}
-    if scene.dynamics is not None:  # another producer of a solved motion, the same finish
-        from .dynamics import simulate
-
-        check_memory(scene)
-        return simulate(scene, tell, seconds)  # finished by spine.finish (measurements too)
     t0 = _time.perf_counter()
     if kinematics is None:  # a reused stage 1 was checked when it was solved
         check_memory(scene)

@@ -17,6 +17,7 @@ import numpy as np
 
 from . import kinematics as kin
 from . import stroke
+from .dynamics import integrated
 from .forces import LAGRANGE_VARIABLES, compute_forces
 from .errors import SceneError
 from .forces.constants import ForceConstants
@@ -73,6 +74,10 @@ def finished(scene: Scene, model, segment: int, seconds: dict, tell=None,
     stage name -> wall seconds, added to; ``tell(stage, done=None)``: told as each stage
     starts and after each segment; ``wanted``: as :func:`finish`'s."""
     tell = tell if callable(tell) else (lambda stage, done=None: None)
+    if scene.dynamics is not None:  # another producer of a solved motion: integrated whole
+        motion, forces, time_axis = integrated(scene, model, tell, seconds)
+        yield finish(scene, model, motion, seconds=seconds, time_axis=time_axis, forces=forces)
+        return
     stage1 = Stage1(scene, model, Stages.of(scene), tell, seconds)
     time, time_note = stage1.time_axis
     S = stage1.n_steps

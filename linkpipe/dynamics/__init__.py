@@ -17,7 +17,7 @@ from ..model import build_model
 from .equations import MotionEquations, NoAssembly
 from .integrate import Trajectory, integrate
 
-__all__ = ["simulate", "equations_of", "integrate", "MotionEquations", "Trajectory"]
+__all__ = ["integrated", "equations_of", "integrate", "MotionEquations", "Trajectory"]
 
 #: the reduced mass matrix's condition beyond which the mechanism counts as mass-free
 MASS_RCOND = 1e-12
@@ -52,30 +52,22 @@ def equations_of(scene, model=None) -> MotionEquations:
     return eqs
 
 
-def simulate(scene, tell=lambda stage: None, seconds: dict | None = None):
-    """Integrate ``scene``'s [dynamics] and return its Result (failed steps are data)."""
-    seconds = {} if seconds is None else seconds
-    t0 = _time.perf_counter()
-    model = build_model(scene)
-    eqs = equations_of(scene, model)
-    seconds["model"] = _time.perf_counter() - t0
-    tell("integration")
-    t0 = _time.perf_counter()
-    traj = integrate(scene, eqs)
-    seconds["integration"] = _time.perf_counter() - t0
-    return finished(eqs, traj, tell, seconds)
-
-
-def finished(eqs: MotionEquations, traj: Trajectory, tell=lambda stage: None,
-             seconds: dict | None = None):
-    """The Result of a trajectory of ``eqs``' scene: its output instants finished as any sweep
-    (:mod:`.finish`: positions, rates, the force stage; then :func:`linkpipe.spine.finish`)."""
-    from ..spine import finish
+def integrated(scene, model, tell=lambda stage: None, seconds: dict | None = None):
+    """Integrate ``scene``'s [dynamics]: its solved motion, ``(motion, forces, time_axis)``
+    (a :class:`~linkpipe.stage1.Kinematics` of the output instants, the force stage with the
+    applied ``input_force`` and ``energy_error``, and ``(time, note)``), which the spine
+    finishes into a Result like any other (:func:`linkpipe.spine.finished`)."""
     from ..stage1 import mobility_of
     from .finish import describe, forces_of, kinematics_of
 
     seconds = {} if seconds is None else seconds
-    scene, model = eqs.scene, eqs.model
+    t0 = _time.perf_counter()
+    eqs = equations_of(scene, model)
+    seconds["model"] = seconds.get("model", 0.0) + _time.perf_counter() - t0
+    tell("integration")
+    t0 = _time.perf_counter()
+    traj = integrate(scene, eqs)
+    seconds["integration"] = _time.perf_counter() - t0
     tell("positions")
     t0 = _time.perf_counter()
     k, F, state = kinematics_of(eqs, traj, mobility_of(model))
@@ -84,5 +76,4 @@ def finished(eqs: MotionEquations, traj: Trajectory, tell=lambda stage: None,
     t0 = _time.perf_counter()
     forces = forces_of(eqs, k, F, state, traj)
     seconds["forces"] = _time.perf_counter() - t0
-    note = describe(traj, forces.variables["energy_error"][1])
-    return finish(scene, model, k, seconds=seconds, time_axis=(traj.t, note), forces=forces)
+    return k, forces, (traj.t, describe(traj, forces.variables["energy_error"][1]))
