@@ -244,6 +244,80 @@ def test_a02_n_fourbar_passes_its_singular_pose_at_the_closed_form_time():
     assert np.abs(r.forces["energy_error"][1]).max() < 1e-6 * G * c
 
 
+# -- stroke-end events --------------------------------------------------------------------------
+
+def ended_at(r) -> float:
+    return float(r.time_note.split("ended at t = ")[1].split(" s")[0])
+
+
+@pytest.mark.parametrize("method", ["DOP853", "Radau"])
+def test_a_pushed_block_stops_at_its_stroke_end_at_sqrt_2_d_m_over_f(method):
+    """The 2 kg block pushed by a constant 3 N from rest at 0.65 m, its driver's stroke
+    [0.5, 1.0]: it reaches the longest end after d = 0.35 m at t = sqrt(2 d m / F) = 0.6831 s.
+    The integration ends there to 1e-9 s (the event on the dense output at rtol 1e-10, plus the
+    allowance of [solver] tol beyond the end: 1e-10 m / 2.05 m/s), said in the summary; every
+    instant before is ok, every one after no_assembly (NaN), by either integrator."""
+    text = text_of("spring_mass_slider").replace("rtol = 1e-10", f'rtol = 1e-10\nmethod = "{method}"')
+    r = solve_text(text.replace('effects = ["springs", "inertia"]', 'effects = ["inertia"]')
+                   .replace("start_rate = 0.0", "start_rate = 0.0\nforce = 3.0\nstroke = [0.5, 1.0]"),
+                   "stroke")
+    t_ref = np.sqrt(2 * 0.35 * M / 3.0)
+    assert abs(ended_at(r) - t_ref) < 1e-9
+    assert "out of stroke: driver x at the longest end of its stroke (1 m" in r.time_note
+    assert method in r.time_note
+    assert np.all(r.status[r.time <= t_ref] == OK) and np.all(r.status[r.time > t_ref] == NO_ASSEMBLY)
+    assert np.isnan(r.driver_value[r.time > t_ref]).all()
+    ok = r.status == OK
+    assert np.abs(r.driver_value[ok, 0] - (0.65 + 3.0 * r.time[ok] ** 2 / (2 * M))).max() < 1e-9
+    # the margin stays inside the stroke at every stored instant (the last one 0.00013 m short)
+    assert np.nanmin(r.stroke_margin[ok]) > 0
+
+
+def test_a_gas_springs_compressed_length_ends_the_run_like_a_drivers_stroke():
+    """The block pushed left by 3 N onto a gas strut S-P (compressed_length 0.3 m, a 1e-12 N
+    push: its force moves the block by < 1e-12 m) reaches 0.3 m at t = sqrt(2 x 0.35 m x 2 kg
+    / 3 N): the gas spring's stroke is found from the positions at the state (not the
+    driver's value), to 1e-9 s of the closed form."""
+    text = text_of("spring_mass_slider").replace(
+        "start_rate = 0.0", "start_rate = 0.0\nforce = -3.0")
+    text = text.replace("k = 200.0\nfree_length = 0.5",
+                        'kind = "gas"\nforce_extended = 1e-12\nextended_length = 1.0\n'
+                        "dead_length = 0.0\ngamma = 1.0\ncompressed_length = 0.3")
+    r = solve_text(text, "gas_stroke")
+    t_ref = np.sqrt(2 * 0.35 * M / 3.0)
+    assert abs(ended_at(r) - t_ref) < 1e-9
+    assert "gas spring spring at the shortest end of its stroke (0.3 m" in r.time_note
+    assert np.all(r.status[r.time <= t_ref] == OK) and np.all(r.status[r.time > t_ref] == NO_ASSEMBLY)
+
+
+@pytest.mark.parametrize("method", ["DOP853", "Radau"])
+def test_an_angle_drivers_stroke_ends_the_falling_lever_at_the_energy_integrals_time(method):
+    """The falling lever with stroke = [-30, 10] deg on its angle: it reaches -30 deg (before
+    its tether's -44.4 deg stop) at t = integral dphi / sqrt((3 g / L) sin phi) over
+    [0, pi/6]; the stroke in degrees, the state in radians: the end within 1e-9 s."""
+    text = text_of("falling_lever").replace("rtol = 1e-10", f'rtol = 1e-10\nmethod = "{method}"')
+    text = text.replace("from = 0.0", "from = 0.0\nstroke = [-30.0, 10.0]")
+    r = solve_text(text, "stroke_lever")
+    t_ref = quad(lambda p: np.sqrt(p / np.sin(p)) if p > 0 else 1.0, 0, np.pi / 6,
+                 weight="alg", wvar=(-0.5, 0), epsabs=1e-15, epsrel=1e-14)[0] / np.sqrt(3 * G)
+    assert abs(ended_at(r) - t_ref) < 1e-9
+    assert "driver fall at the shortest end of its stroke (-30 deg" in r.time_note
+    assert np.all(r.status[r.time <= t_ref] == OK) and np.all(r.status[r.time > t_ref] == NO_ASSEMBLY)
+
+
+def test_a_start_outside_the_stroke_ends_the_run_at_once():
+    """Started at 0.65 m with stroke [0.7, 1.0]: the start instant is out_of_stroke (its values
+    kept), the integration ends at t = 0 and every later instant is no_assembly."""
+    from linkpipe.status import OUT_OF_STROKE
+
+    text = text_of("spring_mass_slider").replace(
+        "start_rate = 0.0", "start_rate = 0.0\nstroke = [0.7, 1.0]")
+    r = solve_text(text, "outside")
+    assert "ended at t = 0 s: out of stroke at the start: driver x at the shortest end" in r.time_note
+    assert r.status[0] == OUT_OF_STROKE and r.driver_value[0, 0] == 0.65
+    assert np.all(r.status[1:] == NO_ASSEMBLY)
+
+
 # -- outputs ----------------------------------------------------------------------------------
 
 def test_run_writes_the_usual_files_on_time(tmp_path):
