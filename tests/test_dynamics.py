@@ -198,6 +198,50 @@ def test_force_law_and_force_log_ramp(tmp_path):
     assert np.abs(logged.forces["input_force"][1][:, 0] - 2.0 * t).max() < 1e-9
 
 
+def test_force_log_with_units_offset_and_lag(tmp_path):
+    """A cylinder pressure log as a rig writes it: column "p" in bar (units), acting on a
+    10 mm^2 bore (scale = 1e-5 m^2), a -1 N offset (a seal's preload), stamps 0.25 s late
+    (lag): the pressure p(t_true) = 2 + 4 t bar pushes with F = 2e5 x 1e-5 (1 + 2 t) - 1 = 1 + 4 t N,
+    so x = 0.65 + t^2 / (2 m) + 4 t^3 / (6 m) (a cubic spline through linear samples is that
+    line). Within 1e-8 m over the 9 m run (rtol 1e-10 of a motion 12x the mechanism's size);
+    the stored input_force is 1 + 4 t to 1e-9 N. Read without its lag the log would start at
+    0.25 s (a scene error: it must cover 0 .. to) and push 1 N less (2.25 m short at 3 s)."""
+    lag = 0.25
+    log = tmp_path / "rig.tsv"
+    t_true = np.linspace(0.0, 3.0, 31)
+    log.write_text("time\tp\n" + "".join(f"{float(a + lag)!r}\t{float(2 + 4 * a)!r}\n"
+                                           for a in t_true))
+    logs = (f'[[logs]]\nname = "rig"\nfile = "{log}"\ndelimiter = "\\t"\ntime = "time"\n'
+            f'units = {{ p = "bar" }}\nlag = {lag}\n\n')
+    r = pushed('force_log = "rig.p"\nscale = 1e-5\noffset = -1.0', logs)
+    t = r.time
+    assert np.abs(r.driver_value[:, 0] - (0.65 + t ** 2 / (2 * M) + 4 * t ** 3 / (6 * M))).max() < 1e-8
+    assert np.abs(r.forces["input_force"][1][:, 0] - (1 + 4 * t)).max() < 1e-9
+    assert np.abs(r.forces["energy_error"][1]).max() < 1e-8 * 0.5 * M * r.driver_velocity[-1, 0] ** 2
+    # a force column in kN with units: the same ramp as test_force_law_and_force_log_ramp's scale
+    log2 = tmp_path / "kn.csv"
+    log2.write_text("t,f\n" + "".join(f"{float(a)!r},{float(a) * 2.0 / 1000!r}\n" for a in t_true))
+    logs2 = f'[[logs]]\nname = "rig"\nfile = "{log2}"\ntime = "t"\nunits = {{ f = "kN" }}\n\n'
+    kn = pushed('force_log = "rig.f"', logs2)
+    assert np.abs(kn.driver_value[:, 0] - (0.65 + 6.0 * t ** 3 / (6 * M * 3.0))).max() < 1e-9
+
+
+@pytest.mark.parametrize("unit,key,words", [
+    ("mm", "force_log", 'is in "mm", not a force or a pressure'),
+    (None, "offset", "offset belongs to a force_log"),
+])
+def test_force_log_bad_units_and_a_stray_offset_are_scene_errors(tmp_path, unit, key, words):
+    log = tmp_path / "rig.csv"
+    log.write_text("t,p\n0.0,1.0\n5.0,2.0\n")
+    units = f'units = {{ p = "{unit}" }}\n' if unit else ""
+    logs = f'[[logs]]\nname = "rig"\nfile = "{log}"\ntime = "t"\n{units}\n'
+    line = 'force_log = "rig.p"' if unit else "force = 1.0\noffset = 2.0"
+    text = text_of("spring_mass_slider").replace("start_rate = 0.0", f"start_rate = 0.0\n{line}")
+    with pytest.raises(SceneError) as err:
+        parse_scene(logs + text, "bad.toml")
+    assert err.value.key == key and words in err.value.message
+
+
 # -- events -----------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("method", ["DOP853", "Radau"])
