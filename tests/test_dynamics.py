@@ -429,6 +429,23 @@ def test_a_mass_free_mechanism_is_a_scene_error(tmp_path, capsys):
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_friction_in_a_dynamics_scene_is_one_message_not_a_crash(tmp_path, capsys):
+    """Friction does not act in [dynamics] yet: [analysis] effects named, exit 2, nothing
+    written (it had raised a TypeError from the effects' table)."""
+    text = text_of("falling_lever").replace('effects = ["gravity", "inertia"]',
+                                            'effects = ["gravity", "inertia", "friction"]')
+    path = tmp_path / "rubbing.toml"
+    path.write_text(text + '\n[[friction]]\nname = "pins"\njoints = ["O"]\nmu = 0.1\n'
+                    "pin_radius = 0.01\n")
+    with pytest.raises(SceneError) as err:
+        linkpipe.solve(linkpipe.load_scene(path))
+    assert (err.value.table, err.value.key) == ("analysis", "effects")
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_dynamics_keys_outside_dynamics_are_errors():
     text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
     text = text.replace('steps = 361', 'steps = 361\nforce = 1.0', 1)
