@@ -472,6 +472,27 @@ def test_a_study_of_dynamics_scenes_gives_each_variants_closing_time(tmp_path):
     assert 0 <= ended - f["closing_time"][-1] < 0.001  # within one output step
 
 
+def test_a_study_over_the_push_gives_each_variants_stroke_end_time(tmp_path):
+    """A study of the pushed block (stroke [0.5, 1.0] m, 0.35 m to go) over its force 1, 2.5, 4 N:
+    each variant's last ok instant is the output instant at or just before its own
+    t = sqrt(2 d m / F) (its stroke event), within one output step."""
+    from linkpipe.stores.study import read_arrays
+
+    text = text_of("spring_mass_slider").replace('effects = ["springs", "inertia"]',
+                                                 'effects = ["inertia"]')
+    text = text.replace("start_rate = 0.0", "start_rate = 0.0\nforce = 1.0\nstroke = [0.5, 1.0]")
+    text = text.replace("rtol = 1e-10", "rtol = 1e-9")
+    (tmp_path / "pushed.toml").write_text(text)
+    study = tmp_path / "push_study.toml"
+    study.write_text('[scene]\nname = "push"\n[study]\nbase = "pushed.toml"\n'
+                     '[study.parameters]\n"drivers.x.force" = { from = 1.0, to = 4.0, steps = 3 }\n'
+                     '[study.metrics]\nend = "max(time)"\n')
+    assert main(["study", str(study), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    f = read_arrays(tmp_path / "out" / "push_study.h5")
+    t_ref = np.sqrt(2 * 0.35 * M / np.array([1.0, 2.5, 4.0]))
+    assert np.all((t_ref - f["end"] >= 0) & (t_ref - f["end"] < 0.001 + 1e-12))
+
+
 def test_accuracy_ladders_rtol_on_a_dynamics_scene(tmp_path):
     """`accuracy` on a dynamics scene: one row per integrator and rtol, each against DOP853 at
     rtol 1e-13; DOP853's position error falls as rtol does and stays within 100 x rtol of the
