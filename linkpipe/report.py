@@ -182,7 +182,8 @@ def _driver_force(driver) -> str:
     if driver.force_log is not None:
         factor = driver.unit_factor * driver.scale
         return (f"force from log {'.'.join(driver.force_log)} x {factor:g}"
-                + (f" + {driver.offset:g}" if driver.offset else ""))
+                + (f" {'-' if driver.offset < 0 else '+'} {abs(driver.offset):g}"
+                   if driver.offset else ""))
     return "free"
 
 
