@@ -180,7 +180,10 @@ def _driver_force(driver) -> str:
         fl = driver.force_law
         return f"force {fl.law} {fl.from_value:g} -> {fl.to_value:g} over {fl.duration:g} s"
     if driver.force_log is not None:
-        return f"force from log {'.'.join(driver.force_log)} x {driver.scale:g}"
+        factor = driver.unit_factor * driver.scale
+        return (f"force from log {'.'.join(driver.force_log)} x {factor:g}"
+                + (f" {'-' if driver.offset < 0 else '+'} {abs(driver.offset):g}"
+                   if driver.offset else ""))
     return "free"
 
 

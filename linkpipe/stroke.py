@@ -68,14 +68,21 @@ def status(model, margin: np.ndarray | None, size=None) -> np.ndarray | None:
     strokes. NaN margins (failed steps) are not judged here."""
     if margin is None:
         return None
+    with np.errstate(invalid="ignore"):
+        outside = (margin < -allowance(model, margin.shape, size)).any(axis=1)
+    return np.where(outside, OUT_OF_STROKE, OK).astype(np.int8)
+
+
+def allowance(model, shape: tuple[int, int], size=None) -> np.ndarray:
+    """(S, n_strokes) how far beyond its end a stroke may be before the step is outside it:
+    the position tolerance (an angle's in degrees: the tolerance over the mechanism's size);
+    ``shape`` the margins' (S, n_strokes), ``size`` per row where a study varies it. The one
+    place the decision is made: :func:`status` and forward dynamics' stroke events use it."""
     tol = np.asarray(model.tolerance(size=size), float)
-    length_tol = np.broadcast_to(tol, (margin.shape[0],))[:, None]
+    length_tol = np.broadcast_to(tol, (shape[0],))[:, None]
     size = np.broadcast_to(np.asarray(model.size if size is None else size, float),
-                           (margin.shape[0],))[:, None]
+                           (shape[0],))[:, None]
     scene = model.scene
     angle = np.array([d.is_angle for d in scene.drivers if d.stroke is not None]
-                     + [False] * (margin.shape[1] - sum(d.stroke is not None for d in scene.drivers)))
-    allowed = np.where(angle, np.degrees(length_tol / size), length_tol)
-    with np.errstate(invalid="ignore"):
-        outside = (margin < -allowed).any(axis=1)
-    return np.where(outside, OUT_OF_STROKE, OK).astype(np.int8)
+                     + [False] * (shape[1] - sum(d.stroke is not None for d in scene.drivers)))
+    return np.where(angle, np.degrees(length_tol / size), length_tol)

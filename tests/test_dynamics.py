@@ -198,6 +198,50 @@ def test_force_law_and_force_log_ramp(tmp_path):
     assert np.abs(logged.forces["input_force"][1][:, 0] - 2.0 * t).max() < 1e-9
 
 
+def test_force_log_with_units_offset_and_lag(tmp_path):
+    """A cylinder pressure log as a rig writes it: column "p" in bar (units), acting on a
+    10 mm^2 bore (scale = 1e-5 m^2), a -1 N offset (a seal's preload), stamps 0.25 s late
+    (lag): the pressure p(t_true) = 2 + 4 t bar pushes with F = 2e5 x 1e-5 (1 + 2 t) - 1 = 1 + 4 t N,
+    so x = 0.65 + t^2 / (2 m) + 4 t^3 / (6 m) (a cubic spline through linear samples is that
+    line). Within 1e-8 m over the 9 m run (rtol 1e-10 of a motion 12x the mechanism's size);
+    the stored input_force is 1 + 4 t to 1e-9 N. Read without its lag the log would start at
+    0.25 s (a scene error: it must cover 0 .. to) and push 1 N less (2.25 m short at 3 s)."""
+    lag = 0.25
+    log = tmp_path / "rig.tsv"
+    t_true = np.linspace(0.0, 3.0, 31)
+    log.write_text("time\tp\n" + "".join(f"{float(a + lag)!r}\t{float(2 + 4 * a)!r}\n"
+                                           for a in t_true))
+    logs = (f'[[logs]]\nname = "rig"\nfile = "{log}"\ndelimiter = "\\t"\ntime = "time"\n'
+            f'units = {{ p = "bar" }}\nlag = {lag}\n\n')
+    r = pushed('force_log = "rig.p"\nscale = 1e-5\noffset = -1.0', logs)
+    t = r.time
+    assert np.abs(r.driver_value[:, 0] - (0.65 + t ** 2 / (2 * M) + 4 * t ** 3 / (6 * M))).max() < 1e-8
+    assert np.abs(r.forces["input_force"][1][:, 0] - (1 + 4 * t)).max() < 1e-9
+    assert np.abs(r.forces["energy_error"][1]).max() < 1e-8 * 0.5 * M * r.driver_velocity[-1, 0] ** 2
+    # a force column in kN with units: the same ramp as test_force_law_and_force_log_ramp's scale
+    log2 = tmp_path / "kn.csv"
+    log2.write_text("t,f\n" + "".join(f"{float(a)!r},{float(a) * 2.0 / 1000!r}\n" for a in t_true))
+    logs2 = f'[[logs]]\nname = "rig"\nfile = "{log2}"\ntime = "t"\nunits = {{ f = "kN" }}\n\n'
+    kn = pushed('force_log = "rig.f"', logs2)
+    assert np.abs(kn.driver_value[:, 0] - (0.65 + 6.0 * t ** 3 / (6 * M * 3.0))).max() < 1e-9
+
+
+@pytest.mark.parametrize("unit,key,words", [
+    ("mm", "force_log", 'is in "mm", not a force or a pressure'),
+    (None, "offset", "offset belongs to a force_log"),
+])
+def test_force_log_bad_units_and_a_stray_offset_are_scene_errors(tmp_path, unit, key, words):
+    log = tmp_path / "rig.csv"
+    log.write_text("t,p\n0.0,1.0\n5.0,2.0\n")
+    units = f'units = {{ p = "{unit}" }}\n' if unit else ""
+    logs = f'[[logs]]\nname = "rig"\nfile = "{log}"\ntime = "t"\n{units}\n'
+    line = 'force_log = "rig.p"' if unit else "force = 1.0\noffset = 2.0"
+    text = text_of("spring_mass_slider").replace("start_rate = 0.0", f"start_rate = 0.0\n{line}")
+    with pytest.raises(SceneError) as err:
+        parse_scene(logs + text, "bad.toml")
+    assert err.value.key == key and words in err.value.message
+
+
 # -- events -----------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("method", ["DOP853", "Radau"])
@@ -242,6 +286,80 @@ def test_a02_n_fourbar_passes_its_singular_pose_at_the_closed_form_time():
     crossing = r.time[i] + theta[i] / (theta[i] - theta[i + 1]) * (r.time[i + 1] - r.time[i])
     assert abs(crossing - t_star) < 1e-6
     assert np.abs(r.forces["energy_error"][1]).max() < 1e-6 * G * c
+
+
+# -- stroke-end events --------------------------------------------------------------------------
+
+def ended_at(r) -> float:
+    return float(r.time_note.split("ended at t = ")[1].split(" s")[0])
+
+
+@pytest.mark.parametrize("method", ["DOP853", "Radau"])
+def test_a_pushed_block_stops_at_its_stroke_end_at_sqrt_2_d_m_over_f(method):
+    """The 2 kg block pushed by a constant 3 N from rest at 0.65 m, its driver's stroke
+    [0.5, 1.0]: it reaches the longest end after d = 0.35 m at t = sqrt(2 d m / F) = 0.6831 s.
+    The integration ends there to 1e-9 s (the event on the dense output at rtol 1e-10, plus the
+    allowance of [solver] tol beyond the end: 1e-10 m / 2.05 m/s), said in the summary; every
+    instant before is ok, every one after no_assembly (NaN), by either integrator."""
+    text = text_of("spring_mass_slider").replace("rtol = 1e-10", f'rtol = 1e-10\nmethod = "{method}"')
+    r = solve_text(text.replace('effects = ["springs", "inertia"]', 'effects = ["inertia"]')
+                   .replace("start_rate = 0.0", "start_rate = 0.0\nforce = 3.0\nstroke = [0.5, 1.0]"),
+                   "stroke")
+    t_ref = np.sqrt(2 * 0.35 * M / 3.0)
+    assert abs(ended_at(r) - t_ref) < 1e-9
+    assert "out of stroke: driver x at the longest end of its stroke (1 m" in r.time_note
+    assert method in r.time_note
+    assert np.all(r.status[r.time <= t_ref] == OK) and np.all(r.status[r.time > t_ref] == NO_ASSEMBLY)
+    assert np.isnan(r.driver_value[r.time > t_ref]).all()
+    ok = r.status == OK
+    assert np.abs(r.driver_value[ok, 0] - (0.65 + 3.0 * r.time[ok] ** 2 / (2 * M))).max() < 1e-9
+    # the margin stays inside the stroke at every stored instant (the last one 0.00013 m short)
+    assert np.nanmin(r.stroke_margin[ok]) > 0
+
+
+def test_a_gas_springs_compressed_length_ends_the_run_like_a_drivers_stroke():
+    """The block pushed left by 3 N onto a gas strut S-P (compressed_length 0.3 m, a 1e-12 N
+    push: its force moves the block by < 1e-12 m) reaches 0.3 m at t = sqrt(2 x 0.35 m x 2 kg
+    / 3 N): the gas spring's stroke is found from the positions at the state (not the
+    driver's value), to 1e-9 s of the closed form."""
+    text = text_of("spring_mass_slider").replace(
+        "start_rate = 0.0", "start_rate = 0.0\nforce = -3.0")
+    text = text.replace("k = 200.0\nfree_length = 0.5",
+                        'kind = "gas"\nforce_extended = 1e-12\nextended_length = 1.0\n'
+                        "dead_length = 0.0\ngamma = 1.0\ncompressed_length = 0.3")
+    r = solve_text(text, "gas_stroke")
+    t_ref = np.sqrt(2 * 0.35 * M / 3.0)
+    assert abs(ended_at(r) - t_ref) < 1e-9
+    assert "gas spring spring at the shortest end of its stroke (0.3 m" in r.time_note
+    assert np.all(r.status[r.time <= t_ref] == OK) and np.all(r.status[r.time > t_ref] == NO_ASSEMBLY)
+
+
+@pytest.mark.parametrize("method", ["DOP853", "Radau"])
+def test_an_angle_drivers_stroke_ends_the_falling_lever_at_the_energy_integrals_time(method):
+    """The falling lever with stroke = [-30, 10] deg on its angle: it reaches -30 deg (before
+    its tether's -44.4 deg stop) at t = integral dphi / sqrt((3 g / L) sin phi) over
+    [0, pi/6]; the stroke in degrees, the state in radians: the end within 1e-9 s."""
+    text = text_of("falling_lever").replace("rtol = 1e-10", f'rtol = 1e-10\nmethod = "{method}"')
+    text = text.replace("from = 0.0", "from = 0.0\nstroke = [-30.0, 10.0]")
+    r = solve_text(text, "stroke_lever")
+    t_ref = quad(lambda p: np.sqrt(p / np.sin(p)) if p > 0 else 1.0, 0, np.pi / 6,
+                 weight="alg", wvar=(-0.5, 0), epsabs=1e-15, epsrel=1e-14)[0] / np.sqrt(3 * G)
+    assert abs(ended_at(r) - t_ref) < 1e-9
+    assert "driver fall at the shortest end of its stroke (-30 deg" in r.time_note
+    assert np.all(r.status[r.time <= t_ref] == OK) and np.all(r.status[r.time > t_ref] == NO_ASSEMBLY)
+
+
+def test_a_start_outside_the_stroke_ends_the_run_at_once():
+    """Started at 0.65 m with stroke [0.7, 1.0]: the start instant is out_of_stroke (its values
+    kept), the integration ends at t = 0 and every later instant is no_assembly."""
+    from linkpipe.status import OUT_OF_STROKE
+
+    text = text_of("spring_mass_slider").replace(
+        "start_rate = 0.0", "start_rate = 0.0\nstroke = [0.7, 1.0]")
+    r = solve_text(text, "outside")
+    assert "ended at t = 0 s: out of stroke at the start: driver x at the shortest end" in r.time_note
+    assert r.status[0] == OUT_OF_STROKE and r.driver_value[0, 0] == 0.65
+    assert np.all(r.status[1:] == NO_ASSEMBLY)
 
 
 # -- outputs ----------------------------------------------------------------------------------
@@ -311,6 +429,23 @@ def test_a_mass_free_mechanism_is_a_scene_error(tmp_path, capsys):
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_friction_in_a_dynamics_scene_is_one_message_not_a_crash(tmp_path, capsys):
+    """Friction does not act in [dynamics] yet: [analysis] effects named, exit 2, nothing
+    written (it had raised a TypeError from the effects' table)."""
+    text = text_of("falling_lever").replace('effects = ["gravity", "inertia"]',
+                                            'effects = ["gravity", "inertia", "friction"]')
+    path = tmp_path / "rubbing.toml"
+    path.write_text(text + '\n[[friction]]\nname = "pins"\njoints = ["O"]\nmu = 0.1\n'
+                    "pin_radius = 0.01\n")
+    with pytest.raises(SceneError) as err:
+        linkpipe.solve(linkpipe.load_scene(path))
+    assert (err.value.table, err.value.key) == ("analysis", "effects")
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_dynamics_keys_outside_dynamics_are_errors():
     text = (ROOT / "configs" / "fourbar_crank_rocker.toml").read_text()
     text = text.replace('steps = 361', 'steps = 361\nforce = 1.0', 1)
@@ -335,6 +470,27 @@ def test_a_study_of_dynamics_scenes_gives_each_variants_closing_time(tmp_path):
     assert np.all(np.diff(f["closing_time"]) > 0)
     ended = float(own.time_note.split("ended at t = ")[1].split(" s")[0])
     assert 0 <= ended - f["closing_time"][-1] < 0.001  # within one output step
+
+
+def test_a_study_over_the_push_gives_each_variants_stroke_end_time(tmp_path):
+    """A study of the pushed block (stroke [0.5, 1.0] m, 0.35 m to go) over its force 1, 2.5, 4 N:
+    each variant's last ok instant is the output instant at or just before its own
+    t = sqrt(2 d m / F) (its stroke event), within one output step."""
+    from linkpipe.stores.study import read_arrays
+
+    text = text_of("spring_mass_slider").replace('effects = ["springs", "inertia"]',
+                                                 'effects = ["inertia"]')
+    text = text.replace("start_rate = 0.0", "start_rate = 0.0\nforce = 1.0\nstroke = [0.5, 1.0]")
+    text = text.replace("rtol = 1e-10", "rtol = 1e-9")
+    (tmp_path / "pushed.toml").write_text(text)
+    study = tmp_path / "push_study.toml"
+    study.write_text('[scene]\nname = "push"\n[study]\nbase = "pushed.toml"\n'
+                     '[study.parameters]\n"drivers.x.force" = { from = 1.0, to = 4.0, steps = 3 }\n'
+                     '[study.metrics]\nend = "max(time)"\n')
+    assert main(["study", str(study), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    f = read_arrays(tmp_path / "out" / "push_study.h5")
+    t_ref = np.sqrt(2 * 0.35 * M / np.array([1.0, 2.5, 4.0]))
+    assert np.all((t_ref - f["end"] >= 0) & (t_ref - f["end"] < 0.001 + 1e-12))
 
 
 def test_accuracy_ladders_rtol_on_a_dynamics_scene(tmp_path):

@@ -1,7 +1,10 @@
 """The drivers' own forces over time: constant, a law, a log column, or none (free).
 
 Values are generalized forces in the drivers' internal units: a torque per radian for an angle
-driver, a force for a distance or coordinate driver (the scene's force and length units)."""
+driver, a force for a distance or coordinate driver (the scene's force and length units). A
+log column is ``column x unit_factor x scale + offset`` (:meth:`DynamicsTables.force_log
+<linkpipe.scene.dynamics.DynamicsTables.force_log>`), read at the true instants (the log's
+stamps less its ``lag``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -22,8 +25,9 @@ class Forcing:
                 self.parts.append(("law", d.force_law))
             elif d.force_log is not None:
                 log = logs[d.force_log[0]]
-                self.parts.append(("log", log_spline(log.t, log.columns[d.force_log[1]] * d.scale,
-                                                     0.0)))
+                # the column in the scene's units (force, or force per area), x scale + offset
+                values = log.columns[d.force_log[1]] * (d.unit_factor * d.scale) + d.offset
+                self.parts.append(("log", log_spline(log.t, values, 0.0)))
             else:
                 self.parts.append(("free", 0.0))
 

@@ -12,7 +12,11 @@ stage's driver values the right-hand side is NaN, the step is rejected and retri
 so the solver closes in on the last instant the motion exists until its step falls below the
 spacing of floating-point numbers there (scipy's "step size too small"): the event's time is
 then known to about 1e-15 s x t, well inside ``rtol``. A stroke limit (a driver's ``stroke``,
-once scenes have it) is a terminal event function located by scipy's root finder.
+a gas spring's ``compressed_length`` / ``extended_length``) is a terminal event function of
+the state, its margin (:func:`linkpipe.stroke.margins`) plus the tolerance beyond which a step
+counts as out of stroke (:func:`linkpipe.stroke.allowance`), whose zero scipy locates on the
+step's dense output (Brent's method to a few ulps: the event's time to the motion's own
+accuracy, ``rtol``).
 """
 from __future__ import annotations
 
@@ -21,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from .. import stroke
+from ..output_units import units_of
 from .equations import MotionEquations, NoAssembly
 from .forcing import Forcing
 
@@ -86,9 +92,17 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     atol = np.concatenate([rtol * sc, rtol * sc, [1e300, 1e300]])
     y0 = np.concatenate([s0, sd0, [0.0, 0.0]])
     instants = np.asarray(dyn.instants, float)
+    strokes = StrokeEvents(scene, eqs, scale)
+    outside = strokes.outside(y0)
+    if outside is not None:  # out of stroke at the start: nothing to integrate
+        Y = np.full((len(instants), len(y0)), np.nan)
+        Y[0] = y0
+        return Trajectory(instants, Y[:, :nd], Y[:, nd:2 * nd], Y[:, 2 * nd],
+                          Y[:, 2 * nd + 1], instants <= 0.0, 0.0,
+                          strokes.describe(outside, y0, "at the start"), 0, 0, method, rtol)
     options = {"jac": finite_jacobian(rhs, nd, atol / rtol)} if method == "Radau" else {}
     sol = solve_ivp(rhs, (0.0, dyn.to), y0, method=method, rtol=rtol, atol=atol,
-                    dense_output=True, **options)
+                    dense_output=True, events=strokes.functions or None, **options)
     end = float(sol.t[-1])
     event = ""
     if sol.status == -1:
@@ -96,6 +110,10 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
                        for d, v in zip(scene.drivers, sol.y[:nd, -1] / scale))
         event = (f"out of assembly (no assembled, non-singular position beyond it; {at})"
                  if at_event(failed, end) else f"the integrator stopped: {sol.message}")
+    elif sol.status == 1:  # a terminal event: a stroke's end
+        c = next(c for c, times in enumerate(sol.t_events) if len(times))
+        end = float(sol.t_events[c][0])
+        event = strokes.describe(c, sol.y_events[c][0])
     solved = instants <= end * (1 + 1e-15) if event else np.ones(len(instants), bool)
     Y = np.full((len(instants), len(y0)), np.nan)
     if solved.any():
@@ -103,6 +121,76 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
     Y[0] = y0  # the start exactly as given
     return Trajectory(instants, Y[:, :nd], Y[:, nd:2 * nd], Y[:, 2 * nd], Y[:, 2 * nd + 1],
                       solved, end, event, len(sol.t) - 1, int(sol.nfev), method, rtol)
+
+
+class StrokeEvents:
+    """The stroke limits of a scene as terminal event functions of the state ``y`` (solve_ivp's
+    ``events``): stroke c's margin (scene units: degrees for an angle driver) plus its
+    allowance, falling through zero where the motion leaves the stroke. A gas spring's margin
+    needs the positions at ``y`` (Newton from the last solved position); the margins of one
+    ``y`` are computed once for all the functions."""
+
+    def __init__(self, scene, eqs: MotionEquations, scale: np.ndarray):
+        self.scene, self.eqs, self.scale = scene, eqs, scale
+        self.labels = stroke.names(scene)
+        self.n_drivers = sum(d.stroke is not None for d in scene.drivers)
+        self.allowed = (stroke.allowance(eqs.model, (1, len(self.labels)))[0]
+                        if self.labels else np.zeros(0))
+        self._last = (None, None)
+        self.functions = [self._function(c) for c in range(len(self.labels))]
+
+    def _function(self, c: int):
+        def g(t, y):
+            return self.values(y)[c]
+        g.terminal, g.direction = True, -1
+        return g
+
+    def positions(self, y: np.ndarray) -> np.ndarray:
+        """X (1, P, 2) at ``y`` (the drawing where no stroke needs the positions)."""
+        if len(self.labels) == self.n_drivers:
+            return self.eqs.model.start_position[None]
+        return self.eqs.positions(y[:len(self.scale)])
+
+    def values(self, y: np.ndarray) -> np.ndarray:
+        """(n_strokes,) margin + allowance at state ``y`` (NaN where it cannot be assembled)."""
+        key = y[:len(self.scale)].tobytes()
+        if self._last[0] != key:
+            try:
+                X = self.positions(y)
+                g = stroke.margins(self.scene, (y[:len(self.scale)] / self.scale)[None], X)[0]
+                g = g + self.allowed
+            except NoAssembly:
+                g = np.full(len(self.labels), np.nan)
+            self._last = (key, g)
+        return self._last[1]
+
+    def outside(self, y: np.ndarray) -> int | None:
+        """The first stroke that ``y`` is outside, or None."""
+        if not self.labels:
+            return None
+        below = np.flatnonzero(self.values(y) < 0)
+        return int(below[0]) if len(below) else None
+
+    def describe(self, c: int, y: np.ndarray, when: str = "") -> str:
+        """The summary's words on stroke ``c`` ended at state ``y``."""
+        label = self.labels[c]
+        value = y[:len(self.scale)] / self.scale
+        length = units_of(self.scene)["length"] or "length units"
+        if c < self.n_drivers:
+            j = next(j for j, d in enumerate(self.scene.drivers) if d.name == label)
+            d = self.scene.drivers[j]
+            v, (lo, hi), unit = value[j], d.stroke, "deg" if d.is_angle else length
+            what = f"driver {label}"
+        else:
+            sp = next(s for s in self.scene.springs if s.name == label)
+            a, b = (self.scene.point_names.index(p) for p in sp.between)
+            X = self.positions(y)[0]
+            v, unit = float(np.hypot(*(X[b] - X[a]))), length
+            lo = sp.compressed_length if sp.compressed_length is not None else -np.inf
+            hi, what = sp.extended_length, f"gas spring {label}"
+        end, bound = ("shortest", lo) if v - lo < hi - v else ("longest", hi)
+        return (f"out of stroke{' ' + when if when else ''}: {what} at the {end} end of its "
+                f"stroke ({bound:.9g} {unit}; {v:.9g} {unit} there)")
 
 
 #: how far past the last instant reached a failed evaluation shows the event that stopped the

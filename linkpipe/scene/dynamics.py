@@ -83,9 +83,10 @@ class DynamicsTables:
             raise table.error(given[1], f"give one of force, force_law or force_log, not both "
                               f"{given[0]} and {given[1]}",
                               f"keep one of {' or '.join(table.as_given(k) for k in given)}")
-        if table.has("scale") and "force_log" not in given:
-            raise table.error("scale", "scale belongs to a force_log",
-                              'remove scale, or give force_log = "<log>.<column>"')
+        for key in ("scale", "offset"):
+            if table.has(key) and "force_log" not in given:
+                raise table.error(key, f"{key} belongs to a force_log",
+                                  f'remove {key}, or give force_log = "<log>.<column>"')
         start = table.number("from")
         fields = dict(from_value=start, to_value=start, steps=len(dynamics.instants), step=None,
                       start_rate=self.rate(table, "start_rate", kind, 1))
@@ -94,7 +95,8 @@ class DynamicsTables:
         elif "force_law" in given:
             fields["force_law"] = self.force_law(table, dynamics)
         elif "force_log" in given:
-            fields["force_log"], fields["scale"] = self.force_log(table, dynamics)
+            (fields["force_log"], fields["scale"], fields["offset"],
+             fields["unit_factor"]) = self.force_log(table, dynamics)
         return fields
 
     def force_law(self, table: _Table, dynamics: Dynamics) -> ForceLaw:
@@ -108,9 +110,14 @@ class DynamicsTables:
                             f"write e.g. {sub.example('duration')}")
         return ForceLaw(law, sub.number("from"), sub.number("to"), duration)
 
-    def force_log(self, table: _Table, dynamics: Dynamics) -> tuple[tuple[str, str], float]:
-        """force_log = "<log>.<column>" (times scale): read and checked now; its time column
-        must cover 0 .. [dynamics] to."""
+    def force_log(self, table: _Table, dynamics: Dynamics) -> tuple[tuple[str, str], float,
+                                                                    float, float]:
+        """force_log = "<log>.<column>": ``((log, column), scale, offset, unit_factor)``, the
+        force being ``column x unit_factor x scale + offset``. ``unit_factor`` takes a column
+        with ``[[logs]] units`` to the scene's force (a force unit) or force per length^2 (a
+        pressure: ``scale`` is then the area it acts on); ``offset`` is in the scene's force
+        units. Read and checked now; its time column (less the log's ``lag``) must cover
+        0 .. [dynamics] to."""
         text = table.string("force_log")
         log_name, dot, column = text.partition(".")
         if not dot or not column:
@@ -134,8 +141,18 @@ class DynamicsTables:
                               f"{log.t[-1]:g} s; [dynamics] needs its force from 0 to "
                               f"{dynamics.to:g} s", "use a log that covers the run, or a "
                               "shorter [dynamics] to")
+        factor = 1.0
+        if column in log.units:
+            quantity, order, _ = log.units[column]
+            if quantity not in ("force", "pressure") or order:
+                raise table.error("force_log", f'column "{column}" of log "{log.name}" is in '
+                                  f'"{self.data_units(log, column)}", not a force or a pressure',
+                                  "push the driver by a column of forces (N, kN, lbf) or "
+                                  "pressures (bar, MPa, psi: scale = the area they act on), or "
+                                  "correct [[logs]] units")
+            factor = self.unit_factor(table, "force_log", log, column)
         scale = table.number("scale", 1.0)
-        return (log.name, column), scale
+        return (log.name, column), scale, table.number("offset", 0.0), factor
 
 
 def check_not_dynamic(table: _Table) -> None:
