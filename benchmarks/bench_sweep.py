@@ -254,16 +254,22 @@ def print_run_targets(r) -> str:
              f"{write:.4f} |",
              f"| the disk's floor: write + fsync + rename of {r['h5_bytes'] / 2**20:.1f} MiB | "
              f"{r['floor']:.4f} |", ""]
-    if r["pylinkage"] is not None:
+    if r["pylinkage"] is not None and r.get("pylinkage_cpu") is not None:
+        # judged in CPU seconds: both are one thread here, and a loaded machine's wall clock
+        # counts other jobs' time (one tool's best of a few may fall in a quiet moment, the
+        # other's not: 2-4x either way was seen at a load of 5)
+        cpu_marginal = r["run_cpu"] - r["run_361_cpu"]
+        xc = r["pylinkage_cpu"] / cpu_marginal
+        x = r["pylinkage"] / marginal
+        lines.append(f"- pylinkage+numba's warm kernel / run's marginal, CPU seconds "
+                     f"({r['pylinkage_cpu']:.4f} / {cpu_marginal:.4f}) = {xc:.2f}x (target >= 2x): "
+                     f"{'met' if xc >= 2 else 'MISSED'}" + ("" if xc >= 2 else f", by {2 / xc:.1f}x")
+                     + f" (wall seconds, not judged: {r['pylinkage']:.4f} / {marginal:.4f} = {x:.2f}x)")
+    elif r["pylinkage"] is not None:
         x = r["pylinkage"] / marginal
         lines.append(f"- pylinkage+numba's warm kernel ({r['pylinkage']:.4f} s) / run's marginal = "
                      f"{x:.2f}x (target >= 2x): {'met' if x >= 2 else 'MISSED'}"
                      + ("" if x >= 2 else f", by {2 / x:.1f}x"))
-        if r.get("pylinkage_cpu") is not None:
-            xc = r["pylinkage_cpu"] / (r["run_cpu"] - r["run_361_cpu"])
-            lines.append(f"- the same in CPU seconds (a loaded machine's wall clock counts other "
-                         f"jobs' time): {r['pylinkage_cpu']:.4f} / "
-                         f"{r['run_cpu'] - r['run_361_cpu']:.4f} = {xc:.2f}x")
     else:
         lines.append("- run's marginal vs pylinkage+numba: pylinkage not installed, not measured")
     y = write / r["floor"]
