@@ -98,6 +98,10 @@ def finite_rows(arrays, n_steps: int) -> np.ndarray:
 
     def work(lo: int, hi: int) -> None:
         for a in arrays:
+            # the rows' total is finite only if every entry is (an inf or NaN anywhere makes
+            # it inf or NaN): one vectorised sum clears the usual all-finite chunk at once
+            if np.isfinite(np.sum(a[lo:hi])):
+                continue
             # a row's sum (one BLAS product) is finite if and only if its entries are, but for
             # finite entries whose sum overflows: the rows whose sum is not are looked at entry
             # by entry (3x faster than isfinite(a).all(axis=1) when every row is finite)

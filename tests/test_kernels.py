@@ -231,3 +231,60 @@ def test_entries_of_points_are_the_entries_of_their_coordinates():
         X = model.positions(q)
         np.testing.assert_array_equal(model.qT_of(X), model.q_of(X).T)
         np.testing.assert_array_equal(eng.entries_of(X, s), eng.entries(q, s))
+
+
+def _link_rates_as_written(link_a, link_b, X, V, A):
+    """The links' rates by the formula as written (one numpy expression per quantity, the
+    form link_rate_rows had before it worked in scratch columns)."""
+    w, al = [], []
+    for a, b in zip(link_a, link_b):
+        dx, dy = X[:, b, 0] - X[:, a, 0], X[:, b, 1] - X[:, a, 1]
+        dvx, dvy = V[:, b, 0] - V[:, a, 0], V[:, b, 1] - V[:, a, 1]
+        dax, day = A[:, b, 0] - A[:, a, 0], A[:, b, 1] - A[:, a, 1]
+        n2 = dx * dx + dy * dy
+        wj = (dx * dvy - dy * dvx) / n2
+        w.append(wj)
+        al.append((dx * day - dy * dax) / n2 - 2 * wj * (dx * dvx + dy * dvy) / n2)
+    return np.stack(w, axis=1), np.stack(al, axis=1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 300), scale=st.integers(-200, 200))
+def test_link_rate_columns_are_the_written_formula_bit_for_bit(seed, n, scale):
+    """The links' rates in scratch columns (link_rate_rows on whole rows, and the dyads' chunk
+    columns with the fixed points read as at rest) equal the formula as written to the last
+    bit, NaN, inf and zero-length links included; the fused directions equal
+    model.link_angles."""
+    from linkpipe.kinematics.angles import link_rate_columns, link_rate_rows
+
+    model = build_model(linkpipe.load_scene(str(_ALL_CONFIGS[0].parent / "fourbar_crank_rocker.toml")))
+    rng = np.random.default_rng(seed)
+    P, L = model.n_points, len(model.link_a)
+    X = rng.normal(size=(n, P, 2)) * 10.0 ** (scale / 10)
+    V, A = (rng.normal(size=(n, P, 2)) * 10.0 ** (scale / 10) for _ in range(2))
+    fixed = np.flatnonzero(model.fixed)
+    X[:, fixed] = model.start_position[fixed]
+    V[:, fixed] = A[:, fixed] = 0.0
+    k = rng.integers(0, n, 3)
+    X[k[0], model.link_b[0]] = model.start_position[model.link_a[0]] if not model.fixed[model.link_b[0]] else np.nan
+    V[k[1], rng.integers(0, P)] = np.nan
+    A[k[2], rng.integers(0, P)] = np.inf
+    V[:, fixed] = A[:, fixed] = 0.0
+    with np.errstate(all="ignore"):
+        want_w, want_al = _link_rates_as_written(model.link_a, model.link_b, X, V, A)
+        w, al = np.empty((n, L)), np.empty((n, L))
+        link_rate_rows(model.link_a, model.link_b, X, V, A, w, al)
+        np.testing.assert_array_equal(w, want_w)
+        np.testing.assert_array_equal(al, want_al)
+        cw, cal, ang = np.empty((n, L)), np.empty((n, L)), np.empty((n, L))
+
+        def col(Y, p):  # the dyads' columns: a fixed point's position a float, its rates 0.0
+            if model.fixed[p]:
+                return (float(Y[0, p, 0]), float(Y[0, p, 1])) if Y is X else (0.0, 0.0)
+            return np.ascontiguousarray(Y[:, p, 0]), np.ascontiguousarray(Y[:, p, 1])
+
+        link_rate_columns(model.link_a, model.link_b, lambda p: col(X, p), lambda p: col(V, p),
+                          lambda p: col(A, p), cw, cal, still={int(p) for p in fixed}, angle=ang)
+    np.testing.assert_array_equal(cw, want_w)
+    np.testing.assert_array_equal(cal, want_al)
+    np.testing.assert_array_equal(ang, model.link_angles(X))

@@ -55,7 +55,8 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
     drawn = drawn_link_angles(model) if drawings is None else model.link_angles(drawings)
     if carry is not None:
         out, after = unwrap_runs(ang, carry)
-        shift = np.where(np.isnan(carry.shift), _turns_towards(drawn, out), carry.shift)
+        shift = (carry.shift if not np.isnan(carry.shift).any() else  # set: no pass over out
+                 np.where(np.isnan(carry.shift), _turns_towards(drawn, out), carry.shift))
         after = dataclasses.replace(after, shift=np.where(np.isnan(after.last), np.nan, shift))
         out += np.nan_to_num(shift)
     elif period:
@@ -239,13 +240,61 @@ def link_rate_rows(link_a, link_b, X, V, A, w, al) -> None:
     """The links' angular velocities into ``w`` (n, n_links) and, with ``A``, accelerations
     into ``al``, of the rows X, V, A (n, n_points, 2): the one formula, link by link on the
     rows' columns (:func:`link_rates` over a sweep; the closed-form dyads on each chunk of
-    their own pass, while it is in cache: :func:`.dyads.solve_chain`)."""
-    for j, (a, b) in enumerate(zip(link_a, link_b)):
-        dx, dy = X[:, b, 0] - X[:, a, 0], X[:, b, 1] - X[:, a, 1]
-        dvx, dvy = V[:, b, 0] - V[:, a, 0], V[:, b, 1] - V[:, a, 1]
-        n2 = dx * dx + dy * dy
-        wj = (dx * dvy - dy * dvx) / n2
+    their own pass, while it is in cache: :func:`.dyads.solve_chain`, through
+    :func:`link_rate_columns`)."""
+    def cols(Y):
+        return None if Y is None else (lambda p: (Y[:, p, 0], Y[:, p, 1]))
+
+    link_rate_columns(link_a, link_b, cols(X), cols(V), cols(A), w, al)
+
+
+def link_rate_columns(link_a, link_b, x, v, a, w, al, still=(), angle=None) -> None:
+    """:func:`link_rate_rows` on columns: ``x(p)``, ``v(p)``, ``a(p)`` -> a point's (x, y)
+    columns (n,) of positions, velocities and accelerations (``a`` None: none asked);
+    ``still``: points at rest (their rates zero: not read, and ``u - 0.0`` is ``u`` to the
+    bit, so the numbers are those of the formula on the full rows). The formula's operations
+    in its order, ``(dx dvy - dy dvx) / n2`` and ``(dx day - dy dax) / n2 - 2 w (dx dvx +
+    dy dvy) / n2`` with ``n2 = dx dx + dy dy``, into three scratch columns: no temporary per
+    operation (``tests/test_kernels.py`` holds it to the bit against the written formula).
+    ``angle`` (n, n_links): also each link's direction, ``arctan2(dy, dx)`` of the same
+    differences (:meth:`linkpipe.model.Model.link_angles`' formula)."""
+    n = (w if w is not None else angle).shape[0]
+    t1, t2, t3 = np.empty(n), np.empty(n), np.empty(n)
+
+    def diff(f, p, q):  # f(q) - f(p), two columns (p at rest: f(q) itself, never written)
+        xq, yq = f(q)
+        if p in still:
+            return xq, yq
+        xp, yp = f(p)
+        return xq - xp, yq - yp
+
+    for j, (pa, pb) in enumerate(zip(link_a, link_b)):
+        (xb, yb), (xa, ya) = x(pb), x(pa)
+        dx, dy = np.subtract(xb, xa), np.subtract(yb, ya)
+        if angle is not None:
+            angle[:, j] = np.arctan2(dy, dx)
+        if w is None:
+            continue
+        dvx, dvy = diff(v, pa, pb)
+        n2 = np.multiply(dx, dx)
+        np.multiply(dy, dy, out=t1)
+        n2 += t1
+        wj = np.multiply(dx, dvy)
+        np.multiply(dy, dvx, out=t1)
+        wj -= t1
+        wj /= n2
         w[:, j] = wj
-        if A is not None:
-            dax, day = A[:, b, 0] - A[:, a, 0], A[:, b, 1] - A[:, a, 1]
-            al[:, j] = (dx * day - dy * dax) / n2 - 2 * wj * (dx * dvx + dy * dvy) / n2
+        if a is None:
+            continue
+        dax, day = diff(a, pa, pb)
+        np.multiply(dx, day, out=t1)
+        np.multiply(dy, dax, out=t2)
+        t1 -= t2
+        t1 /= n2
+        np.multiply(dx, dvx, out=t2)
+        np.multiply(dy, dvy, out=t3)
+        t2 += t3
+        np.multiply(wj, 2, out=t3)
+        t3 *= t2
+        t3 /= n2
+        np.subtract(t1, t3, out=al[:, j])

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 from .branches import BRANCH_MARGIN
 from .decompose import Dyad, DyadChain, Line
-from .angles import link_rate_rows
+from .angles import link_rate_columns
 from .linalg import CHUNK
 
 
@@ -376,6 +376,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     miss = np.full(S, np.inf) if gaps else None
     residual = np.empty(S) if max_abs_phi is not None else None
     moving = [int(p) for p in model.moving]
+    fixed_set = {int(p) for p in np.flatnonzero(fixed)}
     nd = model.n_drivers
     cols = [np.ascontiguousarray(s[:, j]) for j in range(nd)]
     dcols = [np.ascontiguousarray(s_dot[:, j]) for j in range(nd)] if order >= 1 else None
@@ -413,12 +414,13 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
                 ch.sdd = [c if isinstance(c, float) else c[lo:hi] for c in ddcols]
                 ch.ax, ch.ay = [None] * P, [None] * P
                 A[lo:hi] = _derivative_pass(part, ch, 2, moving, bufs[2], n)
-            if links:
-                angle[lo:hi] = model.link_angles(bufs[0][:n])
-            if w is not None:
-                link_rate_rows(model.link_a, model.link_b, bufs[0][:n], bufs[1][:n],
-                               bufs[2][:n] if al is not None else None, w[lo:hi],
-                               al[lo:hi] if al is not None else None)
+            if links:  # from the chunk's own columns (the buffers' numbers, unstrided)
+                link_rate_columns(
+                    model.link_a, model.link_b, lambda p: (ch.px[p], ch.py[p]),
+                    lambda p: (_val(ch.vx[p]), _val(ch.vy[p])),
+                    (lambda p: (_val(ch.ax[p]), _val(ch.ay[p]))) if al is not None else None,
+                    None if w is None else w[lo:hi], None if al is None else al[lo:hi],
+                    still=fixed_set, angle=angle[lo:hi])
     bad = ~ok
     if bad.any():
         X[np.ix_(bad, moving)] = np.nan

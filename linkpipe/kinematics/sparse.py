@@ -382,13 +382,12 @@ class Engine:
     def norm1(self, E: np.ndarray) -> np.ndarray:
         """Return the 1-norm (largest column sum of |J|) at every step (S,): each column's
         entries added in order (as ``|E|[entries].sum(axis=0)`` adds them), in place."""
-        absE = np.abs(E)
-        out = None
-        for ce in self.col_entries:
-            acc = absE[ce[0]].copy()
+        out, acc, tmp = None, np.empty(E.shape[1]), np.empty(E.shape[1])
+        for ce in self.col_entries:  # no |E| of every entry at once: two scratch columns
+            np.abs(E[ce[0]], out=acc)
             for e in ce[1:]:
-                acc += absE[e]
-            out = acc if out is None else np.maximum(out, acc, out=out)
+                acc += np.abs(E[e], out=tmp)
+            out = acc.copy() if out is None else np.maximum(out, acc, out=out)
         return out
 
     def inverse(self, E: np.ndarray) -> np.ndarray:
@@ -416,6 +415,7 @@ class Engine:
         order = [r for rows, _, _, _ in self.blocks for r in rows]  # unit columns, by block
         at = {r: i for i, r in enumerate(order)}
         x: list = [None] * self.model.n_q  # x[c]: (columns up to its block's end, S)
+        scratch = np.empty((len(order), S))  # E[e] x[c], then Cramer's products: in place
         with np.errstate(divide="ignore", invalid="ignore"):
             end = 0
             for rows, cols, inner, outer in self.blocks:
@@ -426,13 +426,14 @@ class Engine:
                     acc[at[r]] = 1.0
                     for e, c in out:  # as _solve: b[r] - E[e] x[c] - ..., in its order
                         xc = x[c]
-                        acc[:len(xc)] -= E[e] * xc
+                        tmp = scratch[:len(xc)]
+                        acc[:len(xc)] -= np.multiply(E[e], xc, out=tmp)
                     rhs.append(acc)
                 k = len(cols)
                 if k == 1:
-                    sol = [rhs[0] / E[inner[0][0]]]
+                    sol = [np.divide(rhs[0], E[inner[0][0]], out=rhs[0])]
                 elif k == 2:
-                    sol = list(_cramer2(*_block2(E, inner), *rhs))
+                    sol = _cramer2_into(*_block2(E, inner), *rhs, scratch[:end])
                 else:  # larger blocks: the general solve on these columns
                     M = _dense_block(E, inner)
                     R = np.stack(rhs)  # (k, end, S)
@@ -445,7 +446,7 @@ class Engine:
                     x[c] = xc
             sums = np.zeros((self.model.n_rows, S))  # by block; summed over the unknowns
             for xc in x:                              # in their order, as inverse's rows
-                sums[:len(xc)] += np.abs(xc)
+                sums[:len(xc)] += np.abs(xc, out=scratch[:len(xc)])
         out = np.empty_like(sums)
         out[order] = sums
         return out
@@ -455,6 +456,20 @@ def _cramer2(a, b, c, d, r0, r1):
     """Solve [[a, b], [c, d]] x = [r0, r1] by Cramer's rule, elementwise over steps."""
     idet = 1.0 / (a * d - b * c)
     return (r0 * d - r1 * b) * idet, (a * r1 - c * r0) * idet
+
+
+def _cramer2_into(a, b, c, d, r0, r1, tmp):
+    """:func:`_cramer2`'s numbers to the bit, into ``r0`` and ``r1`` themselves (arrays of
+    one shape, overwritten) with ``tmp`` of their shape as scratch: no temporary per product
+    (the determinant's, of the entries (S,), is as small as the entries)."""
+    idet = 1.0 / (a * d - b * c)
+    x0 = np.multiply(r0, d)                    # r0 d - r1 b
+    x0 -= np.multiply(r1, b, out=tmp)
+    x0 *= idet
+    np.multiply(a, r1, out=r1)                 # a r1 - c r0
+    r1 -= np.multiply(c, r0, out=tmp)
+    r1 *= idet
+    return x0, r1
 
 
 def _block2(E: np.ndarray, inner) -> tuple:
