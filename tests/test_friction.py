@@ -630,3 +630,43 @@ def test_a_friction_measurement_without_its_friction_is_one_scene_error(tmp_path
     message = str(err.value)
     assert all(w in message for w in words), message
     assert "[[measurements]]" in message or "measurements" in message
+
+
+@pytest.mark.parametrize("name", ["excavator_arm", "five_bar", "jansen", "shear_press",
+                                  "slider_crank"])
+def test_the_stacked_unit_cases_equal_the_cases_solved_one_by_one(name, monkeypatch):
+    """Friction's unit load cases solved together (``stacked_multipliers``, multipliers laid
+    out row by row; ``stacked_reactions`` accumulating in its outputs' memory) against each
+    case solved alone by :func:`multipliers` and :func:`reactions` (the single-case path every
+    frictionless run takes): every stored force agrees to 1e-12 of its largest value (the
+    block solves differ only in using inverses or factorisations: rounding)."""
+    import pathlib
+
+    import linkpipe.forces as forces
+    from linkpipe.forces.lagrange import reactions
+
+    path = pathlib.Path(__file__).resolve().parent.parent / "configs" / f"{name}.toml"
+    stacked = linkpipe.solve(_with_friction_everywhere(path))
+
+    def one_by_one(model, lam, point_forces, bodies, X, s, ok, rows=None, at_fixed=False):
+        fixed = np.flatnonzero(model.fixed)
+        out = []
+        for k, case_bodies in enumerate(bodies):
+            loads = np.zeros(X.shape)
+            loads[:, fixed] = point_forces[k] if at_fixed else point_forces[k][:, fixed]
+            out.append(reactions(model, np.array(lam[k]), loads, case_bodies, X, s, ok, rows))
+        return np.stack([g for g, _ in out]), np.stack([p for _, p in out])
+
+    monkeypatch.setattr(forces, "stacked_multipliers", lambda *a, **k: None)  # case by case
+    monkeypatch.setattr(forces, "stacked_reactions", one_by_one)
+    alone = linkpipe.solve(_with_friction_everywhere(path))
+    np.testing.assert_array_equal(stacked.status, alone.status)
+    assert set(stacked.forces) == set(alone.forces)
+    for key, (_, values, _) in alone.forces.items():
+        new = stacked.forces[key][1]
+        if values.dtype.kind != "f":
+            np.testing.assert_array_equal(new, values)
+            continue
+        np.testing.assert_array_equal(np.isnan(new), np.isnan(values))
+        scale = np.nanmax(np.abs(values), initial=0.0)
+        assert np.nanmax(np.abs(new - values), initial=0.0) <= 1e-12 * max(scale, 1e-300), key
