@@ -284,10 +284,11 @@ class _Case:
         """This case plus ``u[:, k]`` (S,) times each of ``cases`` ({name: (K, S, ...)})."""
         out = {}
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
-            total = getattr(self, name).copy()
+            # summed with the step axis last (where the stacked cases keep it contiguous)
+            total = np.moveaxis(getattr(self, name), 0, -1).copy()
             for k, part in enumerate(cases[name]):
-                total += u[:, k].reshape((-1,) + (1,) * (part.ndim - 1)) * part
-            out[name] = total
+                total += u[:, k] * np.moveaxis(part, 0, -1)
+            out[name] = np.moveaxis(total, -1, 0)
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
 
