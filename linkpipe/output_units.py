@@ -57,6 +57,11 @@ def entry_unit(scene: Scene, variable: str, label: str | None = None) -> str:
              "power": f"{F}*{L}/{T}", "residual": L, "condition": "1", "iterations": "1"}
     if variable in per_driver and label in names:
         return per_driver[variable][names.index(label)]
+    frictions = [fr.name for fr in scene.friction]
+    if variable == "friction_force" and label in frictions:  # a torque at pins, else a force
+        return friction_units(scene, u)[frictions.index(label)]
+    if variable == "friction_power":
+        return f"{F}*{L}/{T}"
     return whole.get(variable, "")
 
 

@@ -560,3 +560,126 @@ def test_every_shipped_scene_with_friction_everywhere_balances(name):
         rate = r.kinematics.s_dot[ok]
         balance = (vw * rate).sum(axis=1) + f["power"][1][ok].sum(axis=1)
         assert np.abs(balance).max() <= 1e-12 * np.abs(vw * rate).max()
+
+
+LOGGED_LEVER = LEVER.replace("""from = -30.0
+to = 60.0
+steps = 91
+rate = RATE
+""", 'log = "rig.angle_deg"\n') + """
+[time]
+log = "rig"
+
+[[logs]]
+name = "rig"
+file = "rig.csv"
+time = "t"
+
+[[measurements]]
+name = "pivot_torque"
+log = "rig.pivot_Nmm"
+scale = 0.001
+of = "friction_force.pivot"
+
+[[measurements]]
+name = "pivot_power"
+log = "rig.pivot_W"
+of = "friction_power.pivot"
+"""
+
+
+def _logged_lever(tmp_path, text=LOGGED_LEVER):
+    """The lever turned at a steady pi/2 rad/s (-30 to 60 degrees in 1 s) from a log that also
+    holds the pin friction's closed form: torque mu r W = 0.2 x 0.01 m x 500 N = 1 N m (the pin
+    carries the weight alone; logged in N mm) and its power -1 N m x pi/2 rad/s."""
+    t = np.linspace(0.0, 1.0, 51)
+    rows = ["t,angle_deg,pivot_Nmm,pivot_W"] + [
+        f"{x!r},{-30.0 + 90.0 * x!r},1000.0,{-math.pi / 2!r}" for x in t.tolist()]
+    (tmp_path / "rig.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "lever.toml").write_text(text)
+    return tmp_path / "lever.toml"
+
+
+def test_pin_friction_is_measurable_against_its_closed_form(tmp_path):
+    """``of = "friction_force.<entry>"`` and ``"friction_power.<entry>"``: the computed
+    counterpart is the stored entry, in its unit (N*m for pins); residuals against the closed
+    form are rounding (1e-9 N m on 1 N m; the log's angle is read through its spline, exact on
+    a straight line)."""
+    from linkpipe.measure import compare
+    from linkpipe.output_units import measured_units
+
+    r = linkpipe.solve(linkpipe.load_scene(_logged_lever(tmp_path)))
+    assert (r.status == OK).all()
+    got = compare(r)
+    assert got["names"] == ["pivot_torque", "pivot_power"]
+    assert np.abs(got["residual"]).max() < 1e-9
+    assert measured_units(r.scene) == ["N*m", "N*m/s"]
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ('effects = ["loads", "friction"]', 'effects = ["loads"]',
+     ['"friction_force" is computed by "friction" in [analysis] effects']),
+    ('of = "friction_force.pivot"', 'of = "friction_force.pivto"',
+     ["no friction entry named", "pivot"]),
+])
+def test_a_friction_measurement_without_its_friction_is_one_scene_error(tmp_path, old, new,
+                                                                        words):
+    text = LOGGED_LEVER.replace(old, new)
+    with pytest.raises(SceneError) as err:
+        linkpipe.load_scene(_logged_lever(tmp_path, text))
+    message = str(err.value)
+    assert all(w in message for w in words), message
+    assert "[[measurements]]" in message or "measurements" in message
+
+
+@pytest.mark.parametrize("name", ["excavator_arm", "five_bar", "jansen", "shear_press",
+                                  "slider_crank"])
+def test_the_stacked_unit_cases_equal_the_cases_solved_one_by_one(name, monkeypatch):
+    """Friction's unit load cases solved together (``stacked_multipliers``, multipliers laid
+    out row by row; ``stacked_reactions`` accumulating in its outputs' memory) against each
+    case solved alone by :func:`multipliers` and :func:`reactions` (the single-case path every
+    frictionless run takes): every stored force agrees to 1e-12 of its largest value (the
+    block solves differ only in using inverses or factorisations: rounding)."""
+    import pathlib
+
+    import linkpipe.forces as forces
+    from linkpipe.forces.lagrange import reactions
+
+    path = pathlib.Path(__file__).resolve().parent.parent / "configs" / f"{name}.toml"
+    stacked = linkpipe.solve(_with_friction_everywhere(path))
+
+    def one_by_one(model, lam, point_forces, bodies, X, s, ok, rows=None, at_fixed=False):
+        fixed = np.flatnonzero(model.fixed)
+        out = []
+        for k, case_bodies in enumerate(bodies):
+            loads = np.zeros(X.shape)
+            loads[:, fixed] = point_forces[k] if at_fixed else point_forces[k][:, fixed]
+            out.append(reactions(model, np.array(lam[k]), loads, case_bodies, X, s, ok, rows))
+        return np.stack([g for g, _ in out]), np.stack([p for _, p in out])
+
+    monkeypatch.setattr(forces, "stacked_multipliers", lambda *a, **k: None)  # case by case
+    monkeypatch.setattr(forces, "stacked_reactions", one_by_one)
+    alone = linkpipe.solve(_with_friction_everywhere(path))
+    np.testing.assert_array_equal(stacked.status, alone.status)
+    assert set(stacked.forces) == set(alone.forces)
+    for key, (_, values, _) in alone.forces.items():
+        new = stacked.forces[key][1]
+        if values.dtype.kind != "f":
+            np.testing.assert_array_equal(new, values)
+            continue
+        np.testing.assert_array_equal(np.isnan(new), np.isnan(values))
+        scale = np.nanmax(np.abs(values), initial=0.0)
+        assert np.nanmax(np.abs(new - values), initial=0.0) <= 1e-12 * max(scale, 1e-300), key
+
+
+def test_the_row_maximum_column_by_column_is_numpys():
+    """The magnitudes' convergence test takes each row's largest change column by column
+    (:func:`linkpipe.forces.friction._row_max`): exactly ``max(axis=1, initial=0.0)``, NaN
+    rows included (a NaN step never converges), on random rows of 0 to 9 columns."""
+    from linkpipe.forces.friction import _row_max
+
+    rng = np.random.default_rng(35)
+    for m in range(10):
+        a = np.abs(rng.standard_normal((500, m))) * 10.0 ** rng.integers(-20, 20, (500, 1))
+        a[rng.random((500, m)) < 0.05] = np.nan
+        np.testing.assert_array_equal(_row_max(a), a.max(axis=1, initial=0.0))

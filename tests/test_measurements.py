@@ -230,7 +230,16 @@ MEASURED = [("position.A.y", "mm"), ("velocity.A.x", "mm/s"), ("acceleration.P.y
             ("spring_length.coil", "mm"), ("spring_extension.coil", "mm"),
             ("spring_energy.coil", "kN*mm"), ("torsion_spring_angle.hinge", "rad"),
             ("torsion_spring_torque.hinge", "kN*mm"), ("torsion_spring_energy.hinge", "kN*mm"),
-            ("joint_force.A@crank.x", "kN"), ("ground_reaction.O2.y", "kN")]
+            ("joint_force.A@crank.x", "kN"), ("ground_reaction.O2.y", "kN"),
+            ("friction_force.pins", "kN*mm"), ("friction_power.pins", "kN*mm/s")]
+#: MIXED with pin friction (version 3), for the friction's measurements
+FRICTION = """
+[[friction]]
+name = "pins"
+joints = ["O", "O2"]
+mu = 0.1
+pin_radius = 20.0
+"""
 
 
 def test_each_measurement_and_driver_carries_its_own_unit(tmp_path, capsys):
@@ -238,14 +247,16 @@ def test_each_measurement_and_driver_carries_its_own_unit(tmp_path, capsys):
     measurement's unit (``measurement_units``, the summary, the recording's plot names, the fit's
     and the fleet's files) is the unit of the entry it measures, read back from the run's file:
     ``driver_units`` where the variable has it, else its ``units``. The slider force is the only
-    measurable variable left out (no slider): a force, as link_force."""
+    measurable variable left out (no slider): a force, as link_force. Pin friction's
+    ``friction_force`` is a torque, its power a force times a speed."""
     from linkpipe.scene.timing import MEASURABLE
     assert {of.split(".")[0] for of, _ in MEASURED} == set(MEASURABLE) - {"slider_force"}
     t = np.linspace(0.0, 1.0, 21)
     import pandas as pd
     pd.DataFrame({"t": t, "angle": 10.0 + 40.0 * t, "length": 1300.0 + 200.0 * t,
                   "signal": np.sin(t)}).to_csv(tmp_path / "run.csv", index=False)
-    text = MIXED + "".join(f'\n[[measurements]]\nname = "m{k}"\nlog = "run.signal"\nof = "{of}"\n'
+    text = MIXED.replace('effects = ["gravity", "springs"]',
+                         'effects = ["gravity", "springs", "friction"]') + FRICTION + "".join(f'\n[[measurements]]\nname = "m{k}"\nlog = "run.signal"\nof = "{of}"\n'
                            for k, (of, _) in enumerate(MEASURED))
     text = text.replace('[analysis]', '[outputs]\nkinematics = ["velocity", "acceleration"]\n\n'
                         '[analysis]')

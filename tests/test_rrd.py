@@ -136,6 +136,9 @@ def _expected_entities(result) -> set[str]:
         out |= {f"/mechanism/forces/friction/{f.name}" for f in sc.friction
                 if f.kind == "slider" or (f.kind == "driver" and next(
                     d for d in sc.drivers if d.name == f.driver).kind == "distance")}
+        if result.velocity is not None:  # a pin friction's couple: an arc arrow at each pin
+            out |= {f"/mechanism/forces/friction/{f.name}/{j}" for f in sc.friction
+                    if f.kind == "pins" for j in f.joints}
     if result.stroke_margin is not None:  # version 3: margins and the out-of-stroke markers
         from linkpipe.stroke import names
 
@@ -346,6 +349,23 @@ def test_friction_and_stroke_in_the_recording(tmp_path):
     colours = rec.static("/mechanism/forces/friction/seal", "Arrows2D:colors")
     inputs = rec.static("/mechanism/forces/input/tipping_cylinder", "Arrows2D:colors")
     assert list(colours) != list(inputs)
+    # the hinge pin's friction couple: an arc arrow in friction's hue, on a circle about H
+    hinge = "/mechanism/forces/friction/hinge/H"
+    assert list(rec.static(hinge, "LineStrips2D:colors")) == list(colours)
+    from linkpipe.stores.rrd.forces import COUPLE_RADIUS, COUPLE_SWEEP, COUPLE_LEAST
+    from linkpipe.stores.rrd.geometry import mechanism_size
+    rho = COUPLE_RADIUS * mechanism_size(result)      # float32 in the file: 1e-6 of the size
+    torque = result.forces["friction_force"][1][:, 1]
+    frame = rec.steps(hinge)
+    H = result.position[:, result.point_names.index("H")]
+    for step, strips in zip(frame["step"], _column(frame, hinge, "LineStrips2D:strips")):
+        arc = np.stack(strips[0])[:24]
+        assert np.allclose(np.hypot(*(arc - H[step]).T), rho, atol=1e-5 * rho)
+        turned = np.arctan2(*(arc[-1] - H[step])[::-1]) - np.pi / 2   # started at the top
+        want = max(COUPLE_SWEEP * abs(torque[step]) / np.abs(torque).max(), COUPLE_LEAST)
+        assert np.isclose(abs((turned + np.pi) % (2 * np.pi) - np.pi)
+                          if want <= np.pi else 2 * np.pi - abs((turned + np.pi) % (2 * np.pi) - np.pi),
+                          want, atol=1e-4)
     marks = rec.steps("/plots/stroke_margin/out_of_stroke")
     values = np.array([v[0] if v is not None and len(v) else np.nan for v in _column(
         marks, "/plots/stroke_margin/out_of_stroke", "Scalars:scalars")], float)

@@ -284,10 +284,11 @@ class _Case:
         """This case plus ``u[:, k]`` (S,) times each of ``cases`` ({name: (K, S, ...)})."""
         out = {}
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
-            total = getattr(self, name).copy()
+            # summed with the step axis last (where the stacked cases keep it contiguous)
+            total = np.moveaxis(getattr(self, name), 0, -1).copy()
             for k, part in enumerate(cases[name]):
-                total += u[:, k].reshape((-1,) + (1,) * (part.ndim - 1)) * part
-            out[name] = total
+                total += u[:, k] * np.moveaxis(part, 0, -1)
+            out[name] = np.moveaxis(total, -1, 0)
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
 
@@ -401,30 +402,38 @@ def _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors) -> di
     2), ground (K, S, n_fixed, 2)}. Solved together (one pass of the block solves and of
     Phi_X's terms) where no driver pushes (``input``) and the model has a sparse engine; else
     case by case (:func:`_case`)."""
-    loads = list(friction.unit_loads(ctx, layout, influence, Xz))
     names = ("input_force", "input_force_lagrange", "lam", "pins", "ground")
     if any(d.input is not None for d in model.scene.drivers):
         cases = [_case(model, ctx, motion, units, influence, rhs, bodies, work, Xz, factors)
-                 for rhs, work, bodies in loads]
+                 for rhs, work, bodies in friction.unit_loads(ctx, layout, influence, Xz)]
         return {name: np.stack([getattr(c, name) for c in cases]) for name in names}
     n_steps = ctx.n_steps
-    rhs = np.stack([r for r, _, _ in loads])
-    generalized = np.stack([w for _, w, _ in loads])
+    # each case's loads straight into the solve's layout (moving coordinates, (K, S, n_q)) and
+    # the reactions' (fixed points): no (K, S, n_points, 2) stack of them
+    fixed = np.flatnonzero(model.fixed)
+    n_cases = len(layout.links) + len(layout.slides)
+    gq = np.empty((n_cases, n_steps, model.n_q))
+    at_fixed = np.empty((n_cases, n_steps, len(fixed), 2))
+    generalized, bodies = [], []
+    for k, (r, w, b) in enumerate(friction.unit_loads(ctx, layout, influence, Xz)):
+        gq[k] = r[:, model.moving].reshape(n_steps, -1)
+        at_fixed[k] = r[:, fixed]
+        generalized.append(w)
+        bodies.append(b)
+    generalized = np.stack(generalized)
     ok = motion.status == OK
-    lam = stacked_multipliers(model, Xz, motion.s,
-                              rhs[:, :, model.moving].reshape(len(loads), n_steps, -1), ok,
+    lam = stacked_multipliers(model, Xz, motion.s, gq, ok,
                               ctx.constants.pivots, ctx.constants.model_rows, factors)
     if lam is None:  # no sparse engine: case by case
-        lam = np.stack([multipliers(model, Xz, motion.s,
-                                    r[:, model.moving].reshape(n_steps, -1), ok,
+        lam = np.stack([multipliers(model, Xz, motion.s, g, ok,
                                     ctx.constants.pivots, ctx.constants.model_rows)[0]
-                        for r in rhs])
+                        for g in gq])
     input_force = -generalized
     input_force_lagrange = lam[:, :, model.driver_rows] * influence.phi_s
     input_force[:, ~ok] = np.nan
     input_force_lagrange[:, ~ok] = np.nan
-    ground, pins = stacked_reactions(model, lam, rhs, [b for _, _, b in loads], Xz, motion.s, ok,
-                                     ctx.constants.model_rows)
+    ground, pins = stacked_reactions(model, lam, at_fixed, bodies, Xz, motion.s, ok,
+                                     ctx.constants.model_rows, at_fixed=True)
     return dict(input_force=input_force, input_force_lagrange=input_force_lagrange, lam=lam,
                 pins=pins, ground=ground)
 

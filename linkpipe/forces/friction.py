@@ -291,12 +291,15 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
             break
         at = slice(None) if len(live) == len(work) else live
         steps = work[at]
-        G = gw[at] + np.einsum("sk,skd->sd", x[steps] @ C, Rw[at])
+        xs = x if len(steps) == S else x[steps]  # every step live: no gather
+        G = gw[at] + np.einsum("sk,skd->sd", xs @ C, Rw[at])
         new = coef * np.hypot(G[:, 0::2], G[:, 1::2]) * sw[at] + vw[at]
         with np.errstate(invalid="ignore"):
-            done = (np.abs(new - x[steps]).max(axis=1, initial=0.0)
-                    <= tol * np.abs(new).max(axis=1, initial=0.0))
-        x[steps] = new
+            done = _row_max(np.abs(new - xs)) <= tol * _row_max(np.abs(new))
+        if len(steps) == S:
+            x = new
+        else:
+            x[steps] = new
         live = np.arange(len(work))[at][~done]
         if len(live) < 0.5 * len(work):  # compact the working arrays to the live steps
             work, Rw, gw, sw, vw = work[live], Rw[live], gw[live], sw[live], vw[live]
@@ -305,6 +308,15 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     converged[work[live]] = False
     torque, force = x[:, :n_pairs], x[:, n_pairs:]
     return torque, force, torque @ A, converged
+
+
+def _row_max(a):
+    """``a.max(axis=1, initial=0.0)`` of an (n, m) array with few columns, column by column
+    (the same values, NaN included; a reduction along a short axis pays per row)."""
+    out = np.zeros(a.shape[0])
+    for c in range(a.shape[1]):
+        np.maximum(out, a[:, c], out=out)
+    return out
 
 
 def _column(x):

@@ -65,7 +65,8 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
     if eng is None:
         return None
     K, n_steps = generalized_q.shape[:2]
-    lam = np.full((K, n_steps, model.n_rows), np.nan)
+    lam = np.full((model.n_rows, K, n_steps), np.nan)  # as the block solve gives it; returned
+    # as a (K, S, n_rows) view (each row's cases contiguous: what stacked_reactions reads)
     factors = {} if factors is None else factors
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):
@@ -77,22 +78,27 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
             factors[key] = E, eng.block_inverses(E)
         E, inverses = factors[key]
         rhs = list(np.ascontiguousarray(generalized_q[:, ii].transpose(2, 0, 1)))
-        lam[:, ii] = np.stack(eng.solve_transpose(E, rhs, inverses), axis=-1)
-    return lam
+        for r, y in enumerate(eng.solve_transpose(E, rhs, inverses)):
+            lam[r][:, ii] = y
+    return np.moveaxis(lam, 0, 2)
 
 
-def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, rows=None):
+def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, rows=None,
+                      at_fixed: bool = False):
     """:func:`reactions` of K load cases at once: ``lam`` (K, S, n_rows), ``point_forces``
-    (K, S, P, 2), ``bodies`` one dict per case; returns (K, S, n_fixed, 2), (K, S, n_joints, 2),
-    Phi_X's terms computed once for all cases."""
+    (K, S, P, 2) (``at_fixed``: those at the fixed points alone, (K, S, n_fixed, 2)),
+    ``bodies`` one dict per case; returns (K, S, n_fixed, 2), (K, S, n_joints, 2), Phi_X's
+    terms computed once for all cases."""
     fixed = np.flatnonzero(model.fixed)
     fixed_slot = {int(p): k for k, p in enumerate(fixed)}
     pairs = joints(model)
     pair_slot = {(li, p): k for k, (li, p) in enumerate(pairs)}
     row_link = body_rows(model).tolist()
     K, S = lam.shape[:2]
-    R = np.full((K, S, len(fixed), 2), np.nan)
-    F = np.full((K, S, len(pairs), 2), np.nan)
+    # filled in the chunks' own layout (slot, axis, case, step: each chunk's block contiguous)
+    # and returned as (K, S, slot, 2) views of it
+    R_ = np.full((len(fixed), 2, K, S), np.nan)
+    F_ = np.full((len(pairs), 2, K, S), np.nan)
     relative = bool((model.drv_kind == eq.RELATIVE).any())
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):
@@ -100,10 +106,14 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
         n = len(ii)
         if n and ii[-1] - ii[0] + 1 == n:  # contiguous: views, not copies
             ii = slice(int(ii[0]), int(ii[-1]) + 1)
-        lam_c = np.moveaxis(lam[:, ii], 2, 0)  # (n_rows, K, n): each row's cases contiguous
-        lam_c = np.ascontiguousarray(lam_c)
-        Rc = np.moveaxis(-point_forces[:, ii][:, :, fixed], (2, 3), (0, 1)).copy()
-        Fc = np.zeros((len(pairs), 2, K, n))  # slot, axis, case, step
+        lam_c = np.moveaxis(lam[:, ii], 2, 0)  # (n_rows, K, n): a view where lam is one of
+        # stacked_multipliers' (each row's cases contiguous), else strided
+        at = point_forces[:, ii] if at_fixed else point_forces[:, ii][:, :, fixed]
+        in_place = isinstance(ii, slice)  # accumulate in the outputs' own memory (no copy)
+        Rc = R_[..., ii] if in_place else np.empty((len(fixed), 2, K, n))
+        Rc[...] = np.moveaxis(-at, (2, 3), (0, 1))
+        Fc = F_[..., ii] if in_place else np.empty((len(pairs), 2, K, n))
+        Fc[...] = 0.0  # slot, axis, case, step
         rows_c = None if rows is None else rows.take(ii)
         Xc, sc = X[ii], s[ii]
         for k, case_bodies in enumerate(bodies):
@@ -122,9 +132,10 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
             if k is not None:
                 Fc[k, 0] += lr * gx
                 Fc[k, 1] += lr * gy
-        R[:, ii] = np.moveaxis(Rc, (0, 1), (2, 3))
-        F[:, ii] = np.moveaxis(Fc, (0, 1), (2, 3))
-    return R, F
+        if not in_place:
+            R_[..., ii] = Rc
+            F_[..., ii] = Fc
+    return np.moveaxis(R_, (0, 1), (2, 3)), np.moveaxis(F_, (0, 1), (2, 3))
 
 
 def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:

@@ -141,7 +141,7 @@ class _Parser(GeometryTables, MotionTables, EffectTables, SpringTables, TimeTabl
                      logs=tuple(self.logs.values()), friction=friction, dynamics=self.dynamics,
                      warnings=self.warnings(gravity, effects, drivers),
                      measurements=self.measurement_tables(drivers, springs, torsion_springs,
-                                                          sliders, effects))
+                                                          sliders, effects, friction))
 
 
     def warnings(self, gravity, effects, drivers=()) -> tuple[str, ...]:

@@ -289,6 +289,7 @@ MEASURABLE = {
     "torsion_spring_torque": ("torsion_springs", False),
     "torsion_spring_energy": ("torsion_springs", False), "joint_force": ("joints", True),
     "ground_reaction": ("fixed_points", True),
+    "friction_force": ("friction", False), "friction_power": ("friction", False),
 }
 
 
@@ -303,6 +304,7 @@ MEASURED_NEEDS = {
     **dict.fromkeys(("spring_force", "spring_length", "spring_extension", "spring_energy",
                      "torsion_spring_angle", "torsion_spring_torque",
                      "torsion_spring_energy"), "springs"),
+    **dict.fromkeys(("friction_force", "friction_power"), "friction"),
 }
 
 
@@ -315,14 +317,15 @@ def entry_unit_is_radians(variable: str) -> bool:
 class MeasurementTables:
     """The ``[[measurements]]`` reader of :class:`~.parse._Parser` (after logs and [time])."""
 
-    def measurement_tables(self, drivers, springs, torsion_springs, sliders, effects=()) -> tuple:
+    def measurement_tables(self, drivers, springs, torsion_springs, sliders, effects=(),
+                           friction=()) -> tuple:
         out = []
         for table in self.entries("measurements"):
             if self.time is None or self.time.log is None:
                 raise table.error("log", "a measurement needs [time] log = <its log>: the "
                                   "steps are then the log's rows, where it was measured",
                                   'add [time] with log = "<the log\'s name>"')
-            of = self.measured_of(table, drivers, springs, torsion_springs, sliders)
+            of = self.measured_of(table, drivers, springs, torsion_springs, sliders, friction)
             columns, scales, values, parts = self.measured_columns(table, of)
             offset = table.number("offset", 0.0)
             values = values + offset
@@ -336,13 +339,14 @@ class MeasurementTables:
                                   "a positive value and the measurement's sigma",
                                   "give sigma (the measurement's standard deviation) and alarm > 0")
             need = MEASURED_NEEDS.get(of[0])
-            if need == "forces" and not effects or need == "springs" and "springs" not in effects:
-                what = ('"springs" in [analysis] effects' if need == "springs" else
+            effect = need in ("springs", "friction")  # computed by that effect alone
+            if need == "forces" and not effects or effect and need not in effects:
+                what = (f'"{need}" in [analysis] effects' if effect else
                         "the force stage, which runs only with [analysis] effects")
                 raise table.error("of", f'"{of[0]}" is computed by {what}; this scene has '
                                   + (f"effects {list(effects)}" if effects else "none"),
-                                  'add it, e.g. [analysis] effects = ["springs"]' if need ==
-                                  "springs" else 'add the effects the machine has, e.g. '
+                                  f'add it, e.g. [analysis] effects = ["{need}"]' if effect
+                                  else 'add the effects the machine has, e.g. '
                                   '[analysis] effects = ["gravity"]')
             (log, column), scale = columns[0], scales[0]
             out.append(Measurement(table.data["name"], log, column, scale, of, sigma, values,
@@ -402,7 +406,8 @@ class MeasurementTables:
             total = total + y * scale
         return tuple(columns), tuple(scales), total, np.stack(parts, axis=1)
 
-    def measured_of(self, table, drivers, springs, torsion_springs, sliders) -> tuple:
+    def measured_of(self, table, drivers, springs, torsion_springs, sliders,
+                    friction=()) -> tuple:
         """``of = "<variable>.<name>[.x|.y]"`` checked against the scene's names."""
         text = table.string("of")
         variable, _, rest = text.partition(".")
@@ -422,8 +427,9 @@ class MeasurementTables:
                  "torsion_springs": [t.name for t in torsion_springs],
                  "sliders": [s.name for s in sliders],
                  "joints": [f"{p}@{n}" for n, ln in self.links.items() for p in ln.points],
-                 "fixed_points": [n for n, p in self.points.items() if p.fixed]}[kind]
+                 "fixed_points": [n for n, p in self.points.items() if p.fixed],
+                 "friction": [f.name for f in friction]}[kind]
         if rest not in names:
-            raise table.error("of", f'{_show(text)}: no {kind[:-1].replace("_", " ")} named '
+            raise table.error("of", f'{_show(text)}: no {"friction entry" if kind == "friction" else kind[:-1].replace("_", " ")} named '
                               f'{_show(rest)}', _suggest(rest, names) if names else "")
         return variable, rest, axis

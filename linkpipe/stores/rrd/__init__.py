@@ -173,6 +173,7 @@ def log_result(stream: rr.RecordingStream, result) -> None:
     mechanism.log_traces(stream, result)
     mechanism.log_vectors(stream, send, result)
     forces.log_forces(stream, send, result)
+    forces.log_pin_couples(stream, send, result)
     legend.log_legend(stream, result, *mechanism_bounds(result))
     series.log_series(stream, send, result)
     series.log_out_of_stroke(stream, send, result)

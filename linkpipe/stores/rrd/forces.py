@@ -19,8 +19,10 @@ values; the recording multiplies them by the one scale):
 * ``springs`` (yellow): each two-point spring's force (``spring_force``, damping included) on
   its two ends; a tension pulls them together.
 * ``reactions`` (cyan): ``ground_reaction``, the force the ground exerts at each fixed point.
-* ``friction`` (pink): a seal's friction on its cylinder's two pins, a slider's on its point
-  along the guide, opposing the motion (:func:`friction_arrows`; a pin's is a couple).
+* ``friction`` (blue): a seal's friction on its cylinder's two pins, a slider's on its point
+  along the guide, opposing the motion (:func:`friction_arrows`); a pin's is a couple, drawn as
+  an arc arrow around its pin, ``mechanism/forces/friction/<entry>/<joint>``
+  (:func:`pin_couples`).
 
 The scale makes the longest arrow of the sweep at most :data:`FORCE_FRACTION` of the mechanism's
 size, rounded so that one length unit stands for 1, 2, 2.5 or 5 times a power of ten force
@@ -30,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
@@ -38,7 +41,7 @@ import rerun as rr
 from ...cache import derived
 from . import style
 from .geometry import finite_rows, mechanism_size
-from .mechanism import path_of
+from .mechanism import path_of, send_strips
 
 #: the longest force arrow of a sweep, at most this fraction of the mechanism's size
 FORCE_FRACTION = 0.3
@@ -412,3 +415,69 @@ def _labelled(vectors: np.ndarray, scale: float, size: float) -> bool:
     with np.errstate(invalid="ignore"):
         longest = np.nanmax(np.hypot(vectors[..., 0], vectors[..., 1]), axis=1, initial=0.0)
     return bool(np.mean(longest * scale >= LABEL_FRACTION * size) >= 0.8)
+
+
+#: a pin friction's couple is drawn as an arc around its pin: this radius (fraction of the
+#: mechanism's size), sweeping up to :data:`COUPLE_SWEEP` radians at the sweep's largest torque
+COUPLE_RADIUS, COUPLE_SWEEP, COUPLE_LEAST = 0.05, 1.5 * np.pi, 0.2 * np.pi
+
+
+def pin_couples(result) -> list[tuple[str, str, np.ndarray]]:
+    """Return [(entry, joint, arc (S, n, 2))]: every pin friction's couple as an arc with a
+    head around its pin, in the sense the couple turns the pin's (first) moving body (against
+    its rotation relative to the other body or the ground), sweeping an angle proportional to
+    the entry's ``friction_force`` (its torque; an entry on several pins: their sum, drawn at
+    each) over the largest of every pin entry's, at least :data:`COUPLE_LEAST`; NaN (not drawn)
+    where the torque is zero (at rest) or unknown."""
+    if not result.forces or "friction_force" not in result.forces or result.velocity is None:
+        return []
+    from ...forces.friction import link_angular_velocity  # the one formula for a link's rate
+    entries = [(e, fr) for e, fr in enumerate(result.scene.friction) if fr.kind == "pins"]
+    if not entries:
+        return []
+    X, idx = _points(result)
+    V = result.velocity
+    mag = result.forces["friction_force"][1]
+    with np.errstate(invalid="ignore"):
+        largest = np.nanmax(np.abs(mag[:, [e for e, _ in entries]]), initial=0.0)
+    if not largest > 0:
+        return []
+    links = result.scene.links
+    a = np.array([idx[ln.points[0]] for ln in links])
+    b = np.array([idx[ln.points[1]] if len(ln.points) > 1 else idx[ln.points[0]] for ln in links])
+    model = SimpleNamespace(link_a=a, link_b=b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = link_angular_velocity(model, X, V)               # (S, n_links)
+    rho = COUPLE_RADIUS * mechanism_size(result)
+    out = []
+    for e, fr in entries:
+        torque = mag[:, e]
+        sweep = np.maximum(COUPLE_SWEEP * np.abs(torque) / largest, COUPLE_LEAST)
+        for joint in fr.joints:
+            on = [li for li, ln in enumerate(links) if joint in ln.points and len(ln.points) > 1]
+            if not on:
+                continue
+            rel = w[:, on[0]] - (w[:, on[1]] if len(on) > 1 else 0.0)
+            sense = -np.sign(rel)                            # against the relative rotation
+            t = np.linspace(0.0, 1.0, 24)
+            phi = 0.5 * np.pi + sense[:, None] * sweep[:, None] * t[None, :]   # (S, n)
+            centre = X[:, idx[joint]]
+            arc = centre[:, None, :] + rho * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+            end, tangent = arc[:, -1], sense[:, None] * np.stack(
+                [-np.sin(phi[:, -1]), np.cos(phi[:, -1])], axis=1)
+            back, side = -0.35 * rho * tangent, 0.2 * rho * _perp(tangent)
+            head = np.stack([end + back + side, end, end + back - side], axis=1)
+            strip = np.concatenate([arc, head], axis=1)      # the arc, then its head
+            blank = ~(np.isfinite(torque) & (torque != 0) & (sense != 0))
+            out.append((fr.name, joint, np.where(blank[:, None, None], np.nan, strip)))
+    return out
+
+
+def log_pin_couples(stream, send, result) -> None:
+    """``mechanism/forces/friction/<entry>/<joint>``: each pin friction's couple as an arc
+    arrow around its pin (:func:`pin_couples`), in friction's hue, labelled ``f <entry>``."""
+    for name, joint, strip in pin_couples(result):
+        send_strips(stream, send, path_of("mechanism", "forces", "friction", name, joint), strip,
+                    radii=rr.components.Radius.ui_points(2.0),
+                    colors=style.arrow_colour("friction"), labels=[f"f {name}"],
+                    show_labels=True, draw_order=46.0)

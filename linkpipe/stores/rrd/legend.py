@@ -15,7 +15,7 @@ import numpy as np
 import rerun as rr
 
 from . import style
-from .forces import force_arrows, nice_ceiling
+from .forces import force_arrows, nice_ceiling, pin_couples
 from .geometry import arrow_scales
 
 #: the 2D view's drawing area in logical pixels at a 1400x900 window (its column share 3 of 5,
@@ -44,6 +44,8 @@ def rows(result) -> list[Row]:
     if scale:
         kinds = dict.fromkeys(kind for kind, *_ in arrows)
         out += [Row(k.legend or k.name, k.colour) for k in kinds]
+        if pin_couples(result) and not any(k.name == "friction" for k in kinds):
+            out.append(Row("friction", tuple(style.arrow_colour("friction"))))  # couples only
         out.append(Row("", style.LEGEND, 1.0 / scale))         # the force scale: F set below
     if result.scene.outputs.vectors:   # scale bars: "velocity 5 m/s" once sized
         for quantity, s in arrow_scales(result).items():
