@@ -8,7 +8,9 @@ latency     a logger process writes configs/logged/fourbar_live.toml's rig at 1 
             --serve; a row's latency is from its flush to the end of the block that holds it:
             written to the .h5 (flushed, visible to SWMR readers) and sent to the gRPC server
             (stream flushed). It includes the 32 rows (32 ms at 1 kHz) each row waits for its
-            spline to settle (docs/follow.md). Target: p95 <= 100 ms.
+            spline to settle (docs/follow.md). Target: p95 <= 100 ms. Beside it: follow's
+            process CPU seconds over its wall seconds (the recording's thread included), per
+            block stored (the steadier figure on a shared machine).
 throughput  the same four-bar (gravity and inertia forces, two measurements with alarms)
             over a log of --rows rows written beforehand, followed from its first row to the
             idle end, BLAS on one thread (as run's default), no viewer: rows / wall seconds from
