@@ -2,6 +2,7 @@
 and kept beside it (never set on it) until it is garbage-collected. A leaf: anyone may import it."""
 from __future__ import annotations
 
+import threading
 import weakref
 
 _DERIVED: dict[tuple[int, str], object] = {}
@@ -10,6 +11,7 @@ _SHARED: dict[tuple, object] = {}
 #: the content keys' entries kept (a fit's recent trials, follow's one model: a few suffice)
 SHARED_KEEP = 32
 _MISSING = object()
+_SHARED_LOCK = threading.Lock()  # a study's worker threads derive too
 
 
 def derived(owner, name: str, build, same=None):
@@ -20,13 +22,15 @@ def derived(owner, name: str, build, same=None):
     block of one scene, a fit per trial; the last :data:`SHARED_KEEP` are kept)."""
     key = (id(owner), name)
     if key not in _DERIVED:
-        value = _MISSING if same is None else _SHARED.pop((same, name), _MISSING)
+        with _SHARED_LOCK:
+            value = _MISSING if same is None else _SHARED.pop((same, name), _MISSING)
         if value is _MISSING:
             value = build(owner)
         if same is not None:
-            _SHARED[same, name] = value  # newest last
-            while len(_SHARED) > SHARED_KEEP:
-                _SHARED.pop(next(iter(_SHARED)))
+            with _SHARED_LOCK:
+                _SHARED[same, name] = value  # newest last
+                while len(_SHARED) > SHARED_KEEP:
+                    _SHARED.pop(next(iter(_SHARED)))
         _DERIVED[key] = value
         weakref.finalize(owner, _DERIVED.pop, key, None)
     return _DERIVED[key]

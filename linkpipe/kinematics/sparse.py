@@ -14,6 +14,8 @@ serves it, by declaration (``engine`` returns None).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..model import Model, content_key, derived
@@ -29,6 +31,7 @@ from .affine import affine_coefficients, relative_entries
 _STRUCTURAL = ("blocks", "entry_of", "col_entries", "_relative_slots", "_direct")
 _STRUCTURES: dict[tuple, dict] = {}
 STRUCTURES_KEPT = 16
+_STRUCTURES_LOCK = threading.Lock()  # a study's worker threads build engines too
 
 
 class EngineUnavailable(Exception):
@@ -60,9 +63,10 @@ class Engine:
         if known is None:
             self._blocks()
             self._check()
-            _STRUCTURES[key] = {name: getattr(self, name) for name in _STRUCTURAL}
-            while len(_STRUCTURES) > STRUCTURES_KEPT:
-                _STRUCTURES.pop(next(iter(_STRUCTURES)))
+            with _STRUCTURES_LOCK:
+                _STRUCTURES[key] = {name: getattr(self, name) for name in _STRUCTURAL}
+                while len(_STRUCTURES) > STRUCTURES_KEPT:
+                    _STRUCTURES.pop(next(iter(_STRUCTURES)))
         else:  # the same rows on other numbers (a fit's trial): its order and checked form
             self.__dict__.update(known)
 
