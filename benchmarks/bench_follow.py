@@ -8,7 +8,9 @@ latency     a logger process writes configs/logged/fourbar_live.toml's rig at 1 
             --serve; a row's latency is from its flush to the end of the block that holds it:
             written to the .h5 (flushed, visible to SWMR readers) and sent to the gRPC server
             (stream flushed). It includes the 32 rows (32 ms at 1 kHz) each row waits for its
-            spline to settle (docs/follow.md). Target: p95 <= 100 ms.
+            spline to settle (docs/follow.md). Target: p95 <= 100 ms. Beside it: follow's
+            process CPU seconds over its wall seconds (the recording's thread included), per
+            block stored (the steadier figure on a shared machine).
 throughput  the same four-bar (gravity and inertia forces, two measurements with alarms)
             over a log of --rows rows written beforehand, followed from its first row to the
             idle end, BLAS on one thread (as run's default), no viewer: rows / wall seconds from
@@ -79,13 +81,17 @@ def latency(seconds: float, port: int) -> bool:
         code = STAMPED_LOGGER.format(root=str(ROOT), path=str(log), rate=1000.0, seconds=seconds)
         writer = subprocess.Popen([sys.executable, "-c", code])
         at = {"h5": {}, "viewer": {}}  # step -> wall time its block was in the .h5 / sent
+        blocks = {"h5": 0, "viewer": 0}
 
         def on_block(part, where):
             now = time.time()
             at[where].update(dict.fromkeys(part.step_numbers.tolist(), now))
+            blocks[where] += 1
 
+        c0, w0 = time.process_time(), time.perf_counter()
         done = follow(str(scene), folder / "out", serve=port > 0, port=port or None, idle=2.0,
                       say=lambda text: None, on_block=on_block)
+        cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         writer.wait()
         stamps = np.array(json.loads(pathlib.Path(str(log) + ".stamps.json").read_text()))
     # live rows: flushed after follow's first block was stored (before it: its start-up,
@@ -104,6 +110,10 @@ def latency(seconds: float, port: int) -> bool:
         print(f"latency  1 kHz, {len(steps):,} live rows ({done.rows:,} stored), flush -> {what}: "
               f"p50 {p50:.1f} ms, p95 {p95:.1f} ms, p99 {p99:.1f} ms, max {lat.max() * 1e3:.1f} ms "
               f"(24 ms of it the settling window); target p95 <= 100 ms: {_verdict(p95 <= 100)}")
+    print(f"latency  follow's process: {cpu:.2f} s CPU in {wall:.2f} s wall ({cpu / wall:.0%} of "
+          f"a core; the logger apart), {blocks['h5']:,} blocks to the .h5 ("
+          f"{1e3 * cpu / max(blocks['h5'], 1):.2f} ms CPU per block, the recording's thread "
+          f"included: {blocks['viewer']:,} sends)")
     print(f"latency  start-up: the first row reached the .h5 {first_lat:.2f} s after its flush "
           "(follow started with the logger: imports, the scene, the first solve)")
     return ok

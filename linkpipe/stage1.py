@@ -12,7 +12,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import kinematics as kin
-from .model import check_mobility
+from .cache import derived
+from .model import check_mobility, content_key
 from .model import driver_scale as model_driver_scale
 from .model.drive import driver_motion as drive_motion
 from .result import Motion
@@ -25,6 +26,10 @@ def mobility_of(model):
     with one BLAS thread whatever ``threads`` says: its dense SVD and least squares of a few
     hundred unknowns gain nothing from threads and, multi-threaded on a busy machine, were
     measured to stall for up to a second (docs/performance.md)."""
+    return derived(model, "mobility", _mobility, content_key(model))  # a model's numbers alone
+
+
+def _mobility(model):
     if model.n_q < kin.SPARSE_FROM:
         return check_mobility(model)
     with threadpool_limits(limits=1, user_api="blas"):

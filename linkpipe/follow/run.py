@@ -303,11 +303,11 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         + f" into {path}")
 
     def store(part) -> None:
+        if recording is not None:  # first: its thread logs the block while the file is written
+            recording.add(part)
         writer.add(part)
         if on_block is not None:
             on_block(part, "h5")
-        if recording is not None:
-            recording.add(part)
         reports.block(part)
         for k, v in part.seconds.items():
             seconds[k] = seconds.get(k, 0.0) + v

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cache import derived
-from ..model import Model
+from ..model import Model, content_key
 from ..workers import for_chunks
 from .drawing import assembled_drawing
 from .linalg import CHUNK
@@ -89,7 +89,7 @@ def drawn_link_angles(model: Model) -> np.ndarray:
     """Each link's direction (first to second point) in the drawing, in (-pi, pi] (n_links,):
     the drawing assembled at its own driver values where it assembles there (its points may
     be a guess), else as drawn. The reference a link's whole turns are taken from."""
-    return derived(model, "drawn_link_angles", _drawn_link_angles)
+    return derived(model, "drawn_link_angles", _drawn_link_angles, content_key(model))
 
 
 def _drawn_link_angles(model: Model) -> np.ndarray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cache import derived
-from ..model import Model
+from ..model import Model, content_key
 from .roots import newton
 from .step import _step_kernels
 
@@ -16,7 +16,7 @@ def assembled_drawing(model: Model) -> np.ndarray | None:
     or drivers, or where the drawing does not assemble at its own driver values (the start is
     then solved at the sweep's first values directly). The scene's "start configuration" where
     its points are a guess: a spring's ``preload`` is its tension here."""
-    return derived(model, "assembled_drawing", _assembled_drawing)
+    return derived(model, "assembled_drawing", _assembled_drawing, content_key(model))
 
 
 def _assembled_drawing(model: Model) -> np.ndarray | None:

@@ -14,12 +14,24 @@ serves it, by declaration (``engine`` returns None).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
-from ..model import Model, derived
+from ..model import Model, content_key, derived
 from ..model import equations as eq
 from .graph import _components, _matching
 from .affine import affine_coefficients, relative_entries
+
+
+#: what an engine's rows' structure alone decides (:meth:`Engine._blocks`; the affine form
+#: :meth:`Engine._check` confirms is the rows' kinds', whatever their numbers), kept per
+#: structure for the next model with the same rows on other numbers (a fit's trials): those
+#: engines read their coefficients ``C`` off their own model and take these as they are
+_STRUCTURAL = ("blocks", "entry_of", "col_entries", "_relative_slots", "_direct")
+_STRUCTURES: dict[tuple, dict] = {}
+STRUCTURES_KEPT = 16
+_STRUCTURES_LOCK = threading.Lock()  # a study's worker threads build engines too
 
 
 class EngineUnavailable(Exception):
@@ -46,8 +58,26 @@ class Engine:
         self._terms = [(float(col[0]), [(int(f), float(col[f])) for f in np.flatnonzero(col) if f > 0])
                        for col in self.C.T]  # per entry: constant, [(feature, coefficient)]
         self._rows_setup()
-        self._blocks()
-        self._check()
+        key = self._structure_key()
+        known = _STRUCTURES.get(key)
+        if known is None:
+            self._blocks()
+            self._check()
+            with _STRUCTURES_LOCK:
+                _STRUCTURES[key] = {name: getattr(self, name) for name in _STRUCTURAL}
+                while len(_STRUCTURES) > STRUCTURES_KEPT:
+                    _STRUCTURES.pop(next(iter(_STRUCTURES)))
+        else:  # the same rows on other numbers (a fit's trial): its order and checked form
+            self.__dict__.update(known)
+
+    def _structure_key(self) -> tuple:
+        """Everything the block-triangular order and the affine check read: the rows' kinds
+        and points, the unknowns, the entries' pattern (numbers left out)."""
+        md = self.model
+        arrays = (md.fixed, md.dist_a, md.dist_b, md.loc_a, md.loc_b, md.loc_p, md.sfix_p,
+                  md.smov_p, md.smov_d, md.smov_e, md.drv_kind, md.drv_a, md.drv_b, md.drv_axis,
+                  md.drv_c, md.drv_d, self.rows, self.cols)
+        return (md.n_rows, md.n_q) + tuple(a.tobytes() for a in arrays)
 
     # ------------------------------------------------------------------ the affine map
     def _coefficients(self):
@@ -490,13 +520,13 @@ def _dense_block(E: np.ndarray, inner) -> np.ndarray:
 
 def engine(model: Model) -> Engine | None:
     """Return the model's engine (built once per model), or None when it has none."""
-    return derived(model, "engine", _build_engine)[0]
+    return derived(model, "engine", _build_engine, content_key(model))[0]
 
 
 def no_engine_reason(model: Model) -> str:
     """Why the model has no sparse engine ("" when it has one): a declared path, not a
     silent fallback; the run's ``solver_note`` says it."""
-    return derived(model, "engine", _build_engine)[1]
+    return derived(model, "engine", _build_engine, content_key(model))[1]
 
 
 def _build_engine(model: Model) -> tuple[Engine | None, str]:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import Model, derived
+from ..model import Model, content_key, derived
 from .linalg import EXACT_WITHIN, estimated_condition, lin_solve
 from .sparse import engine
 
@@ -204,4 +204,5 @@ def _parity(perm: np.ndarray) -> float:
 
 def step_lu(model: Model) -> StepLU | None:
     """The model's :class:`StepLU` (built once per model), or None where it does not use one."""
-    return derived(model, "step_lu", lambda md: StepLU(md) if uses_sparse(md) else None)
+    return derived(model, "step_lu", lambda md: StepLU(md) if uses_sparse(md) else None,
+                   content_key(model))

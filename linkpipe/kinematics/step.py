@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import Model, derived
+from ..model import Model, content_key, derived
 from ..model import equations as eq
 from .linalg import lin_solve
 from .newton import ONE, iterate
@@ -106,4 +106,4 @@ class _Step:
 
 def _step_kernels(model: Model) -> _Step:
     """Return the model's one-step kernels (built once per model, kept beside it)."""
-    return derived(model, "step_kernels", _Step)
+    return derived(model, "step_kernels", _Step, content_key(model))

@@ -9,7 +9,7 @@ drivers, lengths for coordinate drivers). The constraint rows themselves are wri
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -301,6 +301,25 @@ def build_model(scene: Scene) -> Model:
         dist_link=ints(dist["link"]), loc_link=ints(loc["link"]), rows=eq.rows_of(**arrays),
         extent=float(np.abs(X0).max()) if X0.size else 0.0,
     )
+
+
+def content_key(model: Model) -> tuple:
+    """A key of everything that what is derived from a model alone reads (the sparse engine,
+    the one-step kernels, the assembled drawing, the mobility): every array and number of the
+    model and the scene's ``[solver]`` table, not the rest of the scene (its drivers' values,
+    logs, measurements). Two models equal in it give the same derived objects to the last bit
+    (:func:`linkpipe.cache.derived`'s ``same``); computed once per model."""
+    from ..cache import derived
+
+    def build(md: Model) -> tuple:
+        parts = [repr(md.scene.solver), md.point_names, float(md.size), float(md.extent)]
+        for f in fields(md):
+            value = getattr(md, f.name)
+            if isinstance(value, np.ndarray):
+                parts.append((f.name, value.dtype.str, value.shape, value.tobytes()))
+        return tuple(parts)
+
+    return derived(model, "content_key", build)
 
 
 def mechanism_size(scene: Scene, X0: np.ndarray):

@@ -194,6 +194,10 @@ class GrowingWriter:
         for name, (dims, data, units) in self.flags.items():
             if name in self._file and (name not in before or (before[name] != data).any()):
                 self._file[name][...] = data
+        # the variables on disk before ``step`` grows: HDF5's metadata cache may write a
+        # dataset's new shape in any order at a flush, and a reader takes ``step`` as the rows
+        # it may read (blocks come faster than a flush's order could be left to chance)
+        self._file.flush()
         step = self._data["step"]
         step.resize((hi,))
         step[lo:hi] = steps
