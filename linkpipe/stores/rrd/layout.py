@@ -2,9 +2,11 @@
 plots, read against the quantity that moves the scene.
 
 Laid out for a 1400x900 window and up (1920x1080): the mechanism takes 11 of 20 columns, the
-plots the rest, one row each; the solver's series are a second tab beside the plots (collapsed
-until asked for). The time panel opens on ``time`` for a timed or logged scene (``[time]``),
-on the first driver's value for a sweep (``crank [degree]``), else on ``time`` or ``step``.
+plots the rest, one row each up to :data:`MAX_ROWS` plots (more: two columns, so each keeps the
+height its axis numbers need); the solver's series are a second tab beside the plots (collapsed
+until asked for). The time panel opens on ``time`` for a timed, logged or dynamics scene
+(``[time]``, ``[dynamics]``), on the first driver's value for a sweep (``crank [degree]``), else
+on ``time`` or ``step``.
 """
 from __future__ import annotations
 
@@ -23,6 +25,9 @@ from ...output_units import entry_units
 
 #: the mechanism's share of the window's width (of 20)
 COLUMNS = (11, 9)
+#: the most plots stacked in one column: at 900 px a sixth of the column (~130 px) shows no
+#: number on its y axis (seen on the dump truck with friction's six plots); more go in two
+MAX_ROWS = 4
 #: the plots' x axis: the whole sweep and this fraction of it either side
 X_PAD = 0.03
 
@@ -64,9 +69,13 @@ def mechanism_title(result) -> str:
 
 
 def active_timeline(result) -> str:
-    """The timeline the plots open on: ``time`` for a timed or logged scene, the first driver's
-    value for a sweep (:func:`.columns.driver_timelines`), else ``time`` or ``step``."""
-    if result.time is not None and result.scene.time is not None:
+    """The timeline the plots open on: ``time`` for a timed, logged or forward-dynamics scene
+    (``[time]`` or ``[dynamics]``: its motion is the answer, the driver's value one of its
+    outputs), the first driver's value for a sweep (:func:`.columns.driver_timelines`), else
+    ``time`` or ``step``."""
+    scene = result.scene
+    if result.time is not None and (scene.time is not None
+                                    or getattr(scene, "dynamics", None) is not None):
         return "time"
     timelines = driver_timelines(result)
     if timelines:
@@ -96,6 +105,14 @@ def x_range(result, timeline: str):
         start = rr.TimeRangeBoundary.absolute(seq=int(values.min()) - pad)
         end = rr.TimeRangeBoundary.absolute(seq=int(values.max()) + pad)
     return rrb.TimeAxis(view_range=rr.TimeRange(start=start, end=end))
+
+
+def plot_column(plots: list) -> rrb.Container:
+    """The ``plots`` tab: one column of up to :data:`MAX_ROWS` views, else a grid of two
+    columns (in reading order, left to right)."""
+    if len(plots) <= MAX_ROWS:
+        return rrb.Vertical(*plots, name="plots")
+    return rrb.Grid(*plots, grid_columns=2, name="plots")
 
 
 def blueprint(result) -> rrb.Blueprint:
@@ -140,7 +157,7 @@ def blueprint(result) -> rrb.Blueprint:
     solver += [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]",
                                   plot_legend=rrb.PlotLegend(visible=False), **axis)
                for name in SOLVER]
-    right = rrb.Tabs(rrb.Vertical(*plots, name="plots"), rrb.Vertical(*solver, name="solver"),
+    right = rrb.Tabs(plot_column(plots), rrb.Vertical(*solver, name="solver"),
                      active_tab=0) if plots else rrb.Vertical(*solver, name="solver")
     return rrb.Blueprint(
         rrb.Horizontal(mechanism, right, column_shares=list(COLUMNS)),
