@@ -180,3 +180,25 @@ def test_a_crank_turning_many_times_is_wrapped_and_the_computed_line_shows(tmp_p
         (computed,) = rec.static(f"/plots/measurements/{m}/computed", "SeriesLines:colors")
         assert int(measured) & 0xFF == rrd.series.MEASURED_ALPHA < 255
         assert int(computed) & 0xFF == 255
+
+
+def test_a_crowd_of_labels_and_legend_entries_is_left_to_hover(tmp_path):
+    """The 40-bar chain (IFToMM A02): 82 points and 81 links. Its point labels drew as a smear
+    ("BBBB AAAA"), its weights' and reactions' labels likewise, and its link-angle legend of
+    81 entries covered the plot: past style.CROWD labels of one kind and MAX_LEGEND entries
+    they are hidden (logged: hover shows them). The crank-rocker keeps all of them."""
+    result = solve_scene(str(CONFIGS / "dynamics" / "n_fourbar_a02.toml"))
+    rec = Recording(_write(result, tmp_path / "chain"))
+    assert len(result.point_names) > style.CROWD
+    assert list(rec.static("/mechanism/points", "Points2D:show_labels")) == [False]
+    weights = [e for e in rec.entities if e.startswith("/mechanism/forces/weights/")]
+    assert len(weights) > style.CROWD
+    for e in weights[:3]:
+        assert list(rec.static(e, "Arrows2D:show_labels")) == [False]
+    assert rec.legends()["link angle [deg]"] is False
+    assert rec.legends()["input force [N*m]"] is True
+    small = Recording(_write(solve_scene(str(CONFIGS / "fourbar_crank_rocker.toml")),
+                             tmp_path / "small"))
+    assert list(small.static("/mechanism/points", "Points2D:show_labels")) == [True]
+    assert all(small.legends()[v] for v in small.legends() if not v.startswith(("residual",
+                                                                               "iterations")))

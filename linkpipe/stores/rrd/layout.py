@@ -28,6 +28,9 @@ COLUMNS = (11, 9)
 #: the most plots stacked in one column: at 900 px a sixth of the column (~130 px) shows no
 #: number on its y axis (seen on the dump truck with friction's six plots); more go in two
 MAX_ROWS = 4
+#: the most series a plot's legend lists: the 40-bar chain's 80 link angles' legend covered
+#: the plot (its entries stay on hover)
+MAX_LEGEND = 8
 #: the plots' x axis: the whole sweep and this fraction of it either side
 X_PAD = 0.03
 
@@ -142,8 +145,10 @@ def blueprint(result) -> rrb.Blueprint:
             entries = [path_of("plots", shown, label)
                        for label, u in zip(labels[var.dims[1]], units)
                        if u == unit and path_of("plots", name, label) not in left_out]
+            # a legend of more entries than MAX_LEGEND covers the curves: hover names them
+            shown_legend = legend if len(entries) <= MAX_LEGEND else rrb.PlotLegend(visible=False)
             plots.append(rrb.TimeSeriesView(origin=f"plots/{shown}", name=f"{title} [{unit}]",
-                                            contents=entries, plot_legend=legend, **axis))
+                                            contents=entries, plot_legend=shown_legend, **axis))
     if result.measurements:
         plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
                                      name=f"{name}: computed and measured [{unit}]",
