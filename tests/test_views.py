@@ -129,6 +129,8 @@ def test_more_than_four_plots_go_in_two_columns(tmp_path):
                                                                        "iterations"))]
     assert len(plots) == 6 > rrd.layout.MAX_ROWS
     assert {"friction force [N]", "friction force [N*m]", "stroke margin [m]"} <= set(plots)
+    # half a column wide: the measurement's title is short (its legend says what is which)
+    assert "cylinder_force [N]" in plots
     container = rec.containers()["plots"]
     assert [ContainerKind(int(k)) for k in container["container_kind"]] == [ContainerKind.Grid]
     assert [int(c) for c in container["grid_columns"]] == [2]
@@ -196,9 +198,37 @@ def test_a_crowd_of_labels_and_legend_entries_is_left_to_hover(tmp_path):
     for e in weights[:3]:
         assert list(rec.static(e, "Arrows2D:show_labels")) == [False]
     assert rec.legends()["link angle [deg]"] is False
-    assert rec.legends()["input force [N*m]"] is True
     small = Recording(_write(solve_scene(str(CONFIGS / "fourbar_crank_rocker.toml")),
                              tmp_path / "small"))
     assert list(small.static("/mechanism/points", "Points2D:show_labels")) == [True]
     assert all(small.legends()[v] for v in small.legends() if not v.startswith(("residual",
                                                                                "iterations")))
+
+
+def test_a_dynamics_run_that_ends_early_fills_its_plots_and_a_free_driver_has_no_force_plot(
+        tmp_path):
+    """The falling lever's tether runs out at 0.328 s of its 1 s: the plots' time axis spans
+    the assembled instants (3 % either side), not the NaN tail; its driver moves freely (input
+    force 0 at every step), so no flat input-force plot (the series stays logged)."""
+    result = solve_scene(str(CONFIGS / "dynamics" / "falling_lever.toml"))
+    assembled = np.isfinite(result.position).all(axis=(1, 2))
+    t_end = float(result.time[assembled][-1])
+    assert 0.3 < t_end < 0.35 and not assembled[-1]
+    rec = Recording(_write(result, tmp_path / "lever"))
+    assert not any(v.startswith("input force") for v in rec.views())
+    assert "/plots/input_force/fall" in rec.entities
+    assert "link angle [deg]" in rec.views()
+    axis = rrd.layout.x_range(result, "time")
+    # the view's range as the blueprint holds it, seconds
+    (start, end) = _time_range_seconds(axis)
+    np.testing.assert_allclose([start, end], [-0.03 * t_end, 1.03 * t_end], rtol=1e-6)
+    goal = solve_scene(str(CONFIGS / "basketball_goal.toml"))    # a driven sweep keeps its plot
+    assert any(v.startswith("input force") for v in
+               Recording(_write(goal, tmp_path / "goal")).views())
+
+
+def _time_range_seconds(axis) -> tuple[float, float]:
+    """(start, end) in seconds of a TimeAxis's absolute view range."""
+    arrow = axis.view_range.as_arrow_array()
+    values = arrow.to_pylist()[0]
+    return values["start"] / 1e9, values["end"] / 1e9       # Absolute, nanoseconds

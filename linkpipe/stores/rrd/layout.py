@@ -90,8 +90,11 @@ def x_range(result, timeline: str):
     """The whole sweep on ``timeline``, for the plots' x axis (else the viewer may open on a
     window around its cursor)."""
     if timeline == "time":
+        # the instants that assembled: a dynamics run that ended early (the falling lever's
+        # tether running out at 0.33 s of 1 s) is NaN after, and would fill a third of the plot
         t = np.asarray(result.time, dtype=float)
-        t = t[np.isfinite(t)]
+        assembled = np.isfinite(result.position).all(axis=(1, 2))
+        t = t[np.isfinite(t) & assembled] if assembled.any() else t[np.isfinite(t)]
         if not len(t):
             return None
         pad = X_PAD * float(t.max() - t.min())
@@ -134,6 +137,8 @@ def blueprint(result) -> rrb.Blueprint:
     for name in PLOTTED:
         if name not in variables:
             continue
+        if name == "input_force" and not np.nanmax(np.abs(variables[name].data), initial=0.0):
+            continue   # drivers that move freely ([dynamics], no force): a flat 0 says nothing
         var = variables[name]
         units = entry_units(var) if len(var.dims) == 2 else [var.units]
         shown, title = name, name.replace("_", " ")
@@ -150,8 +155,12 @@ def blueprint(result) -> rrb.Blueprint:
             plots.append(rrb.TimeSeriesView(origin=f"plots/{shown}", name=f"{title} [{unit}]",
                                             contents=entries, plot_legend=shown_legend, **axis))
     if result.measurements:
+        # in a half-width grid cell "cylinder_force: computed and measured [N]" was cut; its
+        # legend says computed and measured
+        grid = len(plots) + len(result.measurements["names"]) > MAX_ROWS
         plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
-                                     name=f"{name}: computed and measured [{unit}]",
+                                     name=(f"{name} [{unit}]" if grid else
+                                           f"{name}: computed and measured [{unit}]"),
                                      plot_legend=legend, **axis)
                   for name, unit in zip(result.measurements["names"],
                                         result.measurements["units"])]
