@@ -187,7 +187,8 @@ def test_a_crank_turning_many_times_is_wrapped_and_the_computed_line_shows(tmp_p
 def test_a_crowd_of_labels_and_legend_entries_is_left_to_hover(tmp_path):
     """The 40-bar chain (IFToMM A02): 82 points and 81 links. Its point labels drew as a smear
     ("BBBB AAAA"), its weights' and reactions' labels likewise, and its link-angle legend of
-    81 entries covered the plot: past style.CROWD labels of one kind and MAX_LEGEND entries
+    81 entries covered the plot (Andrews' 7 a third of it): past style.CROWD labels of one kind
+    and MAX_LEGEND entries
     they are hidden (logged: hover shows them). The crank-rocker keeps all of them."""
     result = solve_scene(str(CONFIGS / "dynamics" / "n_fourbar_a02.toml"))
     rec = Recording(_write(result, tmp_path / "chain"))
@@ -198,6 +199,9 @@ def test_a_crowd_of_labels_and_legend_entries_is_left_to_hover(tmp_path):
     for e in weights[:3]:
         assert list(rec.static(e, "Arrows2D:show_labels")) == [False]
     assert rec.legends()["link angle [deg]"] is False
+    andrews = solve_scene(str(CONFIGS / "dynamics" / "andrews_squeezer.toml"))  # 7 links
+    assert len(andrews.link_names) > rrd.layout.MAX_LEGEND
+    assert Recording(_write(andrews, tmp_path / "a")).legends()["link angle [deg]"] is False
     small = Recording(_write(solve_scene(str(CONFIGS / "fourbar_crank_rocker.toml")),
                              tmp_path / "small"))
     assert list(small.static("/mechanism/points", "Points2D:show_labels")) == [True]

@@ -28,9 +28,9 @@ COLUMNS = (11, 9)
 #: the most plots stacked in one column: at 900 px a sixth of the column (~130 px) shows no
 #: number on its y axis (seen on the dump truck with friction's six plots); more go in two
 MAX_ROWS = 4
-#: the most series a plot's legend lists: the 40-bar chain's 80 link angles' legend covered
-#: the plot (its entries stay on hover)
-MAX_LEGEND = 8
+#: the most series a plot's legend lists: the 40-bar chain's 81 link angles' legend covered
+#: the plot, Andrews' squeezer's 7 a third of it at 1400x900 (the entries stay on hover)
+MAX_LEGEND = 6
 #: the plots' x axis: the whole sweep and this fraction of it either side
 X_PAD = 0.03
 
