@@ -202,6 +202,9 @@ def test_a_crowd_of_labels_and_legend_entries_is_left_to_hover(tmp_path):
     andrews = solve_scene(str(CONFIGS / "dynamics" / "andrews_squeezer.toml"))  # 7 links
     assert len(andrews.link_names) > rrd.layout.MAX_LEGEND
     assert Recording(_write(andrews, tmp_path / "a")).legends()["link angle [deg]"] is False
+    jansen = solve_scene(str(CONFIGS / "jansen.toml"))   # 7 links, its only plot: full height
+    assert len(jansen.link_names) > rrd.layout.MAX_LEGEND
+    assert Recording(_write(jansen, tmp_path / "j")).legends()["link angle [deg]"] is True
     small = Recording(_write(solve_scene(str(CONFIGS / "fourbar_crank_rocker.toml")),
                              tmp_path / "small"))
     assert list(small.static("/mechanism/points", "Points2D:show_labels")) == [True]

@@ -29,7 +29,8 @@ COLUMNS = (11, 9)
 #: number on its y axis (seen on the dump truck with friction's six plots); more go in two
 MAX_ROWS = 4
 #: the most series a plot's legend lists: the 40-bar chain's 81 link angles' legend covered
-#: the plot, Andrews' squeezer's 7 a third of it at 1400x900 (the entries stay on hover)
+#: the plot, Andrews' squeezer's 7 a third of it at 1400x900 (the entries stay on hover);
+#: twice as many in a plot that has the column to itself
 MAX_LEGEND = 6
 #: the plots' x axis: the whole sweep and this fraction of it either side
 X_PAD = 0.03
@@ -150,10 +151,14 @@ def blueprint(result) -> rrb.Blueprint:
             entries = [path_of("plots", shown, label)
                        for label, u in zip(labels[var.dims[1]], units)
                        if u == unit and path_of("plots", name, label) not in left_out]
-            # a legend of more entries than MAX_LEGEND covers the curves: hover names them
-            shown_legend = legend if len(entries) <= MAX_LEGEND else rrb.PlotLegend(visible=False)
-            plots.append(rrb.TimeSeriesView(origin=f"plots/{shown}", name=f"{title} [{unit}]",
-                                            contents=entries, plot_legend=shown_legend, **axis))
+            plots.append(dict(origin=f"plots/{shown}", name=f"{title} [{unit}]",
+                              contents=entries))
+    # a legend of more entries than fit covers the curves (hover names them): MAX_LEGEND in a
+    # column of several plots, twice that in a plot of its own (Jansen's 7 links: full height)
+    room = MAX_LEGEND * (2 if len(plots) + len(result.measurements["names"] if
+                                                   result.measurements else []) == 1 else 1)
+    plots = [rrb.TimeSeriesView(**view, plot_legend=legend if len(view["contents"]) <= room
+                                else rrb.PlotLegend(visible=False), **axis) for view in plots]
     if result.measurements:
         # in a half-width grid cell "cylinder_force: computed and measured [N]" was cut; its
         # legend says computed and measured
