@@ -35,7 +35,8 @@ def write_report(h5_path, out_path=None) -> pathlib.Path:
     h5_path = pathlib.Path(h5_path)
     out = pathlib.Path(out_path) if out_path else h5_path.with_suffix(".html")
     root, variables = read_plain(h5_path)
-    page = (_study_page if "variant" in variables else _run_page)(h5_path, root, variables)
+    page = (_optimize_page if "evaluation" in variables else
+            _study_page if "variant" in variables else _run_page)(h5_path, root, variables)
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(page, encoding="utf-8")
     os.replace(tmp, out)
@@ -138,8 +139,9 @@ def _headline(counts, n_ok: int, n: int) -> str:
 
 
 def _axis(variables, scene: dict, root: dict):
-    """(x (S,), its label): time for a timed scene, else the first driver's value, else step."""
-    if "time" in scene and "time" in variables:
+    """(x (S,), its label): time for a timed or forward-dynamics scene (``[time]``,
+    ``[dynamics]``), else the first driver's value, else step."""
+    if ("time" in scene or "dynamics" in scene) and "time" in variables:
         return np.asarray(variables["time"]["data"], float), f"time [{_unit(variables, 'time')}]"
     if "driver_value" in variables:
         names = _labels(variables, "driver")
@@ -176,7 +178,12 @@ def _run_page(h5_path, root, variables) -> str:
     if "position" in variables:
         body.append("<h2>The mechanism</h2>")
         body.append(_svg(_poses(plt, variables, scene, root)))
-    if "input_force" in variables:
+    free = ("input_force" in variables
+            and not np.nanmax(np.abs(variables["input_force"]["data"]), initial=0.0))
+    if free:   # a [dynamics] driver with no force: a plot of the Lagrange check's rounding
+        body.append("<h2>Input force</h2><p>None: every driver moves freely (an input force "
+                    "of 0 at every step).</p>")
+    elif "input_force" in variables:
         body.append("<h2>Input force</h2>")
         body.append(_svg(_lines(plt, x, xlabel, variables, "input_force", "driver",
                                 "input force", lagrange=True, names=_input_names(scene))))
@@ -184,6 +191,21 @@ def _run_page(h5_path, root, variables) -> str:
         body.append("<h2>Springs</h2>")
         body.append(_svg(_lines(plt, x, xlabel, variables, "spring_force", "spring",
                                 "spring force (tension > 0)")))
+    if "dynamics" in scene and "driver_value" in variables:
+        body.append("<h2>Motion</h2>")
+        body.append(_svg(_lines(plt, x, xlabel, variables, "driver_value", "driver",
+                                "driver's value")))
+        if "energy_error" in variables:
+            body.append(_svg(_single(plt, x, xlabel, variables, "energy_error",
+                                     "energy error (energy − initial − work)")))
+    if "friction_force" in variables:
+        body.append("<h2>Friction</h2>")
+        body.append(_svg(_lines(plt, x, xlabel, variables, "friction_force", "friction",
+                                "friction force")))
+    if "stroke_margin" in variables:
+        body.append("<h2>Stroke margin</h2>")
+        body.append(_svg(_lines(plt, x, xlabel, variables, "stroke_margin", "stroke",
+                                "stroke margin (< 0: out of stroke)")))
     if "measured" in variables:
         body.append("<h2>Measured against computed</h2>")
         body.append(_svg(_measured(plt, x, xlabel, variables)))
@@ -322,29 +344,48 @@ def _outline(xy: np.ndarray) -> np.ndarray:
 
 
 def _lines(plt, x, xlabel, variables, name, dim, title, lagrange=False, names=None):
+    """One curve per column of ``name`` against ``x``; columns in different units (a slider's
+    friction force in N beside a hinge's torque in N*m) each on an axis of their own, one above
+    the other; coinciding columns one curve, said so in its legend entry."""
     Y = np.asarray(variables[name]["data"], float)
     labels = [(names or {}).get(label, label) for label in _labels(variables, dim)]
     units = str(variables[name]["attrs"].get(f"{dim}_units") or _unit(variables, name)).split(",")
+    units = [units[j] if j < len(units) else units[0] for j in range(len(labels))]
+    groups = list(dict.fromkeys(units))
+    fig, axes = plt.subplots(len(groups), 1, figsize=(WIDE[0], WIDE[1] * len(groups)),
+                             squeeze=False)
+    for ax, unit in zip(axes[:, 0], groups):
+        drawn, lines = [], []
+        for j, label in enumerate(labels):
+            if units[j] != unit:
+                continue
+            same = [k for k in drawn if np.allclose(Y[:, k], Y[:, j], equal_nan=True,
+                                                      rtol=1e-6, atol=1e-12)]
+            if same:  # one curve, said once
+                line = lines[drawn.index(same[0])]
+                line.set_label(f"{line.get_label()} = {label} (coincide)")
+                continue
+            (line,) = ax.plot(x, Y[:, j], lw=1.6, label=label)
+            drawn.append(j)
+            lines.append(line)
+        if lagrange and f"{name}_lagrange" in variables:
+            L = np.asarray(variables[f"{name}_lagrange"]["data"], float)
+            for j in drawn:
+                ax.plot(x, L[:, j], ls=":", color="k", lw=1.0,
+                        label="Lagrange multipliers (check)" if j == drawn[0] else None)
+        ax.set_ylabel(f"{title} [{unit}]")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel(xlabel)
+    return fig
+
+
+def _single(plt, x, xlabel, variables, name, title):
     fig, ax = plt.subplots(figsize=WIDE)
-    drawn = []
-    for j, label in enumerate(labels):
-        same = [k for k in drawn if np.allclose(Y[:, k], Y[:, j], equal_nan=True, rtol=1e-6,
-                                                  atol=1e-12)]
-        if same:  # one curve, said once
-            line = ax.get_lines()[drawn.index(same[0])]
-            line.set_label(f"{line.get_label()} = {label} (coincide)")
-            continue
-        ax.plot(x, Y[:, j], lw=1.6, label=label)
-        drawn.append(j)
-    if lagrange and f"{name}_lagrange" in variables:
-        L = np.asarray(variables[f"{name}_lagrange"]["data"], float)
-        for j in drawn:
-            ax.plot(x, L[:, j], ls=":", color="k", lw=1.0,
-                    label="Lagrange multipliers (check)" if j == drawn[0] else None)
+    ax.plot(x, np.asarray(variables[name]["data"], float), lw=1.4)
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(f"{title} [{', '.join(dict.fromkeys(units))}]")
+    ax.set_ylabel(f"{title} [{_unit(variables, name)}]")
     ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.legend(loc="best", fontsize=8)
     return fig
 
 
@@ -410,3 +451,81 @@ def _study_page(h5_path, root, variables) -> str:
         ax.legend(loc="best", fontsize=8)
     body.append(_svg(fig))
     return _html(f"{name}: linkpipe study report", body)
+
+
+def _optimize_page(h5_path, root, variables) -> str:
+    """An optimisation's ``<name>_optimize.h5``: the best design (each parameter with its
+    bounds, where it started and whether it ended on a bound), its metrics, the search's
+    progress per generation and the objective of every evaluated variant against each
+    parameter (feasible ones coloured, the best starred)."""
+    plt = _pyplot()
+    name = str(root.get("scene_name") or h5_path.stem)
+    params = _labels(variables, "parameter")
+    metrics = _labels(variables, "metric")
+    punits = str(variables["best"]["attrs"].get("parameter_units", "")).split(",")
+    munits = str(variables["best_metric"]["attrs"].get("metric_units", "")).split(",")
+    objective_name = str(np.atleast_1d(root.get("objective_name", [""]))[0])
+    ounit = _unit(variables, "objective")
+    P = np.asarray(variables["parameter_value"]["data"], float)        # (E, n_par)
+    obj = np.asarray(variables["objective"]["data"], float)            # (E,)
+    feasible = np.asarray(variables["feasible"]["data"]).astype(bool)  # (E,)
+    best = int(root.get("best_evaluation", int(np.nanargmin(np.where(feasible, obj, np.inf)))))
+    E = len(obj)
+    gens = len(variables["population_best"]["data"])
+    on_bound = dict(zip([str(p) for p in np.atleast_1d(root.get("on_bound", []))],
+                        [str(p) for p in np.atleast_1d(root.get("on_bound_side", []))]))
+    body = [f"<h1>{html.escape(name)}: optimisation</h1>",
+            f"<div class=\"headline ok\">best {html.escape(objective_name)} "
+            f"{_num(float(root.get('best_objective', obj[best])))} {html.escape(ounit)} "
+            f"(evaluation {best:,} of {E:,}; {int(feasible.sum()):,} feasible, "
+            f"{gens:,} generations)</div>",
+            f"<p class=\"small\">{html.escape(h5_path.name)}, written by linkpipe "
+            f"{html.escape(str(root.get('linkpipe_version', '')))}"
+            + (f"; {html.escape(str(root['solved']))}" if root.get("solved") else "") + "</p>"]
+    kinds = np.atleast_1d(variables["parameter"]["attrs"].get("kind", [""] * len(params)))
+    tied = np.atleast_1d(variables["parameter"]["attrs"].get("tied_to", [""] * len(params)))
+    rows = []
+    for j, p in enumerate(params):
+        u = punits[j] if j < len(punits) else ""
+        lo, hi = (float(variables[k]["data"][j]) for k in ("lower", "upper"))
+        where = (f"tied to {tied[j]}" if j < len(kinds) and str(kinds[j]) == "tie" else
+                 f"{_num(lo)} .. {_num(hi)}" + (f" (on its {on_bound[p]} bound)"
+                                                if p in on_bound else ""))
+        rows.append((p, f"{_num(float(variables['best']['data'][j]))} {u}", where,
+                     _num(float(variables["initial"]["data"][j]))))
+    body += ["<h2>The best design</h2>",
+             _table(rows, header=["parameter", "best", "range", "started at"])]
+    mrows = [(m + ("  (objective)" if m == objective_name else ""),
+              f"{_num(float(variables['best_metric']['data'][k]))} "
+              f"{munits[k] if k < len(munits) else ''}") for k, m in enumerate(metrics)]
+    for c in np.atleast_1d(root.get("constraints", [])):
+        if str(c):
+            mrows.append(("constraint", str(c)))
+    body += ["<h2>Its metrics</h2>", _table(mrows)]
+    body.append("<h2>The search</h2>")
+    fig, ax = plt.subplots(figsize=WIDE)
+    ax.plot(np.arange(gens), np.asarray(variables["population_best"]["data"], float), lw=1.6)
+    ax.set_xlabel("generation")
+    ax.set_ylabel(f"best feasible {objective_name} [{ounit}]")
+    ax.set_yscale("log" if np.nanmin(variables["population_best"]["data"]) > 0 else "linear")
+    body.append(_svg(fig))
+    body.append(f"<h2>{html.escape(objective_name)} against each parameter</h2>")
+    free = [j for j in range(len(params)) if not (j < len(kinds) and str(kinds[j]) == "tie")]
+    cols = min(2, len(free)) or 1
+    rows_n = int(np.ceil(len(free) / cols)) or 1
+    fig, axes = plt.subplots(rows_n, cols, figsize=(WIDE[0], WIDE[1] * rows_n), squeeze=False)
+    for ax in axes.flat[len(free):]:
+        ax.set_visible(False)
+    for ax, j in zip(axes.flat, free):
+        ax.scatter(P[~feasible, j], obj[~feasible], s=3, color="0.75", label="infeasible")
+        ax.scatter(P[feasible, j], obj[feasible], s=3, color="tab:blue", label="feasible")
+        ax.scatter(P[best, j], obj[best], s=90, marker="*", color="tab:orange", zorder=3,
+                   label="best")
+        ax.set_xlabel(f"{params[j]} [{punits[j] if j < len(punits) else ''}]")
+        ax.set_ylabel(f"{objective_name} [{ounit}]")
+        if np.nanmin(obj) > 0:
+            ax.set_yscale("log")
+        ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    body.append(_svg(fig))
+    return _html(f"{name}: linkpipe optimisation report", body)

@@ -15,7 +15,8 @@ from linkpipe.html_report import _num
 
 ROOT = pathlib.Path(__file__).parent.parent
 CONFIGS = sorted((ROOT / "configs").glob("*.toml")) + sorted((ROOT / "configs" / "hard").glob("*.toml")) \
-    + sorted((ROOT / "configs" / "logged").glob("*.toml"))
+    + sorted((ROOT / "configs" / "logged").glob("*.toml")) \
+    + sorted((ROOT / "configs" / "dynamics").glob("*.toml"))
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed "
                                     "(apt-get install chromium)")
@@ -141,3 +142,77 @@ def test_report_of_a_missing_file_is_one_message(tmp_path, capsys):
     assert main(["report", str(tmp_path / "nothing.h5")]) == 2
     err = capsys.readouterr().err
     assert "nothing.h5: no such file" in err and "Traceback" not in err
+
+
+def _run_report(config: pathlib.Path, tmp_path) -> tuple[pathlib.Path, str]:
+    out = tmp_path / "out"
+    assert main(["run", str(config), "--out", str(out), "--no-rrd", "--report", "--quiet"]) == 0
+    (page,) = out.glob("*.html")
+    return page, page.read_text()
+
+
+def _axis_labels(text: str) -> list[str]:
+    """The text of the page's SVG axis labels and legends (svg.fonttype none: each a <text>)."""
+    import html
+
+    return [html.unescape(t) for t in re.findall(r"<text[^>]*>(.*?)</text>", text, re.S)]
+
+
+@needs_chromium
+def test_a_dynamics_scenes_report_is_against_time_and_shows_its_motion(tmp_path):
+    """The pendulum (IFToMM A01) moves freely: its page plots against time, shows the swing's
+    angle and the energy error, and says it has no input force instead of plotting the
+    Lagrange check's 1e-15 rounding."""
+    page, text = _run_report(ROOT / "configs" / "dynamics" / "pendulum_a01.toml", tmp_path)
+    labels = _axis_labels(text)
+    assert "time [s]" in labels and not any(lab.startswith("swing [") for lab in labels)
+    assert "<h2>Motion</h2>" in text and "driver's value [degree]" in labels
+    assert any(lab.startswith("energy error") for lab in labels)
+    assert "every driver moves freely" in text and "input force [N*m]" not in labels
+    assert open_in_chromium(page, tmp_path / "p.png", tmp_path / "profile") == []
+    assert shows_a_page(tmp_path / "p.png")
+
+
+@needs_chromium
+def test_a_friction_scenes_report_shows_friction_and_stroke_margin(tmp_path):
+    """The logged dump truck with friction: its seal's force (N) and its hinge's torque (N*m)
+    on two axes, not one labelled [N, N*m]; the cylinder's stroke margin."""
+    page, text = _run_report(ROOT / "configs" / "logged" / "dump_truck_friction.toml", tmp_path)
+    labels = _axis_labels(text)
+    assert {"friction force [N]", "friction force [N*m]"} <= set(labels)
+    assert not any("N, N*m" in lab for lab in labels)
+    assert "stroke margin (< 0: out of stroke) [m]" in labels and "time [s]" in labels
+    assert open_in_chromium(page, tmp_path / "f.png", tmp_path / "profile") == []
+    assert shows_a_page(tmp_path / "f.png")
+
+
+@needs_chromium
+def test_an_optimisations_report_renders_with_its_best_design(tmp_path):
+    """`report` of an optimisation's .h5 (it had failed: KeyError 'status'): the best design's
+    parameters and objective as the .h5 holds them, the search's progress, the objective
+    against each free parameter."""
+    out = tmp_path / "out"
+    config = tmp_path / "opt.toml"
+    text = (ROOT / "configs" / "studies" / "basketball_goal_optimize.toml").read_text()
+    config.write_text(text.replace("../basketball_goal.toml",
+                                   str(ROOT / "configs" / "basketball_goal.toml")))
+    assert "[optimize]" in text
+    assert main(["optimize", str(config), "--out", str(out), "--no-rrd", "--quiet"]) == 0
+    (h5,) = out.glob("*_optimize.h5")
+    assert main(["report", str(h5)]) == 0
+    page = h5.with_suffix(".html")
+    text = page.read_text()
+    assert self_contained(text) and "optimisation" in text
+    with h5py.File(h5) as f:
+        best = f.attrs["best_objective"]
+        params = [p.decode() if isinstance(p, bytes) else str(p) for p in f["parameter"][:]]
+        values = f["best"][:]
+    assert f"best peak_handle {_num(best)} lbf" in text
+    for p, v in zip(params, values):
+        assert re.search(rf"<td>{re.escape(p)}</td>\s*<td[^>]*>{re.escape(_num(v))} ", text), p
+    labels = _axis_labels(text)
+    assert "generation" in labels
+    assert "springs.left.k [lbf/ft]" in labels and "springs.right.k [lbf/ft]" not in labels
+    png = tmp_path / "opt.png"
+    assert open_in_chromium(page, png, tmp_path / "profile") == []
+    assert shows_a_page(png)

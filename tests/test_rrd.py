@@ -65,6 +65,41 @@ class Recording:
                 out[str(name)] = [str(q) for v in frame[query].dropna() for q in v]
         return out
 
+    def legends(self) -> dict[str, bool]:
+        """{display name: whether its plot legend is visible} of the embedded blueprint's
+        views that set one (a legend set only by its corner is visible)."""
+        (entry,) = self.blueprints
+        store = self.reader.store(store=entry).stream().collect()
+        frame = _frame(store.reader(index="blueprint", contents="/view/**"))
+        out = {}
+        for col in frame.columns:
+            if col.endswith(":ViewBlueprint:display_name"):
+                view = col.split(":", 1)[0]
+                (name,) = [n for v in frame[col].dropna() for n in v]
+                corner = f"{view}/PlotLegend:PlotLegend:corner"
+                visible = f"{view}/PlotLegend:PlotLegend:visible"
+                if visible in frame.columns:
+                    out[str(name)] = bool([x for v in frame[visible].dropna() for x in v][0])
+                elif corner in frame.columns:
+                    out[str(name)] = True
+        return out
+
+    def containers(self) -> dict[str, dict[str, object]]:
+        """{display name: {component: value}} of the embedded blueprint's named containers
+        (``container_kind``, ``grid_columns``, ...)."""
+        (entry,) = self.blueprints
+        store = self.reader.store(store=entry).stream().collect()
+        frame = _frame(store.reader(index="blueprint", contents="/container/**"))
+        out = {}
+        for col in frame.columns:
+            if col.endswith(":ContainerBlueprint:display_name"):
+                path = col.split(":", 1)[0]
+                (name,) = [n for v in frame[col].dropna() for n in v]
+                out[str(name)] = {
+                    c.rsplit(":", 1)[1]: [x for v in frame[c].dropna() for x in v]
+                    for c in frame.columns if c.startswith(f"{path}:")}
+        return out
+
     def static(self, entity, component):
         return self.store.reader(index=None, contents=entity).to_pandas()[f"{entity}:{component}"][0]
 

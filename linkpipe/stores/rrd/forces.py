@@ -337,6 +337,9 @@ def log_forces(stream, send, result) -> None:
     unit = result.units()["force"]
     drawn = drawn_arrows(result)
     under = _drawn_over(drawn)
+    per_kind = {}
+    for kind, *_ in drawn:
+        per_kind[kind.name] = per_kind.get(kind.name, 0) + 1
     for n_item, ((kind, item, _, forces_), (_, _, origins, vectors, short)) in enumerate(zip(arrows, drawn)):
         parts = item if isinstance(item, tuple) else (item,)
         entity = path_of("mechanism", "forces", kind.name, *parts)
@@ -348,8 +351,11 @@ def log_forces(stream, send, result) -> None:
         valued, named = bool(short.any()), _labelled(forces_, scale, size)
         if n_item in under:    # drawn under an earlier item's arrows: its label says both
             valued = named = False
+        if per_kind[kind.name] > style.CROWD:   # a smear of labels: each on hover only
+            named = False
         stream.log(entity, rr.Arrows2D.from_fields(
-            labels=None if valued else [tag], colors=kind.colour, show_labels=valued or named,
+            labels=None if valued else [tag], colors=kind.colour,
+            show_labels=(valued or named) and per_kind[kind.name] <= style.CROWD,
             radii=rr.components.Radius.ui_points(2.0), draw_order=45.0), static=True)
         ok = finite_rows(origins) & finite_rows(vectors)          # (S, k)
         values = np.hypot(forces_[..., 0], forces_[..., 1])

@@ -2,9 +2,11 @@
 plots, read against the quantity that moves the scene.
 
 Laid out for a 1400x900 window and up (1920x1080): the mechanism takes 11 of 20 columns, the
-plots the rest, one row each; the solver's series are a second tab beside the plots (collapsed
-until asked for). The time panel opens on ``time`` for a timed or logged scene (``[time]``),
-on the first driver's value for a sweep (``crank [degree]``), else on ``time`` or ``step``.
+plots the rest, one row each up to :data:`MAX_ROWS` plots (more: two columns, so each keeps the
+height its axis numbers need); the solver's series are a second tab beside the plots (collapsed
+until asked for). The time panel opens on ``time`` for a timed, logged or dynamics scene
+(``[time]``, ``[dynamics]``), on the first driver's value for a sweep (``crank [degree]``), else
+on ``time`` or ``step``.
 """
 from __future__ import annotations
 
@@ -23,6 +25,13 @@ from ...output_units import entry_units
 
 #: the mechanism's share of the window's width (of 20)
 COLUMNS = (11, 9)
+#: the most plots stacked in one column: at 900 px a sixth of the column (~130 px) shows no
+#: number on its y axis (seen on the dump truck with friction's six plots); more go in two
+MAX_ROWS = 4
+#: the most series a plot's legend lists: the 40-bar chain's 81 link angles' legend covered
+#: the plot, Andrews' squeezer's 7 a third of it at 1400x900 (the entries stay on hover);
+#: twice as many in a plot that has the column to itself
+MAX_LEGEND = 6
 #: the plots' x axis: the whole sweep and this fraction of it either side
 X_PAD = 0.03
 
@@ -64,9 +73,13 @@ def mechanism_title(result) -> str:
 
 
 def active_timeline(result) -> str:
-    """The timeline the plots open on: ``time`` for a timed or logged scene, the first driver's
-    value for a sweep (:func:`.columns.driver_timelines`), else ``time`` or ``step``."""
-    if result.time is not None and result.scene.time is not None:
+    """The timeline the plots open on: ``time`` for a timed, logged or forward-dynamics scene
+    (``[time]`` or ``[dynamics]``: its motion is the answer, the driver's value one of its
+    outputs), the first driver's value for a sweep (:func:`.columns.driver_timelines`), else
+    ``time`` or ``step``."""
+    scene = result.scene
+    if result.time is not None and (scene.time is not None
+                                    or getattr(scene, "dynamics", None) is not None):
         return "time"
     timelines = driver_timelines(result)
     if timelines:
@@ -78,8 +91,11 @@ def x_range(result, timeline: str):
     """The whole sweep on ``timeline``, for the plots' x axis (else the viewer may open on a
     window around its cursor)."""
     if timeline == "time":
+        # the instants that assembled: a dynamics run that ended early (the falling lever's
+        # tether running out at 0.33 s of 1 s) is NaN after, and would fill a third of the plot
         t = np.asarray(result.time, dtype=float)
-        t = t[np.isfinite(t)]
+        assembled = np.isfinite(result.position).all(axis=(1, 2))
+        t = t[np.isfinite(t) & assembled] if assembled.any() else t[np.isfinite(t)]
         if not len(t):
             return None
         pad = X_PAD * float(t.max() - t.min())
@@ -98,6 +114,14 @@ def x_range(result, timeline: str):
     return rrb.TimeAxis(view_range=rr.TimeRange(start=start, end=end))
 
 
+def plot_column(plots: list) -> rrb.Container:
+    """The ``plots`` tab: one column of up to :data:`MAX_ROWS` views, else a grid of two
+    columns (in reading order, left to right)."""
+    if len(plots) <= MAX_ROWS:
+        return rrb.Vertical(*plots, name="plots")
+    return rrb.Grid(*plots, grid_columns=2, name="plots")
+
+
 def blueprint(result) -> rrb.Blueprint:
     """Return the default layout: the mechanism (y up) beside the plots; the solver a tab."""
     lo, hi = view_bounds(result)
@@ -114,6 +138,8 @@ def blueprint(result) -> rrb.Blueprint:
     for name in PLOTTED:
         if name not in variables:
             continue
+        if name == "input_force" and not np.nanmax(np.abs(variables[name].data), initial=0.0):
+            continue   # drivers that move freely ([dynamics], no force): a flat 0 says nothing
         var = variables[name]
         units = entry_units(var) if len(var.dims) == 2 else [var.units]
         shown, title = name, name.replace("_", " ")
@@ -125,11 +151,21 @@ def blueprint(result) -> rrb.Blueprint:
             entries = [path_of("plots", shown, label)
                        for label, u in zip(labels[var.dims[1]], units)
                        if u == unit and path_of("plots", name, label) not in left_out]
-            plots.append(rrb.TimeSeriesView(origin=f"plots/{shown}", name=f"{title} [{unit}]",
-                                            contents=entries, plot_legend=legend, **axis))
+            plots.append(dict(origin=f"plots/{shown}", name=f"{title} [{unit}]",
+                              contents=entries))
+    # a legend of more entries than fit covers the curves (hover names them): MAX_LEGEND in a
+    # column of several plots, twice that in a plot of its own (Jansen's 7 links: full height)
+    room = MAX_LEGEND * (2 if len(plots) + len(result.measurements["names"] if
+                                                   result.measurements else []) == 1 else 1)
+    plots = [rrb.TimeSeriesView(**view, plot_legend=legend if len(view["contents"]) <= room
+                                else rrb.PlotLegend(visible=False), **axis) for view in plots]
     if result.measurements:
+        # in a half-width grid cell "cylinder_force: computed and measured [N]" was cut; its
+        # legend says computed and measured
+        grid = len(plots) + len(result.measurements["names"]) > MAX_ROWS
         plots += [rrb.TimeSeriesView(origin=path_of("plots", "measurements", name),
-                                     name=f"{name}: computed and measured [{unit}]",
+                                     name=(f"{name} [{unit}]" if grid else
+                                           f"{name}: computed and measured [{unit}]"),
                                      plot_legend=legend, **axis)
                   for name, unit in zip(result.measurements["names"],
                                         result.measurements["units"])]
@@ -140,7 +176,7 @@ def blueprint(result) -> rrb.Blueprint:
     solver += [rrb.TimeSeriesView(origin=f"solver/{name}", name=f"{name} [{variables[name].units}]",
                                   plot_legend=rrb.PlotLegend(visible=False), **axis)
                for name in SOLVER]
-    right = rrb.Tabs(rrb.Vertical(*plots, name="plots"), rrb.Vertical(*solver, name="solver"),
+    right = rrb.Tabs(plot_column(plots), rrb.Vertical(*solver, name="solver"),
                      active_tab=0) if plots else rrb.Vertical(*solver, name="solver")
     return rrb.Blueprint(
         rrb.Horizontal(mechanism, right, column_shares=list(COLUMNS)),

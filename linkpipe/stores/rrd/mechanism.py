@@ -20,7 +20,8 @@ def log_points(stream, send, result) -> None:
     X = result.position
     ok = finite_rows(X)                                  # (S, P)
     stream.log("mechanism/points", rr.Points2D.from_fields(
-        radii=rr.components.Radius.ui_points(4.0), colors=style.POINT, show_labels=True,
+        radii=rr.components.Radius.ui_points(4.0), colors=style.POINT,
+        show_labels=len(result.point_names) <= style.CROWD,
         draw_order=30.0), static=True)
     if ok.any():
         pos = X.reshape(-1, 2) if ok.all() else X[ok]  # all finite: no masked copy

@@ -2,7 +2,8 @@
 ``.../measured``, and ``solver/**``, each in a colour of its own.
 
 What a person reads: link angles are also plotted in degrees (``plots/link_angle_deg/<link>``,
-the view the blueprint shows; ``plots/link_angle/<link>`` keeps the contract's radians, as the
+the view the blueprint shows; a link turning more than a whole turn wrapped to ±180 degrees;
+``plots/link_angle/<link>`` keeps the contract's radians, as the
 .h5 does); an input force is named for what it is (``force at H``, ``torque of crank``), not
 by the driver alone; series of one plot that coincide at every step are one legend entry
 (``left = right``: the others stay logged, out of the view: :func:`coinciding`). Series
@@ -23,6 +24,9 @@ from ...status import OUT_OF_STROKE
 PLOTTED = ("input_force", "spring_force", "torsion_spring_torque", "link_angle",
            "friction_force", "stroke_margin")
 SOLVER = ("residual", "iterations")
+#: the measured series' opacity (of 255): drawn over the computed one (the viewer draws
+#: ``measured`` after ``computed``), a minute of a noisy log hid the computed line whole
+MEASURED_ALPHA = 110
 #: link angles in degrees beside the contract's radians (what the blueprint shows)
 DEGREES = "link_angle_deg"
 
@@ -120,8 +124,10 @@ def series_of(result) -> list[tuple[str, str, np.ndarray, list[int]]]:
             colour = style.link_colour(j) if name == "link_angle" else style.colour(j)
             series.append((path_of("plots", name, label), shown[j], var.data[:, j], colour))
             if name == "link_angle":
-                series.append((path_of("plots", DEGREES, label), shown[j],
-                               np.degrees(var.data[:, j]), colour))
+                degrees, wrapped = wrapped_degrees(var.data[:, j])
+                series.append((path_of("plots", DEGREES, label),
+                               shown[j] + (" (wrapped to ±180)" if wrapped else ""),
+                               degrees, colour))
     for name in SOLVER:
         var = variables[name]
         series.append((f"solver/{name}", name, var.data, style.colour(0)))
@@ -131,12 +137,23 @@ def series_of(result) -> list[tuple[str, str, np.ndarray, list[int]]]:
             series.append((path_of("plots", "measurements", name, "computed"), "computed",
                            m["measured"][:, k] + m["residual"][:, k], style.colour(0)))
             series.append((path_of("plots", "measurements", name, "measured"), "measured",
-                           m["measured"][:, k], style.colour(1)))
+                           m["measured"][:, k], style.colour(1) + [MEASURED_ALPHA]))
     log_res, log_tol = log10_residual(result)
     series.append(("solver/log10_residual", "log10 residual", log_res, style.colour(0)))
     series.append(("solver/log10_tolerance", "log10 tolerance",
                    np.full(result.n_steps, log_tol), style.colour(3)))
     return series
+
+
+def wrapped_degrees(angle: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(S,) radians -> (degrees (S,), wrapped): a link that turns more than a whole turn over
+    the sweep (a crank run for a minute: 40,000 degrees) is wrapped into [-180, 180), else it
+    flattens every other link's angle on the plot's scale; others are kept as they are."""
+    degrees = np.degrees(np.asarray(angle, dtype=float))
+    finite = degrees[np.isfinite(degrees)]
+    if not len(finite) or np.ptp(finite) <= 360.0:
+        return degrees, False
+    return (degrees + 180.0) % 360.0 - 180.0, True
 
 
 def log_series(stream, send, result) -> None:

@@ -101,3 +101,9 @@ SPRING = hsv(ARROW_HUES["springs"], 0.35, 0.75)   # the spring itself: its force
 LEGEND = [220, 220, 220]                          # the legend's scale bars
 VECTOR_COLORS = {q: arrow_colour(q) for q in ("velocity", "acceleration")}
 VECTOR_COLOR_NAMES = {q: ARROW_HUE_NAMES[q] for q in ("velocity", "acceleration")}
+
+
+#: the most labels of one kind drawn in the 2D view (points, or one force kind's items): past
+#: it they overlap into an unreadable smear (the 40-bar chain's "BBBB AAAA"); each stays
+#: logged and shows on hover
+CROWD = 16
