@@ -32,6 +32,7 @@ import dataclasses
 import numpy as np
 
 from .. import kinematics as kin
+from ..forces import friction
 from ..forces.effects import EFFECTS, Context, applies, inertia
 from ..forces.virtual_work import Influence
 from ..model import Model, build_model
@@ -94,8 +95,9 @@ def without_inputs(scene):
 class State:
     """The mechanism at driver values ``s`` (B, nd) and rates ``sd`` (B, nd): positions X
     (B, P, 2), velocities V, the acceleration at ``sdd = 0`` A0, influence K (B, n_q, nd), link
-    angles (B, n_links), every effect's generalized force but inertia's ``K^T Q`` (B, nd) and
-    the power of those that store no energy (damping, loads) ``power_other`` (B,)."""
+    angles (B, n_links), every effect's generalized force but inertia's ``K^T Q`` (B, nd), the
+    power of those that store no energy (damping, loads) ``power_other`` (B,) and friction's
+    power ``power_friction`` (B,): the seals' (the only friction [dynamics] takes)."""
 
     s: np.ndarray
     sd: np.ndarray
@@ -106,6 +108,7 @@ class State:
     link_angle: np.ndarray
     generalized: np.ndarray
     power_other: np.ndarray
+    power_friction: np.ndarray
 
 
 class MotionEquations:
@@ -125,7 +128,12 @@ class MotionEquations:
         # gravity's loads on the natural coordinates are constant (each weight lands on its
         # body's basic points with constant shares): read once off the gravity effect
         self.Q_gravity = gravity_loads(self.effects_model)
-        self.varying = tuple(e for e in self.effects_model.scene.effects if e != "gravity")
+        self.varying = tuple(e for e in self.effects_model.scene.effects
+                             if e not in ("gravity", "friction"))
+        #: the actuators' seals' friction (a function of the drivers' rates alone: a
+        #: generalized force on its driver); pins' and sliders' are refused (dynamics.equations_of)
+        self.friction = (friction.Layout.of(self.effects_model)
+                         if "friction" in scene.effects and scene.friction else None)
         self._context = None
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
@@ -184,20 +192,22 @@ class MotionEquations:
 
     def state_of(self, X, s, sd, V, A0, K, link_angle) -> State:
         """A State from solved kinematics (B rows): the effects' generalized forces added."""
-        generalized, power = self.generalized_forces(X, s, sd, V, A0, K, link_angle)
-        return State(s, sd, X, V, A0, K, link_angle, generalized, power)
+        generalized, power, rubbing = self.generalized_forces(X, s, sd, V, A0, K, link_angle)
+        return State(s, sd, X, V, A0, K, link_angle, generalized, power, rubbing)
 
     def generalized_forces(self, X, s, sd, V, A0, K, link_angle):
-        """(K^T Q (B, nd), the power of the effects that store no energy (B,)) of every
-        effect but inertia: gravity's from its constant loads, the others' (springs,
-        damping, loads) from :data:`linkpipe.forces.effects.EFFECTS` by virtual work
-        (:meth:`Influence.generalized`, as the force stage computes the input force)."""
+        """(K^T Q (B, nd), the power of the effects that store no energy (B,), friction's
+        power (B,)) of every effect but inertia: gravity's from its constant loads, the
+        others' (springs, damping, loads) from :data:`linkpipe.forces.effects.EFFECTS` by
+        virtual work (:meth:`Influence.generalized`, as the force stage computes the input
+        force), the seals' friction from :func:`linkpipe.forces.friction.seal_loads` (the
+        force stage's own loads: ``-f`` on its driver, ``f`` the seal's law at its rate)."""
         B = X.shape[0]
         generalized = np.einsum("bid,i->bd", K, self.Q_gravity) if self.Q_gravity is not None \
             else np.zeros((B, self.model.n_drivers))
-        power = np.zeros(B)
-        if not self.varying:
-            return generalized, power
+        power, rubbing = np.zeros(B), np.zeros(B)
+        if not self.varying and self.friction is None:
+            return generalized, power, rubbing
         model = self.effects_model
         status = np.full(B, OK, np.int8)
         motion = Motion(s, sd, np.zeros_like(s), X, V, A0, status, K, None, link_angle)
@@ -213,7 +223,11 @@ class MotionEquations:
             generalized = generalized + g
             if name not in STORED:
                 power += (g * sd).sum(axis=1)
-        return generalized, power
+        if self.friction is not None and self.friction.seals:
+            g = influence.generalized(friction.seal_loads(ctx, self.friction, influence.phi_s)[1])
+            generalized = generalized + g
+            rubbing = (g * sd).sum(axis=1)
+        return generalized, power, rubbing
 
     def rates_one(self, q: np.ndarray, s: np.ndarray, sd: np.ndarray):
         """:meth:`rates` of one state (q (n_q,), s, sd (nd,)) with Phi_q, Phi_s and gamma
@@ -280,6 +294,10 @@ class MotionEquations:
     def nonconservative_power(self, st: State) -> np.ndarray:
         """(B,) the power of the effects with no stored energy (damping, loads)."""
         return st.power_other
+
+    def friction_power(self, st: State) -> np.ndarray:
+        """(B,) friction's power (the seals'; at most zero)."""
+        return st.power_friction
 
 
 #: the effects whose work is stored as an energy (the others' power is integrated)
