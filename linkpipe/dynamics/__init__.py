@@ -26,19 +26,6 @@ MASS_RCOND = 1e-12
 def equations_of(scene, model=None) -> MotionEquations:
     """The scene's equations of motion, checked: a mechanism whose reduced mass matrix is
     singular at the start (a driver moves no mass) is the scene's mistake (SceneError)."""
-    if "friction" in scene.effects:
-        for fr in scene.friction:
-            if fr.kind != "driver":
-                raise SceneError(scene.path, f'friction "{fr.name}"', fr.kind if fr.kind !=
-                                 "pins" else "joints",
-                                 f"{'pin' if fr.kind == 'pins' else 'slider'} friction does not "
-                                 "act in [dynamics] yet (its size depends on the pin or normal "
-                                 "force, which depends on the accelerations being solved for); "
-                                 "[dynamics] takes an actuator seal's friction ([[friction]] "
-                                 "driver = ...) only",
-                                 'remove this [[friction]] entry (or "friction" from [analysis] '
-                                 "effects) to integrate without it, or prescribe the motion with "
-                                 "[time] to compute its forces")
     model = model if model is not None else build_model(scene)
     eqs = MotionEquations(scene, model)
     scale = np.array([np.pi / 180 if d.kind == "angle" else 1.0 for d in scene.drivers])

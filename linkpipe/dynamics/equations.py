@@ -20,7 +20,10 @@ admissible motions ``dq = K ds`` (virtual power) gives the drivers' equations of
 generalized force by virtual work, as the force stage computes the input force
 (:data:`linkpipe.forces.effects.EFFECTS` and :meth:`~linkpipe.forces.virtual_work.Influence.generalized`;
 gravity's loads, constant in natural coordinates, read once off the gravity effect); ``F``:
-the drivers' own forces (:mod:`.forcing`). Nothing here writes a constraint row, a force law
+the drivers' own forces (:mod:`.forcing`). Friction: a seal's is a function of its driver's
+rate, in ``K^T Q``; a pin's or a slider's depends on the pin or normal force, so on ``sdd``:
+solved with it by a fixed point on the force stage (:meth:`MotionEquations.accelerations`).
+Nothing here writes a constraint row, a force law
 or a mass matrix of its own: one state's ``Phi_q``, ``Phi_s`` and ``gamma`` are
 :mod:`linkpipe.model.equations`' rows, on whole arrays (:meth:`MotionEquations.rates`) or on
 Python floats through stage 1's one-step kernels (:meth:`MotionEquations.rates_one`).
@@ -32,7 +35,7 @@ import dataclasses
 import numpy as np
 
 from .. import kinematics as kin
-from ..forces import friction
+from ..forces import compute_forces, friction
 from ..forces.effects import EFFECTS, Context, applies, inertia
 from ..forces.virtual_work import Influence
 from ..model import Model, build_model
@@ -41,7 +44,7 @@ from ..result import Motion
 from ..kinematics.linalg import condition_and_inverse, condition_and_inverse_one, is_singular
 from ..kinematics.step import _step_kernels
 from ..model import equations as eq
-from ..status import OK
+from ..status import NO_ASSEMBLY, OK
 
 
 #: the most unknowns whose one-state rates use Phi_q's dense inverse
@@ -83,11 +86,12 @@ def gravity_loads(model: Model) -> np.ndarray | None:
     return applied.point_forces[0, model.moving].reshape(-1)
 
 
-def without_inputs(scene):
-    """The scene with each driver's ``input`` left out and inertia off: the drivers' forces are
-    generalized forces (torques, axial forces) and the mass matrix enters separately."""
+def without_inputs(scene, keep_inertia: bool = False):
+    """The scene with each driver's ``input`` left out and inertia off (unless
+    ``keep_inertia``): the drivers' forces are generalized forces (torques, axial forces) and
+    the mass matrix enters separately."""
     drivers = tuple(dataclasses.replace(d, input=None) for d in scene.drivers)
-    effects = tuple(e for e in scene.effects if e != "inertia")
+    effects = tuple(e for e in scene.effects if keep_inertia or e != "inertia")
     return dataclasses.replace(scene, drivers=drivers, effects=effects)
 
 
@@ -97,7 +101,8 @@ class State:
     (B, P, 2), velocities V, the acceleration at ``sdd = 0`` A0, influence K (B, n_q, nd), link
     angles (B, n_links), every effect's generalized force but inertia's ``K^T Q`` (B, nd), the
     power of those that store no energy (damping, loads) ``power_other`` (B,) and friction's
-    power ``power_friction`` (B,): the seals' (the only friction [dynamics] takes)."""
+    power ``power_friction`` (B,) (the seals'; with pin or slider friction every friction's,
+    set by :meth:`MotionEquations.accelerations`)."""
 
     s: np.ndarray
     sd: np.ndarray
@@ -130,10 +135,15 @@ class MotionEquations:
         self.Q_gravity = gravity_loads(self.effects_model)
         self.varying = tuple(e for e in self.effects_model.scene.effects
                              if e not in ("gravity", "friction"))
-        #: the actuators' seals' friction (a function of the drivers' rates alone: a
-        #: generalized force on its driver); pins' and sliders' are refused (dynamics.equations_of)
+        #: the scene's friction: seals alone are a function of the drivers' rates (a
+        #: generalized force on its driver, added in :meth:`generalized_forces`)
         self.friction = (friction.Layout.of(self.effects_model)
                          if "friction" in scene.effects and scene.friction else None)
+        #: pin or slider friction: every friction (seals too) solved with the accelerations
+        #: by the force stage itself (:meth:`accelerations`) on the scene with inertia
+        self.coupled = self.friction is not None and self.friction.coupled
+        self.forces_model = build_model(without_inputs(scene, keep_inertia=True)) \
+            if self.coupled else None
         self._context = None
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
@@ -223,7 +233,7 @@ class MotionEquations:
             generalized = generalized + g
             if name not in STORED:
                 power += (g * sd).sum(axis=1)
-        if self.friction is not None and self.friction.seals:
+        if self.friction is not None and self.friction.seals and not self.coupled:
             g = influence.generalized(friction.seal_loads(ctx, self.friction, influence.phi_s)[1])
             generalized = generalized + g
             rubbing = (g * sd).sum(axis=1)
@@ -279,12 +289,55 @@ class MotionEquations:
         return Mr, bias, st.generalized
 
     def accelerations(self, st: State, F: np.ndarray) -> np.ndarray:
-        """sdd (B, nd) under the drivers' forces ``F`` (B, nd)."""
+        """sdd (B, nd) under the drivers' forces ``F`` (B, nd). With pin or slider friction
+        (whose size depends on the pin and normal forces, so on sdd) by a fixed point on the
+        force stage: sdd -> the force the drivers need for that motion, friction solved with
+        the pin forces (:func:`linkpipe.forces.compute_forces`, every effect and friction on
+        the Lagrange side) -> sdd += M_r^-1 (F - needed), until the gap is within
+        :attr:`tol_force` of the largest term (M_r is the exact Jacobian without friction;
+        each round shrinks the gap by friction's sensitivity to sdd, ~ mu r m arm / I).
+        Friction's power is then ``st``'s; a row that does not converge in ``[solver]
+        max_iter`` rounds or whose force stage fails is NaN."""
         Mr, bias, generalized = self.reduced(st)
         rhs = generalized - bias + F
+        sdd = self._solve(Mr, rhs)
+        if not self.coupled:
+            return sdd
+        size = np.abs(np.concatenate([generalized, bias, F], axis=1)).max(axis=1)
+        live = np.isfinite(sdd).all(axis=1)
+        for _ in range(self.scene.solver.max_iter + 1):
+            forces = self.forces_at(st, sdd)
+            gap = F - forces.variables["input_force"][1]
+            live &= np.isfinite(gap).all(axis=1)
+            done = ~live | (np.abs(gap).max(axis=1) <= self.tol_force * size)
+            if done.all():
+                break
+            sdd = sdd + np.where(live[:, None], self._solve(Mr, np.nan_to_num(gap)), 0.0)
+        # a force stage that fails, or friction with no consistent motion (a self-locking
+        # pin: the round did not converge), leaves NaN: the integrator's step is refused
+        sdd = np.where((live & done)[:, None], sdd, np.nan)
+        st.power_friction = forces.variables["friction_power"][1].sum(axis=1)
+        return sdd
+
+    #: the relative tolerance of the friction fixed point on the drivers' forces
+    tol_force = 1e-12
+
+    @staticmethod
+    def _solve(Mr, rhs):
         if Mr.shape[1] == 1:
             return rhs / Mr[:, :, 0]
         return np.linalg.solve(Mr, rhs[..., None])[..., 0]
+
+    def forces_at(self, st: State, sdd: np.ndarray):
+        """The force stage (all effects, inertia and friction, the Lagrange side) of state
+        ``st`` moving with driver accelerations ``sdd`` (B, nd)."""
+        model = self.forces_model
+        A = st.A0.copy()
+        A[:, model.moving] += np.einsum("bid,bd->bi", st.K, sdd).reshape(len(sdd), -1, 2)
+        status = np.where(np.isfinite(A).all(axis=(1, 2)), OK, NO_ASSEMBLY).astype(np.int8)
+        motion = Motion(st.s, st.sd, sdd, st.X, st.V, A, status, st.K,
+                        kin.link_rates(model, st.X, st.V, A)[1], st.link_angle)
+        return compute_forces(model, motion, self.units)
 
     def kinetic_energy(self, st: State) -> np.ndarray:
         """(B,) ½ qd^T M qd."""
@@ -296,7 +349,8 @@ class MotionEquations:
         return st.power_other
 
     def friction_power(self, st: State) -> np.ndarray:
-        """(B,) friction's power (the seals'; at most zero)."""
+        """(B,) friction's power (at most zero; after :meth:`accelerations` where friction
+        depends on the forces)."""
         return st.power_friction
 
 
