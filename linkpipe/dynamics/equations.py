@@ -293,9 +293,10 @@ class MotionEquations:
         (whose size depends on the pin and normal forces, so on sdd) by a fixed point on the
         force stage: sdd -> the force the drivers need for that motion, friction solved with
         the pin forces (:func:`linkpipe.forces.compute_forces`, every effect and friction on
-        the Lagrange side) -> sdd += M_r^-1 (F - needed), until the gap is within
-        :attr:`tol_force` of the largest term (M_r is the exact Jacobian without friction;
-        each round shrinks the gap by friction's sensitivity to sdd, ~ mu r m arm / I).
+        the Lagrange side) -> sdd += J^-1 (F - needed), until the gap is within
+        :attr:`tol_force` of the largest term; J = d needed / d sdd starts at M_r (exact
+        without friction: the first round shrinks the gap by friction's sensitivity to sdd,
+        ~ mu r m arm / I) and takes Broyden's update after each round (superlinear).
         Friction's power is then ``st``'s; a row that does not converge in ``[solver]
         max_iter`` rounds or whose force stage fails is NaN."""
         Mr, bias, generalized = self.reduced(st)
@@ -305,6 +306,7 @@ class MotionEquations:
             return sdd
         size = np.abs(np.concatenate([generalized, bias, F], axis=1)).max(axis=1)
         live = np.isfinite(sdd).all(axis=1)
+        J, last = np.nan_to_num(Mr), None  # d needed / d sdd, Broyden-updated from M_r
         for _ in range(self.scene.solver.max_iter + 1):
             forces = self.forces_at(st, sdd)
             gap = F - forces.variables["input_force"][1]
@@ -312,7 +314,15 @@ class MotionEquations:
             done = ~live | (np.abs(gap).max(axis=1) <= self.tol_force * size)
             if done.all():
                 break
-            sdd = sdd + np.where(live[:, None], self._solve(Mr, np.nan_to_num(gap)), 0.0)
+            gap = np.nan_to_num(gap)
+            if last is not None:  # Broyden: J ds = d needed along the last step
+                ds, dn = sdd - last[0], last[1] - gap
+                norm = np.einsum("bd,bd->b", ds, ds)
+                use = live & (norm > 0)
+                upd = (dn - np.einsum("bij,bj->bi", J, ds)) / np.where(use, norm, 1.0)[:, None]
+                J = J + np.where(use[:, None, None], upd[:, :, None] * ds[:, None, :], 0.0)
+            last = (sdd, gap)
+            sdd = sdd + np.where(live[:, None], self._solve(J, gap), 0.0)
         # a force stage that fails, or friction with no consistent motion (a self-locking
         # pin: the round did not converge), leaves NaN: the integrator's step is refused
         sdd = np.where((live & done)[:, None], sdd, np.nan)
