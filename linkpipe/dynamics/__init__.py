@@ -26,13 +26,6 @@ MASS_RCOND = 1e-12
 def equations_of(scene, model=None) -> MotionEquations:
     """The scene's equations of motion, checked: a mechanism whose reduced mass matrix is
     singular at the start (a driver moves no mass) is the scene's mistake (SceneError)."""
-    if "friction" in scene.effects and scene.friction:
-        raise SceneError(scene.path, "analysis", "effects",
-                         '"friction" does not act in [dynamics] yet (a pin\'s friction depends '
-                         "on its pin force, which depends on the accelerations being solved "
-                         "for): the motion would leave it out",
-                         'remove "friction" from effects to integrate without it, or prescribe '
-                         "the motion with [time] to compute friction's forces")
     model = model if model is not None else build_model(scene)
     eqs = MotionEquations(scene, model)
     scale = np.array([np.pi / 180 if d.kind == "angle" else 1.0 for d in scene.drivers])

@@ -20,7 +20,10 @@ admissible motions ``dq = K ds`` (virtual power) gives the drivers' equations of
 generalized force by virtual work, as the force stage computes the input force
 (:data:`linkpipe.forces.effects.EFFECTS` and :meth:`~linkpipe.forces.virtual_work.Influence.generalized`;
 gravity's loads, constant in natural coordinates, read once off the gravity effect); ``F``:
-the drivers' own forces (:mod:`.forcing`). Nothing here writes a constraint row, a force law
+the drivers' own forces (:mod:`.forcing`). Friction: a seal's is a function of its driver's
+rate, in ``K^T Q``; a pin's or a slider's depends on the pin or normal force, so on ``sdd``:
+solved with it by a fixed point on the force stage (:meth:`MotionEquations.accelerations`).
+Nothing here writes a constraint row, a force law
 or a mass matrix of its own: one state's ``Phi_q``, ``Phi_s`` and ``gamma`` are
 :mod:`linkpipe.model.equations`' rows, on whole arrays (:meth:`MotionEquations.rates`) or on
 Python floats through stage 1's one-step kernels (:meth:`MotionEquations.rates_one`).
@@ -32,6 +35,7 @@ import dataclasses
 import numpy as np
 
 from .. import kinematics as kin
+from ..forces import compute_forces, friction
 from ..forces.effects import EFFECTS, Context, applies, inertia
 from ..forces.virtual_work import Influence
 from ..model import Model, build_model
@@ -40,7 +44,7 @@ from ..result import Motion
 from ..kinematics.linalg import condition_and_inverse, condition_and_inverse_one, is_singular
 from ..kinematics.step import _step_kernels
 from ..model import equations as eq
-from ..status import OK
+from ..status import NO_ASSEMBLY, OK
 
 
 #: the most unknowns whose one-state rates use Phi_q's dense inverse
@@ -82,11 +86,12 @@ def gravity_loads(model: Model) -> np.ndarray | None:
     return applied.point_forces[0, model.moving].reshape(-1)
 
 
-def without_inputs(scene):
-    """The scene with each driver's ``input`` left out and inertia off: the drivers' forces are
-    generalized forces (torques, axial forces) and the mass matrix enters separately."""
+def without_inputs(scene, keep_inertia: bool = False):
+    """The scene with each driver's ``input`` left out and inertia off (unless
+    ``keep_inertia``): the drivers' forces are generalized forces (torques, axial forces) and
+    the mass matrix enters separately."""
     drivers = tuple(dataclasses.replace(d, input=None) for d in scene.drivers)
-    effects = tuple(e for e in scene.effects if e != "inertia")
+    effects = tuple(e for e in scene.effects if keep_inertia or e != "inertia")
     return dataclasses.replace(scene, drivers=drivers, effects=effects)
 
 
@@ -94,8 +99,10 @@ def without_inputs(scene):
 class State:
     """The mechanism at driver values ``s`` (B, nd) and rates ``sd`` (B, nd): positions X
     (B, P, 2), velocities V, the acceleration at ``sdd = 0`` A0, influence K (B, n_q, nd), link
-    angles (B, n_links), every effect's generalized force but inertia's ``K^T Q`` (B, nd) and
-    the power of those that store no energy (damping, loads) ``power_other`` (B,)."""
+    angles (B, n_links), every effect's generalized force but inertia's ``K^T Q`` (B, nd), the
+    power of those that store no energy (damping, loads) ``power_other`` (B,) and friction's
+    power ``power_friction`` (B,) (the seals'; with pin or slider friction every friction's,
+    set by :meth:`MotionEquations.accelerations`)."""
 
     s: np.ndarray
     sd: np.ndarray
@@ -106,6 +113,7 @@ class State:
     link_angle: np.ndarray
     generalized: np.ndarray
     power_other: np.ndarray
+    power_friction: np.ndarray
 
 
 class MotionEquations:
@@ -125,7 +133,17 @@ class MotionEquations:
         # gravity's loads on the natural coordinates are constant (each weight lands on its
         # body's basic points with constant shares): read once off the gravity effect
         self.Q_gravity = gravity_loads(self.effects_model)
-        self.varying = tuple(e for e in self.effects_model.scene.effects if e != "gravity")
+        self.varying = tuple(e for e in self.effects_model.scene.effects
+                             if e not in ("gravity", "friction"))
+        #: the scene's friction: seals alone are a function of the drivers' rates (a
+        #: generalized force on its driver, added in :meth:`generalized_forces`)
+        self.friction = (friction.Layout.of(self.effects_model)
+                         if "friction" in scene.effects and scene.friction else None)
+        #: pin or slider friction: every friction (seals too) solved with the accelerations
+        #: by the force stage itself (:meth:`accelerations`) on the scene with inertia
+        self.coupled = self.friction is not None and self.friction.coupled
+        self.forces_model = build_model(without_inputs(scene, keep_inertia=True)) \
+            if self.coupled else None
         self._context = None
         self.tol = float(self.model.tolerance())
         self.rcond = scene.solver.singular_rcond
@@ -184,20 +202,22 @@ class MotionEquations:
 
     def state_of(self, X, s, sd, V, A0, K, link_angle) -> State:
         """A State from solved kinematics (B rows): the effects' generalized forces added."""
-        generalized, power = self.generalized_forces(X, s, sd, V, A0, K, link_angle)
-        return State(s, sd, X, V, A0, K, link_angle, generalized, power)
+        generalized, power, rubbing = self.generalized_forces(X, s, sd, V, A0, K, link_angle)
+        return State(s, sd, X, V, A0, K, link_angle, generalized, power, rubbing)
 
     def generalized_forces(self, X, s, sd, V, A0, K, link_angle):
-        """(K^T Q (B, nd), the power of the effects that store no energy (B,)) of every
-        effect but inertia: gravity's from its constant loads, the others' (springs,
-        damping, loads) from :data:`linkpipe.forces.effects.EFFECTS` by virtual work
-        (:meth:`Influence.generalized`, as the force stage computes the input force)."""
+        """(K^T Q (B, nd), the power of the effects that store no energy (B,), friction's
+        power (B,)) of every effect but inertia: gravity's from its constant loads, the
+        others' (springs, damping, loads) from :data:`linkpipe.forces.effects.EFFECTS` by
+        virtual work (:meth:`Influence.generalized`, as the force stage computes the input
+        force), the seals' friction from :func:`linkpipe.forces.friction.seal_loads` (the
+        force stage's own loads: ``-f`` on its driver, ``f`` the seal's law at its rate)."""
         B = X.shape[0]
         generalized = np.einsum("bid,i->bd", K, self.Q_gravity) if self.Q_gravity is not None \
             else np.zeros((B, self.model.n_drivers))
-        power = np.zeros(B)
-        if not self.varying:
-            return generalized, power
+        power, rubbing = np.zeros(B), np.zeros(B)
+        if not self.varying and self.friction is None:
+            return generalized, power, rubbing
         model = self.effects_model
         status = np.full(B, OK, np.int8)
         motion = Motion(s, sd, np.zeros_like(s), X, V, A0, status, K, None, link_angle)
@@ -213,7 +233,11 @@ class MotionEquations:
             generalized = generalized + g
             if name not in STORED:
                 power += (g * sd).sum(axis=1)
-        return generalized, power
+        if self.friction is not None and self.friction.seals and not self.coupled:
+            g = influence.generalized(friction.seal_loads(ctx, self.friction, influence.phi_s)[1])
+            generalized = generalized + g
+            rubbing = (g * sd).sum(axis=1)
+        return generalized, power, rubbing
 
     def rates_one(self, q: np.ndarray, s: np.ndarray, sd: np.ndarray):
         """:meth:`rates` of one state (q (n_q,), s, sd (nd,)) with Phi_q, Phi_s and gamma
@@ -265,12 +289,65 @@ class MotionEquations:
         return Mr, bias, st.generalized
 
     def accelerations(self, st: State, F: np.ndarray) -> np.ndarray:
-        """sdd (B, nd) under the drivers' forces ``F`` (B, nd)."""
+        """sdd (B, nd) under the drivers' forces ``F`` (B, nd). With pin or slider friction
+        (whose size depends on the pin and normal forces, so on sdd) by a fixed point on the
+        force stage: sdd -> the force the drivers need for that motion, friction solved with
+        the pin forces (:func:`linkpipe.forces.compute_forces`, every effect and friction on
+        the Lagrange side) -> sdd += J^-1 (F - needed), until the gap is within
+        :attr:`tol_force` of the largest term; J = d needed / d sdd starts at M_r (exact
+        without friction: the first round shrinks the gap by friction's sensitivity to sdd,
+        ~ mu r m arm / I) and takes Broyden's update after each round (superlinear).
+        Friction's power is then ``st``'s; a row that does not converge in ``[solver]
+        max_iter`` rounds or whose force stage fails is NaN."""
         Mr, bias, generalized = self.reduced(st)
         rhs = generalized - bias + F
+        sdd = self._solve(Mr, rhs)
+        if not self.coupled:
+            return sdd
+        size = np.abs(np.concatenate([generalized, bias, F], axis=1)).max(axis=1)
+        live = np.isfinite(sdd).all(axis=1)
+        J, last = np.nan_to_num(Mr), None  # d needed / d sdd, Broyden-updated from M_r
+        for _ in range(self.scene.solver.max_iter + 1):
+            forces = self.forces_at(st, sdd)
+            gap = F - forces.variables["input_force"][1]
+            live &= np.isfinite(gap).all(axis=1)
+            done = ~live | (np.abs(gap).max(axis=1) <= self.tol_force * size)
+            if done.all():
+                break
+            gap = np.nan_to_num(gap)
+            if last is not None:  # Broyden: J ds = d needed along the last step
+                ds, dn = sdd - last[0], last[1] - gap
+                norm = np.einsum("bd,bd->b", ds, ds)
+                use = live & (norm > 0)
+                upd = (dn - np.einsum("bij,bj->bi", J, ds)) / np.where(use, norm, 1.0)[:, None]
+                J = J + np.where(use[:, None, None], upd[:, :, None] * ds[:, None, :], 0.0)
+            last = (sdd, gap)
+            sdd = sdd + np.where(live[:, None], self._solve(J, gap), 0.0)
+        # a force stage that fails, or friction with no consistent motion (a self-locking
+        # pin: the round did not converge), leaves NaN: the integrator's step is refused
+        sdd = np.where((live & done)[:, None], sdd, np.nan)
+        st.power_friction = forces.variables["friction_power"][1].sum(axis=1)
+        return sdd
+
+    #: the relative tolerance of the friction fixed point on the drivers' forces
+    tol_force = 1e-12
+
+    @staticmethod
+    def _solve(Mr, rhs):
         if Mr.shape[1] == 1:
             return rhs / Mr[:, :, 0]
         return np.linalg.solve(Mr, rhs[..., None])[..., 0]
+
+    def forces_at(self, st: State, sdd: np.ndarray):
+        """The force stage (all effects, inertia and friction, the Lagrange side) of state
+        ``st`` moving with driver accelerations ``sdd`` (B, nd)."""
+        model = self.forces_model
+        A = st.A0.copy()
+        A[:, model.moving] += np.einsum("bid,bd->bi", st.K, sdd).reshape(len(sdd), -1, 2)
+        status = np.where(np.isfinite(A).all(axis=(1, 2)), OK, NO_ASSEMBLY).astype(np.int8)
+        motion = Motion(st.s, st.sd, sdd, st.X, st.V, A, status, st.K,
+                        kin.link_rates(model, st.X, st.V, A)[1], st.link_angle)
+        return compute_forces(model, motion, self.units)
 
     def kinetic_energy(self, st: State) -> np.ndarray:
         """(B,) ½ qd^T M qd."""
@@ -280,6 +357,11 @@ class MotionEquations:
     def nonconservative_power(self, st: State) -> np.ndarray:
         """(B,) the power of the effects with no stored energy (damping, loads)."""
         return st.power_other
+
+    def friction_power(self, st: State) -> np.ndarray:
+        """(B,) friction's power (at most zero; after :meth:`accelerations` where friction
+        depends on the forces)."""
+        return st.power_friction
 
 
 #: the effects whose work is stored as an energy (the others' power is integrated)

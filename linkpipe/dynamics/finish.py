@@ -69,9 +69,9 @@ def energy_error(eqs: MotionEquations, state: State, traj: Trajectory,
                  variables: dict) -> np.ndarray:
     """(S,) kinetic + stored energy (the force stage's ``variables``: springs, torsion springs,
     gravity) - their start values - the drivers' work - the work of the effects that store none
-    (damping, loads): zero for the exact motion."""
+    (damping, loads) - friction's work (the seals'): zero for the exact motion."""
     E = eqs.kinetic_energy(state) + potential_of(variables, len(traj.t))
-    return E - E[0] - traj.work_drivers - traj.work_other
+    return E - E[0] - traj.work_drivers - traj.work_other - traj.work_friction
 
 
 def forces_of(eqs: MotionEquations, k: Kinematics, F: np.ndarray, state: State,

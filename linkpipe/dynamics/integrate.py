@@ -1,9 +1,9 @@
 """Integrating the drivers' equations of motion over [dynamics] with scipy's adaptive solvers.
 
-The state is ``y = (s, sd, W_drivers, W_other)``: the drivers' values and rates (internal
-units) and two running works, the drivers' forces' ``integral F . sd dt`` and that of every effect
-with no stored energy (damping, loads), so that ``energy_error`` compares like with like at
-every instant. ``solve_ivp`` (DOP853, explicit 8th order, or Radau IIA, implicit 5th order for
+The state is ``y = (s, sd, W_drivers, W_other, W_friction)``: the drivers' values and rates
+(internal units) and three running works, the drivers' forces' ``integral F . sd dt``, that of
+every effect with no stored energy (damping, loads) and friction's (the actuators' seals'), so
+that ``energy_error`` compares like with like at every instant. ``solve_ivp`` (DOP853, explicit 8th order, or Radau IIA, implicit 5th order for
 stiff springs) chooses its steps to ``rtol``; the motion is read off its dense output at the
 output instants.
 
@@ -34,7 +34,8 @@ from .forcing import Forcing
 @dataclass(frozen=True)
 class Trajectory:
     """The integrated motion at the output instants ``t`` (S,): ``s``, ``sd`` (S, nd) internal
-    units (NaN after an event), the works ``work_drivers`` and ``work_other`` (S,), ``solved``
+    units (NaN after an event), the works ``work_drivers``, ``work_other`` and
+    ``work_friction`` (S,: friction's, at most zero), ``solved``
     (S,) bool; ``end`` the time the integration reached, ``event`` what ended it early ("" at
     [dynamics] to), ``steps``, ``evaluations`` the solver's accepted steps and right-hand-side
     evaluations, ``method``, ``rtol``."""
@@ -44,6 +45,7 @@ class Trajectory:
     sd: np.ndarray
     work_drivers: np.ndarray
     work_other: np.ndarray
+    work_friction: np.ndarray
     solved: np.ndarray
     end: float
     event: str
@@ -84,13 +86,14 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
         F = forcing.at(t)
         sdd = eqs.accelerations(st, F[None])[0]
         return np.concatenate([y[nd:2 * nd], sdd, [F @ y[nd:2 * nd],
-                                                    eqs.nonconservative_power(st)[0]]])
+                                                    eqs.nonconservative_power(st)[0],
+                                                    eqs.friction_power(st)[0]]])
 
     sc = scales(scene, model)
     # the works are carried along but steer no step (atol huge): the motion's accuracy is
     # what rtol controls; they are as accurate as the steps the motion takes
-    atol = np.concatenate([rtol * sc, rtol * sc, [1e300, 1e300]])
-    y0 = np.concatenate([s0, sd0, [0.0, 0.0]])
+    atol = np.concatenate([rtol * sc, rtol * sc, [1e300] * 3])
+    y0 = np.concatenate([s0, sd0, [0.0] * 3])
     instants = np.asarray(dyn.instants, float)
     strokes = StrokeEvents(scene, eqs, scale)
     outside = strokes.outside(y0)
@@ -98,7 +101,7 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
         Y = np.full((len(instants), len(y0)), np.nan)
         Y[0] = y0
         return Trajectory(instants, Y[:, :nd], Y[:, nd:2 * nd], Y[:, 2 * nd],
-                          Y[:, 2 * nd + 1], instants <= 0.0, 0.0,
+                          Y[:, 2 * nd + 1], Y[:, 2 * nd + 2], instants <= 0.0, 0.0,
                           strokes.describe(outside, y0, "at the start"), 0, 0, method, rtol)
     options = {"jac": finite_jacobian(rhs, nd, atol / rtol)} if method == "Radau" else {}
     sol = solve_ivp(rhs, (0.0, dyn.to), y0, method=method, rtol=rtol, atol=atol,
@@ -120,7 +123,7 @@ def integrate(scene, eqs: MotionEquations, rtol: float | None = None,
         Y[solved] = sol.sol(np.minimum(instants[solved], end)).T
     Y[0] = y0  # the start exactly as given
     return Trajectory(instants, Y[:, :nd], Y[:, nd:2 * nd], Y[:, 2 * nd], Y[:, 2 * nd + 1],
-                      solved, end, event, len(sol.t) - 1, int(sol.nfev), method, rtol)
+                      Y[:, 2 * nd + 2], solved, end, event, len(sol.t) - 1, int(sol.nfev), method, rtol)
 
 
 class StrokeEvents:
@@ -209,7 +212,7 @@ def finite_jacobian(rhs, nd: int, scale: np.ndarray):
     works' columns are zero: nothing depends on them), each column taken backward where the
     forward step leaves the assembled region, and zero where neither exists (a state at an
     event: the step's Newton iterations then fail and the step shrinks, as for DOP853).
-    ``scale`` (2 nd + 2,): the states' scales; the step is sqrt(eps) times the larger of it and
+    ``scale`` (2 nd + 3,): the states' scales; the step is sqrt(eps) times the larger of it and
     |y|."""
     def jac(t, y):
         f0 = rhs(t, y)
