@@ -17,7 +17,6 @@ import numpy as np
 
 from . import kinematics as kin
 from . import stroke
-from .dynamics import integrated
 from .forces import LAGRANGE_VARIABLES, compute_forces
 from .errors import SceneError
 from .forces.constants import ForceConstants
@@ -75,6 +74,10 @@ def finished(scene: Scene, model, segment: int, seconds: dict, tell=None,
     starts and after each segment; ``wanted``: as :func:`finish`'s."""
     tell = tell if callable(tell) else (lambda stage, done=None: None)
     if scene.dynamics is not None:  # another producer of a solved motion: integrated whole
+        # imported here, not with the spine: scipy.integrate (and scipy.optimize with it)
+        # costs about 0.35 s of every command's start; only a dynamics scene needs it
+        from .dynamics import integrated
+
         motion, forces, time_axis = integrated(scene, model, tell, seconds)
         yield finish(scene, model, motion, seconds=seconds, time_axis=time_axis, forces=forces)
         return
