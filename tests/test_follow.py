@@ -24,6 +24,8 @@ import time
 import h5py
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from linkpipe.__main__ import main
 
@@ -467,3 +469,45 @@ def test_a_file_that_run_wrote_is_not_followed_into(rig, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "was written by run, not follow" in err and "Traceback" not in err
     assert (out / "fourbar_live.h5").read_bytes() == before
+
+
+_NUMBER = st.one_of(
+    st.floats(-1e9, 1e9, allow_nan=False).map(lambda v: f"{v:.6f}"),
+    st.floats(-1e3, 1e3, allow_nan=False).map(lambda v: f"{v:.12f}"),
+    st.integers(-10**15, 10**15).map(str),
+    st.floats(-1e300, 1e300, allow_nan=False).map(repr),  # exponents, 17 digits: pandas reads
+    st.sampled_from(["0", "-0.0", "-0.000", ".5", "5.", "+3.25", "", " 7.5"]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(values=st.lists(st.tuples(_NUMBER, _NUMBER), min_size=1, max_size=40),
+       pieces=st.lists(st.integers(1, 7), min_size=1, max_size=12))
+def test_the_tail_reads_the_bits_the_batch_reader_reads(tmp_path_factory, values, pieces):
+    """CsvTail's rows, read a few lines at a time (its own number reader for plain decimals of
+    up to 15 digits, pandas for the rest), equal bit for bit pandas.read_csv of the whole file
+    (the batch run's log reader): the same floats, whichever reader took a line."""
+    import pandas as pd
+
+    from linkpipe.follow.tail import CsvTail
+
+    path = tmp_path_factory.mktemp("tail") / "log.csv"
+    lines = [f"{i * 0.001:.3f},{a},{b}" for i, (a, b) in enumerate(values)]
+    path.write_text("t,a,b\n")
+    tail = CsvTail(path, "t", ["a", "b"])
+    got, at, k = {"t": [], "a": [], "b": []}, 0, 0
+    while at < len(lines):
+        step = pieces[k % len(pieces)]
+        with open(path, "a") as f:
+            f.write("".join(line + "\n" for line in lines[at:at + step]))
+        at, k = at + step, k + 1
+        rows = tail.poll()
+        assert rows.fault is None
+        got["t"].append(rows.t)
+        for c in ("a", "b"):
+            got[c].append(rows.columns[c])
+    tail.close()
+    ref = pd.read_csv(path, skipinitialspace=True, index_col=False, engine="c")
+    for c in got:
+        mine = np.concatenate(got[c])
+        want = pd.to_numeric(ref[c], errors="coerce").to_numpy(dtype=float)
+        assert mine.tobytes() == want.tobytes(), c
