@@ -286,8 +286,9 @@ class _Case:
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
             # summed with the step axis last (where the stacked cases keep it contiguous)
             total = np.moveaxis(getattr(self, name), 0, -1).copy()
+            scratch = np.empty_like(total)  # each product into one buffer (no temporaries)
             for k, part in enumerate(cases[name]):
-                total += u[:, k] * np.moveaxis(part, 0, -1)
+                total += np.multiply(u[:, k], np.moveaxis(part, 0, -1), out=scratch)
             out[name] = np.moveaxis(total, -1, 0)
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
