@@ -683,3 +683,33 @@ def test_the_row_maximum_column_by_column_is_numpys():
         a = np.abs(rng.standard_normal((500, m))) * 10.0 ** rng.integers(-20, 20, (500, 1))
         a[rng.random((500, m)) < 0.05] = np.nan
         np.testing.assert_array_equal(_row_max(a), a.max(axis=1, initial=0.0))
+
+
+@pytest.mark.parametrize("name", ["excavator_arm", "five_bar", "jansen", "shear_press",
+                                  "slider_crank"])
+def test_the_unit_loads_placed_at_their_few_points_equal_the_dense_loads(name, monkeypatch):
+    """The stacked unit cases take each unit load at the few points it loads
+    (:func:`linkpipe.forces.friction.unit_load_terms`), written into zeros; the dense loads
+    (:func:`~linkpipe.forces.friction.unit_loads`, every point) give the same solve inputs, so
+    every stored array is bit for bit the same when the terms list every point's dense value."""
+    import pathlib
+
+    import linkpipe.forces.friction as friction
+
+    path = pathlib.Path(__file__).resolve().parent.parent / "configs" / f"{name}.toml"
+    sparse = linkpipe.solve(_with_friction_everywhere(path))
+    terms = friction.unit_load_terms
+
+    def dense_terms(ctx, layout, influence, Xz):
+        for forces, work, bodies in terms(ctx, layout, influence, Xz):
+            points = ctx.zeros_points()
+            for p, f in forces:
+                points[:, p] += f
+            yield tuple((p, points[:, p]) for p in range(points.shape[1])), work, bodies
+
+    monkeypatch.setattr(friction, "unit_load_terms", dense_terms)
+    dense = linkpipe.solve(_with_friction_everywhere(path))
+    np.testing.assert_array_equal(sparse.status, dense.status)
+    assert set(sparse.forces) == set(dense.forces)
+    for key, (_, values, _) in dense.forces.items():
+        np.testing.assert_array_equal(sparse.forces[key][1], values, err_msg=key)

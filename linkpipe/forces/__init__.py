@@ -286,8 +286,9 @@ class _Case:
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
             # summed with the step axis last (where the stacked cases keep it contiguous)
             total = np.moveaxis(getattr(self, name), 0, -1).copy()
+            scratch = np.empty_like(total)  # each product into one buffer (no temporaries)
             for k, part in enumerate(cases[name]):
-                total += u[:, k] * np.moveaxis(part, 0, -1)
+                total += np.multiply(u[:, k], np.moveaxis(part, 0, -1), out=scratch)
             out[name] = np.moveaxis(total, -1, 0)
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
@@ -412,14 +413,22 @@ def _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors) -> di
     # the reactions' (fixed points): no (K, S, n_points, 2) stack of them
     fixed = np.flatnonzero(model.fixed)
     n_cases = len(layout.links) + len(layout.slides)
-    gq = np.empty((n_cases, n_steps, model.n_q))
-    at_fixed = np.empty((n_cases, n_steps, len(fixed), 2))
+    # and only at the few points each loads (zeros elsewhere, as the dense loads hold)
+    # laid out (n_q, K, S), each coordinate's block contiguous: what the block solves read
+    gq_rows = np.zeros((model.n_q, n_cases, n_steps))
+    at_fixed = np.zeros((n_cases, n_steps, len(fixed), 2))
+    column = {int(p): c for c, p in enumerate(model.moving)}
+    fixed_slot = {int(p): c for c, p in enumerate(fixed)}
     generalized, bodies = [], []
-    for k, (r, w, b) in enumerate(friction.unit_loads(ctx, layout, influence, Xz)):
-        gq[k] = r[:, model.moving].reshape(n_steps, -1)
-        at_fixed[k] = r[:, fixed]
+    for k, (forces, w, b) in enumerate(friction.unit_load_terms(ctx, layout, influence, Xz)):
+        for p, f in forces:
+            if p in column:
+                gq_rows[2 * column[p]:2 * column[p] + 2, k] += f.T
+            else:
+                at_fixed[k, :, fixed_slot[p]] += f
         generalized.append(w)
         bodies.append(b)
+    gq = np.moveaxis(gq_rows, 0, 2)  # (K, S, n_q) view
     generalized = np.stack(generalized)
     ok = motion.status == OK
     lam = stacked_multipliers(model, Xz, motion.s, gq, ok,

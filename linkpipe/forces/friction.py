@@ -156,22 +156,29 @@ def unit_loads(ctx, layout: Layout, influence, Xz):
     ``layout.links`` (as its force pair on the link's first two points), then a unit force
     along each friction slider's guide (on its point, minus on the moving guide's first point).
     Yields ``(Q at every point (S, P, 2), its virtual work per driver (S, nd), bodies)``."""
+    for forces, work, bodies in unit_load_terms(ctx, layout, influence, Xz):
+        points = ctx.zeros_points()
+        for p, f in forces:
+            points[:, p] += f
+        yield points, work, bodies
+
+
+def unit_load_terms(ctx, layout: Layout, influence, Xz):
+    """:func:`unit_loads` as the few points they load: yields ``(((point, (S, 2) force), ...),
+    virtual work (S, nd), bodies)``; a point's total is the sum of its forces in this order."""
     model = ctx.model
     for li in layout.links:
         body = couple_as_body(model, np.ones(ctx.n_steps), li, Xz)  # {b: f, a: -f}
-        points = ctx.zeros_points()
-        for p, f in body.items():
-            points[:, p] += f
-        yield points, influence.link_angles[:, li, :], {li: merge_bodies({}, body, -1.0)}
+        yield tuple(body.items()), influence.link_angles[:, li, :], \
+            {li: merge_bodies({}, body, -1.0)}
     for _, _, p, d, _ in layout.slides:
-        points = ctx.zeros_points()
         t = guide_direction(ctx, layout, p, d, Xz)
-        points[:, p] += t
+        forces = [(p, t)]
         work = np.einsum("sx,sxd->sd", t, influence.points[:, p])
         if d >= 0:
-            points[:, d] -= t
+            forces.append((d, -t))
             work = work - np.einsum("sx,sxd->sd", t, influence.points[:, d])
-        yield points, work, {}
+        yield tuple(forces), work, {}
 
 
 def guide_direction(ctx, layout, p, d, Xz):

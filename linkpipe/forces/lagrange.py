@@ -77,7 +77,10 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
                  if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
             factors[key] = E, eng.block_inverses(E)
         E, inverses = factors[key]
-        rhs = list(np.ascontiguousarray(generalized_q[:, ii].transpose(2, 0, 1)))
+        at = ii
+        if len(ii) and ii[-1] - ii[0] + 1 == len(ii):  # contiguous: a view, not a gather
+            at = slice(int(ii[0]), int(ii[-1]) + 1)
+        rhs = list(np.ascontiguousarray(generalized_q[:, at].transpose(2, 0, 1)))
         for r, y in enumerate(eng.solve_transpose(E, rhs, inverses)):
             lam[r][:, ii] = y
     return np.moveaxis(lam, 0, 2)
