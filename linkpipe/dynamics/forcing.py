@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.drive import LAWS, log_spline
+from ..log_splines import log_spline
+from ..model.drive import LAWS
 
 
 class Forcing:

@@ -1,7 +1,7 @@
 """The rows of a growing log solved block by block through the pipeline, each row once final.
 
 A ``[time] log`` scene's drivers follow a cubic spline through the log's samples
-(:func:`linkpipe.model.drive.log_spline`), a global fit: a row added at the end moves the
+(:func:`linkpipe.log_splines.log_spline`), a global fit: a row added at the end moves the
 spline's rates and accelerations near the end (the not-a-knot end condition moves), by an
 amount that decays by about 2 - sqrt(3) = 0.27 per sample away from the end (the
 interpolating spline's influence function). Positions at the samples do not move (the

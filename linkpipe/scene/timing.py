@@ -11,6 +11,7 @@ import numpy as np
 from . import logs as logfiles
 from . import units
 from .keys import _Table, _show, _suggest
+from ..log_splines import log_spline, missing_at
 from .tables import LAWS, LogData, Measurement, TimeSweep
 
 #: the keys that say how a driver of a [time] scene moves (exactly one of them)
@@ -359,8 +360,6 @@ class MeasurementTables:
         ``sum(part_i x scale_i)``, and the parts (S, n): each column in the scene's units at
         the steps (a log other than [time]'s through its cubic spline at the instants; NaN
         where a sample is missing)."""
-        from ..model.drive import log_spline, missing_at
-
         raw = table.data.get("log")
         many = isinstance(raw, list)
         texts = [table.string("log")] if not many else raw
