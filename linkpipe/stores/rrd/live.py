@@ -6,6 +6,7 @@ Alarms and reports go to the ``alarms`` entity (a ``TextLog`` the viewer lists w
 and level)."""
 from __future__ import annotations
 
+import hashlib
 import queue
 import socket
 import threading
@@ -56,6 +57,9 @@ class LiveRecording:
             sinks.append(rr.FileSink(str(file)))
         self.stream.set_sinks(*sinks, default_blueprint=blueprint(template))
         self.stream.send_recording_name(name)
+        # what each block logs, with its static entities (styles, legends, series' names and
+        # colours, ...) sent again only when their content changed since the last block
+        self._static = _UnchangedStaticSkipped(self.stream)
         # the blocks are logged on a thread of their own while the next block solves (a
         # bounded queue: a viewer slower than the log holds the solver back, never memory)
         self._queue: queue.Queue = queue.Queue(maxsize=16)
@@ -103,7 +107,7 @@ class LiveRecording:
                     self._failed = exc
 
     def _block(self, part) -> None:
-        log_result(self.stream, part)
+        log_result(self._static, part)
         self.stream.flush()
         if self.on_sent is not None:
             self.on_sent(part)
@@ -121,6 +125,51 @@ class LiveRecording:
         self._thread.join()
         self.stream.flush()
         self.stream.disconnect()
+
+
+class _UnchangedStaticSkipped:
+    """``stream`` whose static ``log`` calls go out only when the entity's content (its
+    components' Arrow data) differs from what was last sent to that path: a static component
+    is overwritten by the next, so an unchanged one sent again shows nothing new, yet costs a
+    call, its encoding and its bytes on every block. Every other call goes to ``stream``.
+    :attr:`logged` and :attr:`skipped` count the static calls sent and left out."""
+
+    def __init__(self, stream: rr.RecordingStream):
+        self._stream = stream
+        self._sent: dict[tuple, bytes] = {}  # (path, components) -> digest of their data
+        self.logged = self.skipped = 0
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+    def log(self, entity, archetype, *extra, static: bool = False, **kwargs) -> None:
+        if not static or extra or kwargs or not hasattr(archetype, "as_component_batches"):
+            self._stream.log(entity, archetype, *extra, static=static, **kwargs)
+            return
+        batches = archetype.as_component_batches()
+        key = (str(entity), tuple(str(b.component_descriptor()) for b in batches))
+        digest = _digest(batches)
+        if self._sent.get(key) == digest:
+            self.skipped += 1
+            return
+        self._stream.log(entity, archetype, static=True)
+        self._sent[key] = digest
+        self.logged += 1
+
+
+def _digest(batches) -> bytes:
+    """A digest of component batches' Arrow data: types, lengths, offsets and every buffer
+    (children's too), so equal digests mean equal contents."""
+    h = hashlib.blake2b(digest_size=20)
+    for batch in batches:
+        array = batch.as_arrow_array()
+        h.update(f"{batch.component_descriptor()}|{array.type}|{len(array)}|{array.offset}|"
+                 .encode())
+        for buffer in array.buffers():
+            h.update(b"-" if buffer is None else b"+%d:" % buffer.size)
+            if buffer is not None:
+                h.update(memoryview(buffer))
+    return h.digest()
 
 
 def _check_port(port: int) -> None:
