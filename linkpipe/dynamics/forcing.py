@@ -33,18 +33,18 @@ class Forcing:
                 self.parts.append(("free", 0.0))
 
     def at(self, t: float) -> np.ndarray:
-        out = np.empty(len(self.parts))
-        for j, (kind, how) in enumerate(self.parts):
-            if kind == "law":
-                tau = min(max(t / how.duration, 0.0), 1.0)
-                out[j] = how.from_value + (how.to_value - how.from_value) * float(
-                    LAWS[how.law][0](np.asarray(tau)))
-            elif kind == "log":
-                out[j] = float(how(t))
-            else:
-                out[j] = how
-        return out
+        return self.over(np.array([float(t)]))[0]
 
     def over(self, t: np.ndarray) -> np.ndarray:
-        """(S, nd) at the instants ``t`` (S,)."""
-        return np.array([self.at(float(x)) for x in t]).reshape(len(t), len(self.parts))
+        """(S, nd) at the instants ``t`` (S,): each driver's force over all instants at once."""
+        t = np.asarray(t, dtype=float)
+        out = np.empty((len(t), len(self.parts)))
+        for j, (kind, how) in enumerate(self.parts):  # a few drivers: the columns
+            if kind == "law":
+                tau = np.clip(t / how.duration, 0.0, 1.0)
+                out[:, j] = how.from_value + (how.to_value - how.from_value) * LAWS[how.law][0](tau)
+            elif kind == "log":
+                out[:, j] = how(t)
+            else:
+                out[:, j] = how
+        return out

@@ -19,14 +19,24 @@ def assembled_drawing(model: Model) -> np.ndarray | None:
     return derived(model, "assembled_drawing", _assembled_drawing, content_key(model))
 
 
-def _assembled_drawing(model: Model) -> np.ndarray | None:
+def drawn_start(model: Model):
+    """``(q0 (1, n_q), drawn driver values (nd,))`` of the drawing as written, the start of
+    every assembly of it; None without unknowns or drivers, or where the drawing gives no
+    finite driver value."""
     if not model.n_q or not model.n_drivers:
         return None
     X0 = model.start_position[None]
     drawn = model.driver_values_at(X0)[0]
     if not np.isfinite(drawn).all():
         return None
-    q0 = model.q_of(X0)
+    return model.q_of(X0), drawn
+
+
+def _assembled_drawing(model: Model) -> np.ndarray | None:
+    start = drawn_start(model)
+    if start is None:
+        return None
+    q0, drawn = start
     tol_abs = model.tolerance()
     fast = _step_kernels(model)
     q, _, _, conv = (fast.newton(q0[0], drawn, tol_abs, 50) if fast is not None

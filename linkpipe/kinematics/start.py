@@ -8,7 +8,7 @@ from ..errors import SceneError
 from ..model import Model, constraint_source
 from ..model.drive import internal_motion
 from .continuation import solve_positions
-from .drawing import assembled_drawing
+from .drawing import assembled_drawing, drawn_start
 from .linalg import condition, is_singular
 from .roots import _null_line_roots, drivers_aligned, newton
 from .step import _step_kernels
@@ -314,14 +314,12 @@ def _drawing_by_least_squares(model: Model) -> np.ndarray | None:
     Newton's 50 iterations (a wrong length); None where it does not assemble there."""
     from .roots import _lm_root
 
-    if not model.n_q or not model.n_drivers:
+    start = drawn_start(model)
+    if start is None:
         return None
-    X0 = model.start_position[None]
-    drawn = model.driver_values_at(X0)[0]
-    if not np.isfinite(drawn).all():
-        return None
+    q0, drawn = start
     tol_abs = model.tolerance()
-    q, r, _ = _lm_root(model, model.q_of(X0)[0], drawn, tol_abs, max_iter=500)
+    q, r, _ = _lm_root(model, q0[0], drawn, tol_abs, max_iter=500)
     if not r <= 10 * tol_abs:
         return None
     q, _, _, conv = newton(model, q[None], drawn[None], tol_abs, 50)
