@@ -269,10 +269,9 @@ def test_power_balance_at_every_ok_step():
         assert np.all(friction_power[ok] <= 1e-12)
 
 
-SEAL = """
-[scene]
-name = "seal"
-units = { length = "m", mass = "kg", time = "s", force = "N" }
+#: the tipper's body on its cylinder, with gravity and the cylinder's seal friction (Coulomb
+#: 800 N): the drivers and the rest of the seal's law are each test's own
+TIPPER_BODY = """
 [points]
 H = { x = 0.0, y = 0.0, fixed = true }
 F = { x = 5.2, y = 0.0 }
@@ -282,13 +281,8 @@ G = { x = 2.6, y = 0.85 }
 [[links]]
 name = "body"
 points = ["H", "F", "P", "G"]
-[[drivers]]
-name = "cyl"
-distance = ["C", "P"]
-from = FROM
-to = TO
-steps = 41
-rate = RATE
+"""
+SEAL_FRICTION = """
 [analysis]
 effects = ["gravity", "friction"]
 [gravity]
@@ -301,7 +295,20 @@ center = "G"
 name = "seal"
 driver = "cyl"
 coulomb = 800.0
-viscous = 2000.0
+"""
+
+SEAL = """
+[scene]
+name = "seal"
+units = { length = "m", mass = "kg", time = "s", force = "N" }
+""" + TIPPER_BODY + """[[drivers]]
+name = "cyl"
+distance = ["C", "P"]
+from = FROM
+to = TO
+steps = 41
+rate = RATE
+""" + SEAL_FRICTION + """viscous = 2000.0
 stribeck = { peak = 1200.0, velocity = 0.01 }
 """
 
@@ -449,16 +456,7 @@ SEAL_TIMED = """
 [scene]
 name = "seal_timed"
 units = { length = "m", mass = "kg", time = "s", force = "N" }
-[points]
-H = { x = 0.0, y = 0.0, fixed = true }
-F = { x = 5.2, y = 0.0 }
-P = { x = 4.9, y = 0.4 }
-C = { x = 4.6, y = -0.9, fixed = true }
-G = { x = 2.6, y = 0.85 }
-[[links]]
-name = "body"
-points = ["H", "F", "P", "G"]
-[time]
+""" + TIPPER_BODY + """[time]
 from = 0.0
 to = 20.0
 steps = 401
@@ -468,19 +466,7 @@ distance = ["C", "P"]
 from = 1.4
 to = 2.4
 law = "harmonic"
-[analysis]
-effects = ["gravity", "friction"]
-[gravity]
-g = [0.0, -9.81]
-[[masses]]
-link = "body"
-mass = 17500.0
-center = "G"
-[[friction]]
-name = "seal"
-driver = "cyl"
-coulomb = 800.0
-"""
+""" + SEAL_FRICTION
 
 
 def test_the_accuracy_ladder_of_friction_velocity_scale_against_the_sign_law():
