@@ -212,7 +212,7 @@ def test_a_crowd_of_labels_and_legend_entries_is_left_to_hover(tmp_path):
                                                                                "iterations")))
 
 
-def test_a_dynamics_run_that_ends_early_fills_its_plots_and_a_free_driver_has_no_force_plot(
+def test_a_dynamics_run_that_ends_early_fills_its_plots_ends_its_timeline_and_a_free_driver_has_no_force_plot(
         tmp_path):
     """The falling lever's tether runs out at 0.328 s of its 1 s: the plots' time axis spans
     the assembled instants (3 % either side), not the NaN tail; its driver moves freely (input
@@ -229,6 +229,14 @@ def test_a_dynamics_run_that_ends_early_fills_its_plots_and_a_free_driver_has_no
     # the view's range as the blueprint holds it, seconds
     (start, end) = _time_range_seconds(axis)
     np.testing.assert_allclose([start, end], [-0.03 * t_end, 1.03 * t_end], rtol=1e-6)
+    # nothing was integrated after the tether ran out: the recording's timeline ends at the
+    # last assembled instant (the viewer would otherwise play 0.67 s of an empty mechanism),
+    # and its info note says so; the result (and the .h5) keep every instant
+    last = int(np.flatnonzero(assembled)[-1])
+    steps = rec.steps("/mechanism/links/**")
+    assert int(steps["step"].max()) == last and len(result.time) == 1001
+    (note,) = rec.static("/info", "TextDocument:text")
+    assert f"integrated to t = {t_end:.6g} s" in note and f"{1000 - last:,} instants" in note
     goal = solve_scene(str(CONFIGS / "basketball_goal.toml"))    # a driven sweep keeps its plot
     assert any(v.startswith("input force") for v in
                Recording(_write(goal, tmp_path / "goal")).views())

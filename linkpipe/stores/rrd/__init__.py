@@ -25,6 +25,7 @@ import rerun as rr
 
 from .. import atomic_path
 from ...result import stride_of
+from ...status import NO_ASSEMBLY
 from . import forces, legend, mechanism, series
 from .columns import driver_timeline, driver_timelines, sender
 from .forces import FORCE_FRACTION, KINDS, MIN_FRACTION, drawn_arrows, force_arrows, force_legend
@@ -130,6 +131,14 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
             "the .h5 keeps every step." if h5_written else
             "no file of this run keeps every step (it wrote no .h5).")
         result = result.strided(rows)
+    ended = integration_end(result)
+    if ended is not None:  # nothing was integrated after it: the timeline ends there
+        end_note = (f"The motion was integrated to t = {result.time[ended]:.6g} s, where it "
+                    f"left its assembly; this recording ends there (the "
+                    f"{result.n_steps - ended - 1:,} instants after it are no_assembly"
+                    + (" in the .h5)." if h5_written else ")."))
+        info = end_note if info is None else f"{info} {end_note}"
+        result = result.strided(np.arange(ended + 1))
     scene = result.scene
     stream = rr.RecordingStream(APPLICATION_ID, recording_id=f"{scene.name}-{uuid.uuid4().hex}")
     # generous on purpose: the recording holds float32 copies of the arrays plus labels, and
@@ -153,6 +162,20 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     if spawn or connect:
         stream.disconnect()
     return kept
+
+
+def integration_end(result) -> int | None:
+    """The last row of a forward-dynamics ``result`` whose integration ended early (its
+    mechanism left its assembly: every row after it is ``no_assembly``, its moving points NaN),
+    or None (not dynamics, or no such tail). The recording stops there: drawn past it, the
+    viewer would play two thirds of the falling lever's second over an empty mechanism."""
+    if getattr(result.scene, "dynamics", None) is None or result.time is None:
+        return None
+    tail = result.status == NO_ASSEMBLY
+    if not tail[-1] or tail.all():
+        return None
+    last = int(np.flatnonzero(~tail)[-1])
+    return last if last < result.n_steps - 1 else None
 
 
 def _ordinal(n: int) -> str:
