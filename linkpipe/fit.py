@@ -133,6 +133,7 @@ def parameters_of(scene: Scene, data: dict) -> list[Parameter]:
         if twin is not None:
             raise SceneError(where, "fit", "parameters", f'"{name}" is the same value as '
                              f'"{twin}" (two addresses of one number)', "name it once")
+        acts(scene, name, path)
         lo, hi = _bounds_of(scene, bounds, name, value)
         out.append(Parameter(name, path, float(value), (lo, hi)))
     for name in bounds:
@@ -179,6 +180,32 @@ def fit_options(scene: Scene, data: dict) -> FitOptions:
     if len(set(per_log)) != len(per_log):
         raise SceneError(where, "fit", "per_log", "a parameter is named twice", "name each once")
     return FitOptions(loss, float(f_scale), tuple(per_log))
+
+
+def effects_moved_by(path: tuple) -> tuple[str, ...]:
+    """The effects a force table's number acts through (any one of them on: it moves the
+    computed forces), or () for a number of the geometry, the drivers, the logs or the
+    measurements (it always may)."""
+    table, key = path[0], next((k for k in path[2:] if isinstance(k, str)), "")
+    if table in ("springs", "torsion_springs"):
+        return ("damping",) if key == "damping" else ("springs",)
+    if table == "masses":
+        return ("inertia",) if key == "inertia" else ("gravity", "inertia")
+    return (table,) if table in ("gravity", "loads", "friction") else ()
+
+
+def acts(scene, name: str, path: tuple, where=None) -> None:
+    """A parameter of an effect the scene leaves off changes nothing: fitted, it would come
+    back "not identifiable" with no word of why (a study's or a search's variants would all be
+    the same); one message instead. ``where``: (file, table, key), as :func:`locate`'s."""
+    effects = effects_moved_by(path)
+    if effects and not set(effects) & set(scene.effects):
+        either = " or ".join(f'"{e}"' for e in effects)
+        raise SceneError(*(where or (scene.path, "fit", "parameters")),
+                         f'"{name}" acts through the effect {either}, which [analysis] effects '
+                         f"leaves off: it changes nothing that is computed",
+                         f"add {either.split(' or ')[0]} to [analysis] effects, or leave the "
+                         f"parameter out")
 
 
 def _bounds_of(scene, bounds, name, value):

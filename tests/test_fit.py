@@ -212,9 +212,26 @@ def test_a_bad_parameter_is_one_message_exit_2_nothing_written(tmp_path, capsys,
 def test_one_value_named_twice_is_a_scene_error(tmp_path):
     """Two addresses of one number (an index written 1 and 01): one message, not a fit that
     moves one value under two names."""
+    path, _ = make(tmp_path, fit_params='["springs.lift.k", "springs.lift.k"]')
+    with pytest.raises(linkpipe.errors.SceneError, match="a parameter is named twice"):
+        fit(load_scene(str(path)))
     path, _ = make(tmp_path, fit_params='["gravity.g.1", "gravity.g.01"]',
-                   extra="\n[gravity]\ng = [0.0, -9.81]\n")
+                   extra='\n[gravity]\ng = [0.0, -9.81]\n[[masses]]\nlink = "crank"\n'
+                         'mass = 1.0\ncenter = [0.5, 0.0]\n')
+    path.write_text(path.read_text().replace('effects = ["springs"]',
+                                             'effects = ["springs", "gravity"]'))
     with pytest.raises(linkpipe.errors.SceneError, match='the same value as "gravity.g.1"'):
+        fit(load_scene(str(path)))
+
+
+@pytest.mark.parametrize("params, effect", [('["gravity.g.1"]', '"gravity"'),
+                                            ('["springs.lift.k", "gravity.g.1"]', '"gravity"')])
+def test_a_parameter_of_an_effect_left_off_is_one_message(tmp_path, params, effect):
+    """A number of an effect that [analysis] effects leaves off changes nothing computed: the
+    fit would report it "not identifiable" without saying why; one message names the effect."""
+    path, _ = make(tmp_path, fit_params=params, extra="\n[gravity]\ng = [0.0, -9.81]\n")
+    with pytest.raises(linkpipe.errors.SceneError,
+                       match=f"acts through the effect {effect}, which \\[analysis\\] effects"):
         fit(load_scene(str(path)))
 
 

@@ -649,6 +649,20 @@ def test_studies_that_cannot_be_one_step_axis_or_name_a_value_twice(tmp_path, pa
     assert key in str(err.value) and words in str(err.value)
 
 
+def test_a_study_of_a_value_of_an_effect_left_off_is_one_message(tmp_path):
+    """The hatch leaves inertia off (quasi-static): its tailgate's moment of inertia moves
+    nothing computed, so a study of it would give identical variants; one message says why."""
+    path = tmp_path / "s.toml"
+    path.write_text(f'[study]\nbase = "{HATCH.as_posix()}"\n[study.parameters]\n'
+                    '"masses.tailgate.inertia" = { from = 1.0, to = 2.0, steps = 3 }\n')
+    with pytest.raises(SceneError) as err:
+        load_study(path)
+    assert err.value.key == "masses.tailgate.inertia"
+    assert 'acts through the effect "inertia", which [analysis] effects leaves off' in str(err.value)
+    path.write_text(path.read_text().replace("inertia\"", "mass\""))  # the mass: gravity's
+    assert load_study(path).parameters[0].address == "masses.tailgate.mass"
+
+
 def test_two_runs_of_one_study_into_one_folder_wait_for_each_other(tmp_path):
     """The second run waits for the first (it took the first one's unfinished file for one cut
     short by a kill and deleted it); both end with the complete file."""

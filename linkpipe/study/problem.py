@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from ..fit import locate
+from ..fit import acts, locate
 from ..scene.keys import KEYS, _is_number, _suggest
 from ..version import __version__
 from . import paths, spec
@@ -233,6 +233,7 @@ def _bounded(path, raw, scene, base) -> list[StudyParameter]:
     for address, bounds in table.items():
         where = (path, "optimize.parameters", address)
         p_path, value = locate(scene, base, address, where)
+        acts(scene, address, p_path, where)
         if p_path[0] == "time" or p_path[-1] in spec._STEP_KEYS or spec._moves_step_count(base, p_path):
             raise SceneError(*where, "would change the steps; the variants share one sweep of "
                              "steps", "optimise another value")

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneError
-from ..fit import locate
+from ..fit import acts, locate
 from ..scene import Scene, load_scene
 from ..scene.keys import KEYS, _is_number, _suggest
 from ..version import __version__
@@ -284,6 +284,7 @@ def _parameters(path, raw, scene: Scene, base: dict) -> tuple[StudyParameter, ..
     for address, spec in table.items():
         where = (path, "study.parameters", address)
         p_path, value = locate(scene, base, address, where)
+        acts(scene, address, p_path, where)
         if p_path[0] == "time":
             raise SceneError(*where, "would change the instants; the variants of a study share "
                              "one sweep of steps (one time axis)", "vary another value")
