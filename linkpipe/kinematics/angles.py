@@ -202,7 +202,9 @@ def _running_sums(corrections: np.ndarray) -> np.ndarray:
     and held between them; a column with many turns takes the cumsum itself."""
     out = np.empty_like(corrections)
     S1 = corrections.shape[0]
-    at, of = np.nonzero(corrections[1:])  # row-major: each column's rows in order
+    # row-major: each column's rows in order (np.nonzero's (row, column) pairs, from the flat
+    # 1-D search: numpy's n-dimensional nonzero took ~1 ms a 16k-step segment, this ~0.03)
+    at, of = np.divmod(np.flatnonzero(corrections[1:]), corrections.shape[1])
     for j in range(corrections.shape[1]):
         col = corrections[:, j]
         rows = at[of == j] + 1
