@@ -22,6 +22,11 @@ returns positions, velocities and accelerations of all five points, arrays (S, 5
   Hermite predictions; velocities and accelerations by sparse solves);
 * the closed form: Norton's four-bar written out in plain numpy for this one mechanism (circle
   intersection, then the 2x2 velocity and acceleration systems by Cramer's rule), whole arrays;
+* hand-written numpy stage 1: every array ``run`` stores for this sweep (positions, velocities,
+  accelerations, link angles unwrapped and their rates, the residual of the six rows, the exact
+  1-norm condition of the 6x6 Jacobian by its 2x2 blocks, statuses), written out in plain
+  numpy for this one mechanism, in cache-sized chunks (a reference for what specialised numpy
+  costs; not a bound: at 36k steps linkpipe's general run is faster than it);
 * pylinkage 1.3 ``step_fast_with_kinematics`` (numba), when installed (``pip install -e .[bench]``).
 
 Times are the best of several calls after a warm-up; errors are the largest deviation from the
@@ -123,6 +128,131 @@ def closed_form_chunked(theta, chunk=8192):
     return X, V, A
 
 
+def numpy_stage1(theta, omega=OMEGA, chunk=8192):
+    """Every array ``run`` stores for the crank-rocker's sweep at constant crank rate, in plain
+    numpy written for this one mechanism, in cache-sized chunks: positions, velocities and
+    accelerations (S, 5, 2), the three links' angles unwrapped, angular velocities and
+    accelerations (S, 3), the residual max |Phi| of the six rows, the exact 1-norm condition of
+    the 6x6 Jacobian (block-triangular inverse by 2x2 blocks), and each step's status."""
+    S = len(theta)
+    a, b, c, d, u, v = A_, B_, C_, D_, U_, V_
+    al, be = u / b, v / b
+    X = np.empty((S, 5, 2)); V = np.empty((S, 5, 2)); A = np.empty((S, 5, 2))
+    for arr in (X, V, A):
+        arr[:, 0] = 0.0; arr[:, 3] = 0.0
+    X[:, 3, 0] = d
+    ang = np.empty((S, 3)); W = np.empty((S, 3)); AL = np.empty((S, 3))
+    res = np.empty(S); cond = np.empty(S); status = np.empty(S, np.int8)
+    for lo in range(0, S, chunk):
+        hi = min(S, lo + chunk)
+        th = theta[lo:hi]
+        ct, st = np.cos(th), np.sin(th)
+        Ax, Ay = a * ct, a * st
+        VAx, VAy = -omega * Ay, omega * Ax
+        w2 = omega * omega
+        AAx, AAy = -w2 * Ax, -w2 * Ay
+        dx, dy = d - Ax, -Ay
+        inv = 1.0 / (dx * dx + dy * dy)
+        k = 0.5 + 0.5 * (b * b - c * c) * inv
+        h = np.sqrt(b * b * inv - k * k)
+        e1x, e1y = k * dx - h * dy, k * dy + h * dx
+        Bx, By = Ax + e1x, Ay + e1y
+        e2x, e2y = Bx - d, By
+        idet = 1.0 / (e1x * e2y - e1y * e2x)
+        b1 = e1x * VAx + e1y * VAy
+        VBx, VBy = b1 * e2y * idet, -b1 * e2x * idet
+        rvx, rvy = VBx - VAx, VBy - VAy
+        g1 = e1x * AAx + e1y * AAy - (rvx * rvx + rvy * rvy)
+        g2 = -(VBx * VBx + VBy * VBy)
+        ABx, ABy = (g1 * e2y - g2 * e1y) * idet, (e1x * g2 - e2x * g1) * idet
+        Px, Py = Ax + al * e1x - be * e1y, Ay + al * e1y + be * e1x
+        VPx, VPy = VAx + al * rvx - be * rvy, VAy + al * rvy + be * rvx
+        rax, ray = ABx - AAx, ABy - AAy
+        APx, APy = AAx + al * rax - be * ray, AAy + al * ray + be * rax
+        for arr, cols in ((X, (Ax, Ay, Bx, By, Px, Py)), (V, (VAx, VAy, VBx, VBy, VPx, VPy)),
+                          (A, (AAx, AAy, ABx, ABy, APx, APy))):
+            blk = arr[lo:hi]
+            blk[:, 1, 0], blk[:, 1, 1], blk[:, 2, 0], blk[:, 2, 1], blk[:, 4, 0], blk[:, 4, 1] = cols
+        # link angles and rates: crank (O2 A), coupler (A B), rocker (O4 B)
+        an = ang[lo:hi]; wn = W[lo:hi]; aln = AL[lo:hi]
+        an[:, 0] = np.arctan2(Ay, Ax); an[:, 1] = np.arctan2(e1y, e1x); an[:, 2] = np.arctan2(e2y, e2x)
+        wn[:, 0] = omega
+        aln[:, 0] = 0.0
+        for j, (ex, ey, vx, vy, ax_, ay_) in ((1, (e1x, e1y, rvx, rvy, rax, ray)),
+                                               (2, (e2x, e2y, VBx, VBy, ABx, ABy))):
+            il2 = 1.0 / (ex * ex + ey * ey)
+            wj = (ex * vy - ey * vx) * il2
+            wn[:, j] = wj
+            aln[:, j] = (ex * ay_ - ey * ax_) * il2 - 2.0 * (ex * vx + ey * vy) * il2 * wj
+        # residual: the six rows
+        r = np.abs(Ax * Ax + Ay * Ay - a * a)
+        np.maximum(r, np.abs(Ay * ct - Ax * st), out=r)
+        np.maximum(r, np.abs(e1x * e1x + e1y * e1y - b * b), out=r)
+        np.maximum(r, np.abs(e2x * e2x + e2y * e2y - c * c), out=r)
+        res[lo:hi] = r  # P's two rows hold by construction here; a general code evaluates them
+        # condition: J = [[DA, 0, 0], [NB, DB, 0], [NPA, NPB, I]] (rows: crank length, crank
+        # angle; coupler length, rocker length; P's two local rows), unknowns A, B, P
+        # DA = [[2Ax, 2Ay], [-st, ct]], NB = [[-2e1x, -2e1y], [0, 0]], DB = [[2e1x, 2e1y], [2e2x, 2e2y]]
+        # NPA = -(1 - al) I - be Rp, NPB = -al I + be Rp (Rp = [[0, -1], [1, 0]])
+        dA = 1.0 / (2 * Ax * ct + 2 * Ay * st)
+        iA = ((ct * dA, -2 * Ay * dA), (st * dA, 2 * Ax * dA))          # DA^-1
+        dB = 1.0 / (4 * (e1x * e2y - e1y * e2x))
+        iB = ((2 * e2y * dB, -2 * e1y * dB), (-2 * e2x * dB, 2 * e1x * dB))  # DB^-1
+        # block (B, A) of J^-1: -DB^-1 NB DA^-1 (NB's second row is zero)
+        t0 = -2 * e1x * iA[0][0] - 2 * e1y * iA[1][0]
+        t1 = -2 * e1x * iA[0][1] - 2 * e1y * iA[1][1]  # NB DA^-1, first row
+        xBA = ((-iB[0][0] * t0, -iB[0][0] * t1), (-iB[1][0] * t0, -iB[1][0] * t1))
+        # block (P, A): -(NPA DA^-1 + NPB xBA); block (P, B): -NPB DB^-1
+        def mul(M, N):
+            return ((M[0][0] * N[0][0] + M[0][1] * N[1][0], M[0][0] * N[0][1] + M[0][1] * N[1][1]),
+                    (M[1][0] * N[0][0] + M[1][1] * N[1][0], M[1][0] * N[0][1] + M[1][1] * N[1][1]))
+        NPA = ((-(1 - al), be), (-be, -(1 - al)))
+        NPB = ((-al, -be), (be, -al))
+        m1, m2 = mul(NPA, iA), mul(NPB, xBA)
+        xPA = tuple(tuple(-(m1[i][j] + m2[i][j]) for j in range(2)) for i in range(2))
+        m3 = mul(NPB, iB)
+        xPB = tuple(tuple(-m3[i][j] for j in range(2)) for i in range(2))
+        inv1 = None
+        for j in range(2):  # columns of A's block
+            s_ = np.abs(iA[0][j]) + np.abs(iA[1][j]) + np.abs(xBA[0][j]) + np.abs(xBA[1][j]) \
+                + np.abs(xPA[0][j]) + np.abs(xPA[1][j])
+            inv1 = s_ if inv1 is None else np.maximum(inv1, s_)
+        for j in range(2):
+            np.maximum(inv1, np.abs(iB[0][j]) + np.abs(iB[1][j]) + np.abs(xPB[0][j]) + np.abs(xPB[1][j]), out=inv1)
+        np.maximum(inv1, 1.0, out=inv1)  # P's identity block
+        # |J|_1: column sums
+        n1 = 2 * np.abs(Ax) + np.abs(st) + 2 * np.abs(e1x) + abs(1 - al) + be
+        np.maximum(n1, 2 * np.abs(Ay) + np.abs(ct) + 2 * np.abs(e1y) + be + abs(1 - al), out=n1)
+        np.maximum(n1, 2 * np.abs(e1x) + 2 * np.abs(e2x) + al + be, out=n1)
+        np.maximum(n1, 2 * np.abs(e1y) + 2 * np.abs(e2y) + be + al, out=n1)
+        np.maximum(n1, 1.0, out=n1)
+        cn = n1 * inv1
+        cond[lo:hi] = cn
+        status[lo:hi] = np.where(np.isfinite(cn) & (cn * 1e-12 < 1.0), 0, 2)
+    ang[:] = np.unwrap(ang, axis=0)
+    return X, V, A, ang, W, AL, res, cond, status
+
+
+def stage1_condition_error(theta) -> float:
+    """The hand-written stage 1's condition against numpy's dense 1-norm condition (``np.linalg.cond(J, 1)``)
+    of the same Jacobians, largest relative difference: its block inverse is right."""
+    out = numpy_stage1(theta)
+    X = out[0]; cond = out[7]
+    a, b = A_, B_
+    al, be = U_ / b, V_ / b
+    J = np.zeros((len(theta), 6, 6))
+    Ax, Ay = X[:, 1, 0], X[:, 1, 1]
+    e1 = X[:, 2] - X[:, 1]; e2 = X[:, 2] - X[:, 3]
+    ct, st = np.cos(theta), np.sin(theta)
+    J[:, 0, 0], J[:, 0, 1] = 2 * Ax, 2 * Ay
+    J[:, 1, 0], J[:, 1, 1] = -st, ct
+    J[:, 2, 0], J[:, 2, 1], J[:, 2, 2], J[:, 2, 3] = -2 * e1[:, 0], -2 * e1[:, 1], 2 * e1[:, 0], 2 * e1[:, 1]
+    J[:, 3, 2], J[:, 3, 3] = 2 * e2[:, 0], 2 * e2[:, 1]
+    NPA = np.array([[-(1 - al), be], [-be, -(1 - al)]]); NPB = np.array([[-al, -be], [be, -al]])
+    J[:, 4:6, 0:2] = NPA; J[:, 4:6, 2:4] = NPB; J[:, 4:6, 4:6] = np.eye(2)
+    ref = np.linalg.cond(J, 1)
+    return float(np.max(np.abs(cond / ref - 1)))
+
 def linkpipe_model(S: int, method: str = "auto"):
     import dataclasses as dc
 
@@ -214,7 +344,7 @@ def disk_floor(n_bytes: int, folder: pathlib.Path, repeats: int) -> float:
 
 
 def run_targets(S: int, repeats: int, pylinkage_seconds: float | None,
-                pylinkage_cpu: float | None = None):
+                pylinkage_cpu: float | None = None, floor_cpu: float | None = None):
     """Issue 29's targets at S steps: run's marginal against pylinkage's warm kernel, the .h5
     write's marginal against the disk's floor. The runs with and without the .h5 alternate
     (pairs of one each): the write's marginal is the median of the pairs' differences, and
@@ -230,7 +360,7 @@ def run_targets(S: int, repeats: int, pylinkage_seconds: float | None,
     n_bytes = (folder / "out" / f"crank_rocker_{S}.h5").stat().st_size
     floor = disk_floor(n_bytes, folder, repeats)
     return dict(steps=S, run_361=small, run=bare, run_361_cpu=small_cpu, run_cpu=big_cpu,
-                pylinkage_cpu=pylinkage_cpu, run_h5=with_h5, h5_bytes=n_bytes,
+                pylinkage_cpu=pylinkage_cpu, floor_cpu=floor_cpu, run_h5=with_h5, h5_bytes=n_bytes,
                 floor=floor, pylinkage=pylinkage_seconds, write=diffs[len(diffs) // 2],
                 write_spread=(diffs[0], diffs[-1]))
 
@@ -272,6 +402,11 @@ def print_run_targets(r) -> str:
                      + ("" if x >= 2 else f", by {2 / x:.1f}x"))
     else:
         lines.append("- run's marginal vs pylinkage+numba: pylinkage not installed, not measured")
+    if r.get("floor_cpu"):
+        cpu_marginal = r["run_cpu"] - r["run_361_cpu"]
+        lines.append(f"- run's marginal / hand-written numpy stage 1, CPU seconds "
+                     f"({cpu_marginal:.4f} / {r['floor_cpu']:.4f}) = "
+                     f"{cpu_marginal / r['floor_cpu']:.2f}x (a reference, no target)")
     y = write / r["floor"]
     lo, hi = r["write_spread"]
     resolved = hi - lo < 0.5 * r["floor"]
@@ -315,6 +450,16 @@ def pylinkage_run(S: int, cpu: bool = False):
     return (pos[:, order], vel[:, order], acc[:, order], seconds) + ((cpu_seconds,) if cpu else ())
 
 
+def best_cpu_of(fn, repeats: int) -> float:
+    """Best CPU seconds (``time.process_time``) of ``fn()`` over ``repeats`` calls."""
+    best = math.inf
+    for _ in range(repeats):
+        c0 = time.process_time()
+        fn()
+        best = min(best, time.process_time() - c0)
+    return best
+
+
 def best_of(fn, repeats: int):
     """Return (best seconds, last result) of ``repeats`` calls after one warm-up call."""
     result = fn()
@@ -344,13 +489,18 @@ def part1(sizes, repeats):
         ref = closed_form(theta)
         t_cf, _ = best_of(lambda: closed_form(theta), repeats)
         t_cfc, _ = best_of(lambda: closed_form_chunked(theta), repeats)
+        t_floor, got_floor = best_of(lambda: numpy_stage1(theta), repeats)
+        cpu_floor = best_cpu_of(lambda: numpy_stage1(theta), repeats)
         m_fast = linkpipe_model(S)
         t_fast, got_fast = best_of(lambda: linkpipe_fast(m_fast, theta), repeats)
         t_stage1, got_stage1 = best_of(lambda: linkpipe_stage1(m_fast, theta), repeats)
         m_newton = linkpipe_model(S, "newton")
         t_newton, got_newton = best_of(lambda: linkpipe_newton(m_newton, theta), repeats)
         row = dict(steps=S, closed_form=t_cf, closed_form_chunked=t_cfc, fast=t_fast, newton=t_newton,
-                   stage1=t_stage1, err_fast=rel_errors(got_fast, ref),
+                   stage1=t_stage1, floor=t_floor, floor_cpu=cpu_floor,
+                   err_floor=rel_errors(got_floor[:3], ref),
+                   floor_condition=stage1_condition_error(theta[:2000]),
+                   err_fast=rel_errors(got_fast, ref),
                    err_stage1=rel_errors(got_stage1, ref), err_newton=rel_errors(got_newton, ref))
         if pyl.startswith("pylinkage"):
             best, best_cpu, got = math.inf, math.inf, None
@@ -380,7 +530,9 @@ def print_part1(rows, pyl, first_call):
                  ("linkpipe general path kernel (Newton positions + kinematics.derivatives)",
                   r["newton"], r["err_newton"]),
                  ("closed form, plain numpy (reference)", r["closed_form"], [0.0, 0.0, 0.0]),
-                 ("closed form, numpy in cache-sized chunks", r["closed_form_chunked"], None)]
+                 ("closed form, numpy in cache-sized chunks", r["closed_form_chunked"], None),
+                 ("hand-written numpy stage 1 (every array run stores, for this one "
+                  "mechanism, chunked)", r["floor"], r["err_floor"])]
         if "pylinkage" in r:
             items.append(("pylinkage + numba (step_fast_with_kinematics)", r["pylinkage"], r["err_pylinkage"]))
         for name, sec, err in items:
@@ -414,6 +566,13 @@ def print_part1(rows, pyl, first_call):
     x = cps["fast"] / cps["closed_form"]
     lines.append(f"- dyads kernel / closed form = {x:.2f}x (target >= 0.8x): {verdict(x >= 0.8)}"
                  f" (against the chunked closed form: {cps['fast'] / cps['closed_form_chunked']:.2f}x)")
+    if "pylinkage_cpu" in big:
+        x = big["pylinkage_cpu"] / big["floor_cpu"]
+        lines.append(
+            f"- pylinkage+numba / hand-written numpy stage 1, CPU seconds "
+            f"({big['pylinkage_cpu']:.4f} / {big['floor_cpu']:.4f}) = {x:.2f}x (a reference, no "
+            f"target; its condition agrees with numpy's dense 1-norm condition to "
+            f"{big['floor_condition']:.1e})")
     e = max(big["err_fast"])
     lines.append(f"- dyads kernel max relative error {e:.1e} (target <= 1e-12): {verdict(e <= 1e-12)}")
     x = cps["newton"]
@@ -615,7 +774,7 @@ def main(argv=None):
     say()
     big = max(rows, key=lambda r: r["steps"])
     say(print_run_targets(run_targets(big["steps"], args.repeats, big.get("pylinkage"),
-                                      big.get("pylinkage_cpu"))))
+                                      big.get("pylinkage_cpu"), big.get("floor_cpu"))))
     if not args.quick:
         say()
         cases = ["crank_rocker_100k"]
