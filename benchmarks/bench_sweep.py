@@ -238,7 +238,7 @@ def stage1_condition_error(theta) -> float:
     of the same Jacobians, largest relative difference: its block inverse is right."""
     out = numpy_stage1(theta)
     X = out[0]; cond = out[7]
-    a, b = A_, B_
+    b = B_
     al, be = U_ / b, V_ / b
     J = np.zeros((len(theta), 6, 6))
     Ax, Ay = X[:, 1, 0], X[:, 1, 1]
