@@ -31,7 +31,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     run.add_argument("--no-h5", action="store_true", help="do not write the HDF5 file")
     run.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
     run.add_argument("--spawn", action="store_true", help="also stream to a new Rerun viewer")
-    run.add_argument("--connect", metavar="ADDR", help="also stream to a running viewer (rerun+http://...)")
+    run.add_argument("--connect", metavar="ADDR", type=_address,
+                     help="also stream to a running viewer (rerun+http://host:9876/proxy)")
     run.add_argument("--quiet", action="store_true", help="print only errors")
     run.add_argument("-v", "--verbose", action="store_true",
                      help="also print a table of where the time went, stage by stage")
@@ -90,7 +91,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     view = fol.add_mutually_exclusive_group()
     view.add_argument("--serve", action="store_true", help="serve the recording over gRPC; "
                       "viewers that connect late get the history")
-    view.add_argument("--connect", metavar="ADDR", help="stream to a running viewer "
+    view.add_argument("--connect", metavar="ADDR", type=_address, help="stream to a running viewer "
                       "(rerun+http://host:9876/proxy)")
     fol.add_argument("--port", type=_positive, default=None, help="--serve's port (default 9876)")
     fol.add_argument("--server-memory", default=None, metavar="SIZE",
@@ -133,6 +134,22 @@ def _number(text: str, kind, low, what: str):
     if value is None or not low <= value < float("inf"):
         raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
     return value
+
+
+def _address(text: str) -> str:
+    """``--connect``: a viewer's address, rerun+http(s)://host[:port]/proxy."""
+    import urllib.parse
+
+    try:
+        parts = urllib.parse.urlsplit(text)
+        parts.port  # a port that is not a number raises here
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc}; write e.g. "
+                                         "rerun+http://127.0.0.1:9876/proxy") from None
+    if parts.scheme not in ("rerun+http", "rerun+https", "rerun") or not parts.hostname:
+        raise argparse.ArgumentTypeError(f"expected a viewer's address like "
+                                         f"rerun+http://127.0.0.1:9876/proxy, got {text!r}")
+    return text
 
 
 def _megabytes(text: str) -> float:

@@ -6,6 +6,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 
 import h5py
 import numpy as np
@@ -503,6 +504,35 @@ def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
     streamed = _stream_entities(saved)
     assert "/mechanism/points" in streamed and "/solver/log10_residual" in streamed
     assert streamed == written
+
+
+def test_connect_to_no_viewer_is_one_message_and_the_file_is_still_written(tmp_path, capsys):
+    """Nothing listens at the address: one message naming it, exit 1 (an output not
+    delivered), at once (no 6 s of rerun's retries and log lines), the .h5 and .rrd written
+    and complete; a malformed address is the user's mistake, exit 2, before any work."""
+    from linkpipe.__main__ import main
+    from conftest import CONFIG_DIR
+
+    port = _free_port()  # free: nobody listens there
+    out = tmp_path / "out"
+    t0 = time.monotonic()
+    code = main(["run", str(CONFIG_DIR / "fourbar_crank_rocker.toml"), "--out", str(out),
+                 "--quiet", "--connect", f"rerun+http://127.0.0.1:{port}/proxy"])
+    assert code == 1 and time.monotonic() - t0 < 5.0
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "Traceback" not in err
+    assert f"no viewer listens at 127.0.0.1:{port}" in err and "fourbar_crank_rocker.rrd is written" in err
+    assert sorted(p.name for p in out.iterdir()) == ["fourbar_crank_rocker.h5",
+                                                     "fourbar_crank_rocker.rrd"]
+    verify = subprocess.run([str(RERUN), "rrd", "verify", str(out / "fourbar_crank_rocker.rrd")],
+                            capture_output=True, text=True)
+    assert verify.returncode == 0, verify.stderr
+    for bad in ("rerun+http://127.0.0.1:98x/proxy", "127.0.0.1:9876"):
+        with pytest.raises(SystemExit) as stop:  # argparse: usage and one error line
+            main(["run", str(CONFIG_DIR / "fourbar_crank_rocker.toml"), "--out",
+                  str(tmp_path / "b"), "--connect", bad])
+        assert stop.value.code == 2 and not (tmp_path / "b").exists()
+        assert "rerun+http://127.0.0.1:9876/proxy" in capsys.readouterr().err
 
 
 # -- forces, plates, colours, the driver's timeline (issue 13, item 5) ----------------------------

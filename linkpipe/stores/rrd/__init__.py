@@ -17,13 +17,19 @@ view's legend: each arrow kind's colour and scale), :mod:`.layout` (blueprint), 
 """
 from __future__ import annotations
 
-import contextlib
+import errno
+import os
+import pathlib
+import socket
+import sys
+import urllib.parse
 import uuid
 
 import numpy as np
 import rerun as rr
 
-from .. import atomic_path
+from .. import OutputError, atomic_path
+from ...errors import LinkpipeError
 from ...result import stride_of
 from ...status import NO_ASSEMBLY
 from . import forces, legend, mechanism, series
@@ -146,22 +152,54 @@ def write(result, path, spawn: bool = False, connect: str | None = None,
     # the arrays' bytes, the force arrows' float32 origins and vectors, and 256 KiB
     n_bytes = 2 * sum(v.data.nbytes for v in result.variables()) + (256 << 10)
     n_bytes += sum(8 * origins.size for *_, origins, _ in force_arrows(result)[0])
-    with atomic_path(path, n_bytes) if path is not None else contextlib.nullcontext() as tmp:
-        sinks = [rr.FileSink(tmp)] if tmp is not None else []
-        if spawn:
-            rr.spawn(connect=False)
-            sinks.append(rr.GrpcSink())
-        if connect:
-            sinks.append(rr.GrpcSink(connect))
-        stream.set_sinks(*sinks, default_blueprint=blueprint(result))
-        with stream:  # on exit: flush, and finalise the file (footer) so it is complete
-            stream.send_recording_name(scene.name)
+    def logged(into: rr.RecordingStream) -> None:
+        with into:  # on exit: flush, and finalise a file (footer) so it is complete
+            into.send_recording_name(scene.name)
             if info:
-                stream.log("info", rr.TextDocument(info), static=True)
-            log_result(stream, result)
-    if spawn or connect:
-        stream.disconnect()
+                into.log("info", rr.TextDocument(info), static=True)
+            log_result(into, result)
+
+    if path is not None:
+        with atomic_path(path, n_bytes) as tmp:
+            stream.set_sinks(rr.FileSink(tmp), default_blueprint=blueprint(result))
+            logged(stream)
+    if spawn or connect:  # the file first, whatever becomes of the viewer
+        _streamed(result, logged, spawn, connect, path)
     return kept
+
+
+def _streamed(result, logged, spawn: bool, connect: str | None, path) -> None:
+    """Log ``result`` once more, to a new viewer (``spawn``) and/or the one at ``connect``; a
+    viewer that cannot be reached is an :class:`OutputError` naming it (the file, when one was
+    asked for, is written already)."""
+    stream = rr.RecordingStream(APPLICATION_ID,
+                                recording_id=f"{result.scene.name}-{uuid.uuid4().hex}")
+    sinks, where = [], []
+    if connect:
+        _check_listening(connect, path)
+        sinks.append(rr.GrpcSink(connect))
+        where.append(f"the viewer at {connect}")
+    try:
+        if spawn:
+            where.insert(0, "a new viewer (--spawn)")
+            if sys.platform.startswith("linux") and not any(
+                    os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
+                raise RuntimeError("no display to open a viewer on (DISPLAY and WAYLAND_DISPLAY "
+                                   "are not set)")
+            # a viewer process, listening on 9876: the venv's own viewer where the venv's
+            # python runs without its bin/ on PATH (as the README's commands do)
+            beside = pathlib.Path(sys.executable).with_name("rerun")
+            rr.spawn(connect=False, recording=stream,
+                     executable_path=str(beside) if beside.exists() else None)
+            sinks.append(rr.GrpcSink())
+        stream.set_sinks(*sinks, default_blueprint=blueprint(result))
+        logged(stream)
+        stream.disconnect()
+    except RuntimeError as exc:  # rerun: "gRPC has been unable to connect for 6s"
+        kept = f"; {path} is written" if path is not None else ""
+        raise OutputError(errno.ECONNREFUSED, f"could not stream to {' and '.join(where)}: "
+                          f"{exc}{kept} — start a viewer (rerun) and give its address, or "
+                          f"open the .rrd later") from None
 
 
 def integration_end(result) -> int | None:
@@ -176,6 +214,24 @@ def integration_end(result) -> int | None:
         return None
     last = int(np.flatnonzero(~tail)[-1])
     return last if last < result.n_steps - 1 else None
+
+
+def _check_listening(url: str, path) -> None:
+    """:class:`OutputError` at once where nothing listens at ``url``'s host and port (rerun's
+    own client would retry for 6 s, then fill the terminal with its log lines)."""
+    parts = urllib.parse.urlsplit(url)
+    try:
+        host, port = parts.hostname or "127.0.0.1", parts.port or 9876
+    except ValueError as exc:  # a port that is not a number
+        raise LinkpipeError(f"--connect {url}: {exc} — write e.g. "
+                            "rerun+http://127.0.0.1:9876/proxy") from None
+    try:
+        socket.create_connection((host, port), timeout=2.0).close()
+    except OSError as exc:
+        kept = f"; {path} is written" if path is not None else ""
+        raise OutputError(errno.ECONNREFUSED, f"--connect {url}: no viewer listens at {host}:"
+                          f"{port} ({exc.strerror or exc}){kept} — start one (rerun) and give "
+                          "its address, or open the .rrd later") from None
 
 
 def _ordinal(n: int) -> str:
