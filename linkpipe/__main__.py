@@ -324,6 +324,10 @@ def _run(args) -> int:
         print(f"error: --out {out}: is a file, not a folder; name a folder (it is created if "
               "missing)", file=sys.stderr)
         return 2
+    if args.report and args.no_h5:
+        print("error: --report draws its page from the run's .h5, which --no-h5 leaves "
+              "unwritten; drop one of them", file=sys.stderr)
+        return 2
     if args.logs:
         return _fleet("run", args, args.scenes)
     outcome = _Outcome()
@@ -347,7 +351,7 @@ def _run(args) -> int:
 
             with output_lock(out, scene.name):  # another run of this name waits: .h5, .rrd pair
                 result, written, kept = _solve_and_write(scene, out, args, bar, segment)
-                if args.report and not args.no_h5:
+                if args.report:
                     from .html_report import write_report
 
                     written.append(str(write_report(out / f"{scene.name}.h5")))

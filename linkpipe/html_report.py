@@ -19,6 +19,8 @@ import tomllib
 
 import numpy as np
 
+from .errors import LinkpipeError
+
 #: poses of the mechanism drawn (evenly spread over the steps that assembled)
 POSES = 4
 #: the page's figures, inches at 100 dpi (SVG scales with the page)
@@ -35,6 +37,13 @@ def write_report(h5_path, out_path=None) -> pathlib.Path:
     h5_path = pathlib.Path(h5_path)
     out = pathlib.Path(out_path) if out_path else h5_path.with_suffix(".html")
     root, variables = read_plain(h5_path)
+    if not {"evaluation", "variant", "status"} & set(variables):
+        what = ("a fit's file (its figures are the table `fit` printed and the fitted scene "
+                "beside it)" if "fitted" in variables else
+                "an accuracy ladder's file (its recording shows the trade)" if "knob" in variables
+                else "not a file that run, study or optimize wrote")
+        raise LinkpipeError(f"{h5_path}: {what}; report takes a .h5 that run, study or "
+                            "optimize wrote")
     page = (_optimize_page if "evaluation" in variables else
             _study_page if "variant" in variables else _run_page)(h5_path, root, variables)
     tmp = out.with_name(f".{out.name}.tmp")

@@ -144,6 +144,36 @@ def test_report_of_a_missing_file_is_one_message(tmp_path, capsys):
     assert "nothing.h5: no such file" in err and "Traceback" not in err
 
 
+def test_report_of_a_file_it_does_not_draw_is_one_message(tmp_path, capsys):
+    """A scene's .toml (not HDF5 at all), an accuracy ladder's .h5 and a .h5 of other
+    variables: one message each saying what the file is, exit 2, no page (they were an
+    internal KeyError and a raw h5py message, exit 1)."""
+    scene = ROOT / "configs" / "shear_press.toml"
+    assert main(["accuracy", str(scene), "--quick", "--out", str(tmp_path)]) == 0
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f["x"] = np.arange(3.0)
+    capsys.readouterr()
+    for path, words in ((scene, "not an HDF5 file"),
+                        (tmp_path / "shear_press_accuracy.h5", "an accuracy ladder's file"),
+                        (other, "not a file that run, study or optimize wrote")):
+        assert main(["report", str(path), "--out", str(tmp_path / "page.html")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("error:") == 1 and words in err and "Traceback" not in err, err
+        assert "report takes a .h5 that run, study or optimize wrote" in err
+        assert not (tmp_path / "page.html").exists()
+
+
+def test_run_report_without_the_h5_is_one_message_before_any_work(tmp_path, capsys):
+    """--report draws from the .h5: with --no-h5 it wrote nothing and said nothing."""
+    out = tmp_path / "out"
+    assert main(["run", str(ROOT / "configs" / "shear_press.toml"), "--out", str(out),
+                 "--no-h5", "--report"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and "--report" in err and "--no-h5" in err
+    assert not out.exists()
+
+
 def _run_report(config: pathlib.Path, tmp_path) -> tuple[pathlib.Path, str]:
     out = tmp_path / "out"
     assert main(["run", str(config), "--out", str(out), "--no-rrd", "--report", "--quiet"]) == 0

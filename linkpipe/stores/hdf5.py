@@ -16,6 +16,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from ..errors import LinkpipeError
 from ..result import combine_flags
 from ..result import Variable
 from ..workers import held_interrupts
@@ -475,6 +476,9 @@ def read_plain(path: str | os.PathLike) -> tuple[dict, dict]:
             return _decoded(value)
         return value
 
+    if not h5py.is_hdf5(path):
+        raise LinkpipeError(f"{path}: not an HDF5 file; report takes a .h5 that run, study or "
+                            "optimize wrote")
     with h5py.File(path, "r") as f:
         root = {k: plain(v) for k, v in f.attrs.items()}
         variables = {}
