@@ -162,6 +162,11 @@ def test_the_command_writes_the_fitted_scene_and_the_h5(tmp_path, capsys):
     assert "springs.lift.k  10 -> 40" in text and "stage 1 solved 1 time(s)" in text
     fitted = (out / "sprung_crank_fit.toml").read_text()
     assert "# the rate to find" in fitted  # comments kept
+    # the changed line says what it was (its old comment might no longer hold); the head says
+    # the [scene] name is the original's (run into the same folder, it would overwrite it)
+    (k_line,) = [line for line in fitted.splitlines() if line.startswith("k = ")]
+    assert k_line.endswith("# fitted: was 10")
+    assert fitted.startswith(f"# linkpipe fit {path}: ") and "--out <another folder>" in fitted
     again = load_scene(str(out / "sprung_crank_fit.toml"))  # its log path works from out/
     assert again.springs[0].k == pytest.approx(K_TRUE, rel=1e-9)
     with h5py.File(out / "sprung_crank_fit.h5") as f:

@@ -253,6 +253,11 @@ def test_the_written_scene_runs_to_the_objective(tmp_path, capsys):
     assert best[2] == best[0]
     scene = linkpipe.load_scene(out / "goal_optimize.toml")
     assert scene.springs[0].k == best[0] == scene.springs[1].k
+    text = (out / "goal_optimize.toml").read_text()  # each changed line says what it was
+    (s1,) = [line for line in text.splitlines() if line.startswith("S1 = ")]
+    assert s1.endswith("# optimized: y was -0.6571")  # the basketball goal's drawn S1.y
+    assert sum(line.startswith("k = ") and "# optimized: was " in line
+               for line in text.splitlines()) == 2
     result = linkpipe.solve(scene)
     assert result.message.startswith("all")
     peak = np.abs(result.forces["input_force"][1][:, 0]).max()

@@ -13,26 +13,19 @@ import os
 import pathlib
 
 import numpy as np
-import tomlkit
-
-from . import atomic_path, hdf5
+from . import hdf5, scene_toml
 from ..result import Variable
 from ..output_units import common_unit, parameter_units
 
 
 def write_toml(fit, path: str | os.PathLike) -> None:
-    doc = tomlkit.parse(fit.scene.text)
-    for p, value in zip(fit.parameters, fit.fitted):
-        node = doc
-        for key in p.path[:-1]:
-            node = node[key]
-        node[p.path[-1]] = float(value)
+    head = (f"# linkpipe fit {fit.scene.path}: the fitted values in place, each line that changed "
+            f"marked. Its [scene] name is the original's: run it with --out <another folder> "
+            f"to keep the original's outputs.\n")
     out_dir = pathlib.Path(path).resolve().parent
-    for entry, log in zip(doc.get("logs", []), fit.scene.logs):
-        entry["file"] = os.path.relpath(log.path, out_dir)
-    text = tomlkit.dumps(doc)
-    with atomic_path(path, len(text.encode()) + 4096) as tmp:
-        pathlib.Path(tmp).write_text(text)
+    scene_toml.write(head + scene_toml.with_values(
+        fit.scene, [(p.path, v) for p, v in zip(fit.parameters, fit.fitted)], out_dir, "fitted"),
+        path)
 
 
 def write_h5(fit, path: str | os.PathLike) -> None:

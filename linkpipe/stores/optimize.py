@@ -22,9 +22,8 @@ import os
 import pathlib
 
 import numpy as np
-import tomlkit
 
-from . import atomic_path, hdf5
+from . import hdf5, scene_toml
 from ..output_units import common_unit
 from ..result import Variable
 from ..version import __version__
@@ -33,21 +32,15 @@ from ..version import __version__
 def write_toml(outcome, path: str | os.PathLike) -> None:
     problem = outcome.problem
     study = problem.study
-    doc = tomlkit.parse(study.scene.text)
-    for p, value in zip(study.parameters, outcome.best_values):
-        node = doc
-        for key in p.path[:-1]:
-            node = node[key]
-        node[p.path[-1]] = float(value)
-    out_dir = pathlib.Path(path).resolve().parent
-    for entry, log in zip(doc.get("logs", []), study.scene.logs):
-        entry["file"] = os.path.relpath(log.path, out_dir)
     name = problem.objectives[0]
     head = (f"# linkpipe optimize {study.path}: {name} = {outcome.objective[outcome.best]:.12g} "
-            f"at the values below ({name} = \"{_text(study, name)}\")\n")
-    text = head + tomlkit.dumps(doc)
-    with atomic_path(path, len(text.encode()) + 4096) as tmp:
-        pathlib.Path(tmp).write_text(text)
+            f"at the values below ({name} = \"{_text(study, name)}\"), each line that changed "
+            f"marked. Its [scene] name is the original's: run it with --out <another folder> "
+            f"to keep the original's outputs.\n")
+    out_dir = pathlib.Path(path).resolve().parent
+    scene_toml.write(head + scene_toml.with_values(
+        study.scene, [(p.path, v) for p, v in zip(study.parameters, outcome.best_values)],
+        out_dir, "optimized"), path)
 
 
 def _text(study, name: str) -> str:
