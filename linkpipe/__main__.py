@@ -23,7 +23,10 @@ RRD_MAX_MB = 0.0
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
+    from .version import __version__
+
     p = argparse.ArgumentParser(prog=prog, description="Planar linkage analysis pipeline.")
+    p.add_argument("--version", action="version", version=f"linkpipe {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="solve scenes and write outputs/<name>.h5 and .rrd")
     run.add_argument("scenes", nargs="+", help="scene TOML files")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .output_units import input_force_units
+from .output_units import driver_units_of, input_force_units, units_of
 
 
 def slip_clause(slip: str) -> str:
@@ -151,8 +151,10 @@ def describe(scene, mob, warnings=(), fit_parameters=(), slip: str = "") -> str:
         dyn = scene.dynamics
         lines.append(f"  dynamics: 0 .. {dyn.to:g} s, output every {dyn.output_step:g} s "
                      f"({len(dyn.instants)} instants), {dyn.method} at rtol {dyn.rtol:g}; "
-                     + ", ".join(f"{d.name} from {d.from_value:g} at {d.start_rate:g}/s, "
-                                 + _driver_force(d) for d in scene.drivers))
+                     + ", ".join(f"{d.name} from {d.from_value:g} {u} at {d.start_rate:g} {u}/s, "
+                                 + _driver_force(d, f) for d, u, f in
+                                 zip(scene.drivers, driver_units_of(scene),
+                                     input_force_units(scene.drivers, units_of(scene)))))
     if scene.present_but_off:
         lines.append(f"  present but off: {', '.join(scene.present_but_off)}")
     if fit_parameters:
@@ -172,18 +174,19 @@ def describe(scene, mob, warnings=(), fit_parameters=(), slip: str = "") -> str:
     return "\n".join(lines)
 
 
-def _driver_force(driver) -> str:
-    """A dynamics driver's force as ``check`` says it."""
+def _driver_force(driver, unit: str) -> str:
+    """A dynamics driver's force as ``check`` says it (``unit``: its force's, N or N*m)."""
     if driver.force is not None:
-        return f"force {driver.force:g}"
+        return f"force {driver.force:g} {unit}"
     if driver.force_law is not None:
         fl = driver.force_law
-        return f"force {fl.law} {fl.from_value:g} -> {fl.to_value:g} over {fl.duration:g} s"
+        return (f"force {fl.law} {fl.from_value:g} -> {fl.to_value:g} {unit} over "
+                f"{fl.duration:g} s")
     if driver.force_log is not None:
         factor = driver.unit_factor * driver.scale
         return (f"force from log {'.'.join(driver.force_log)} x {factor:g}"
                 + (f" {'-' if driver.offset < 0 else '+'} {abs(driver.offset):g}"
-                   if driver.offset else ""))
+                   if driver.offset else "") + f" {unit}")
     return "free"
 
 

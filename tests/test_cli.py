@@ -211,3 +211,13 @@ def test_verbose_prints_where_the_time_went(tmp_path, capsys):
         stages = [k[len("seconds_"):] for k in f.attrs if k.startswith("seconds_")]
     assert list(rows) == stages + ["hdf5", "other", "total"]
     assert abs(sum(v for k, v in rows.items() if k != "total") - rows["total"]) <= 0.0005 * len(rows)
+
+
+def test_version_is_the_installed_packages(capsys):
+    """``--version`` prints the version pip installed (the package's metadata), exit 0."""
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == f"linkpipe {version('linkpipe')}"

@@ -686,7 +686,8 @@ def test_check_describes_the_dynamics(capsys):
     assert main(["check", str(DYN / "andrews_squeezer.toml"), str(DYN / "falling_lever.toml")]) == 0
     out = capsys.readouterr().out
     assert "dynamics: 0 .. 0.03 s, output every 0.0001 s (301 instants), DOP853 at rtol 1e-10" in out
-    assert "crank from -3.53595 at 0/s, force 0.033" in out and "fall from 0 at 0/s, free" in out
+    assert "crank from -3.53595 degree at 0 degree/s, force 0.033 N*m" in out
+    assert "fall from 0 degree at 0 degree/s, free" in out
 
 
 def test_an_input_on_a_dynamics_driver_is_warned_about():
