@@ -27,6 +27,8 @@ returns positions, velocities and accelerations of all five points, arrays (S, 5
   1-norm condition of the 6x6 Jacobian by its 2x2 blocks, statuses), written out in plain
   numpy for this one mechanism, in cache-sized chunks (a reference for what specialised numpy
   costs; not a bound: at 36k steps linkpipe's general run is faster than it);
+* numba-compiled stage 1: the same arrays as one compiled loop over the steps, when numba is
+  installed (the ``bench`` extra): what a compiled kernel of this one mechanism costs;
 * pylinkage 1.3 ``step_fast_with_kinematics`` (numba), when installed (``pip install -e .[bench]``).
 
 Times are the best of several calls after a warm-up; errors are the largest deviation from the
@@ -252,6 +254,120 @@ def stage1_condition_error(theta) -> float:
     J[:, 4:6, 0:2] = NPA; J[:, 4:6, 2:4] = NPB; J[:, 4:6, 4:6] = np.eye(2)
     ref = np.linalg.cond(J, 1)
     return float(np.max(np.abs(cond / ref - 1)))
+
+def _compiled_stage1_kernel(theta, omega, X, V, A, ang, W, AL, res, cond, status):
+    a, b, c, d, u, v = 1.0, 3.5, 3.0, 4.0, 1.5, 0.8
+    al, be = u / b, v / b
+    S = theta.shape[0]
+    prev = np.zeros(3); corr = np.zeros(3)
+    for i in range(S):
+        th = theta[i]
+        ct, st = math.cos(th), math.sin(th)
+        Ax, Ay = a * ct, a * st
+        VAx, VAy = -omega * Ay, omega * Ax
+        w2 = omega * omega
+        AAx, AAy = -w2 * Ax, -w2 * Ay
+        dx, dy = d - Ax, -Ay
+        inv = 1.0 / (dx * dx + dy * dy)
+        k = 0.5 + 0.5 * (b * b - c * c) * inv
+        h = math.sqrt(b * b * inv - k * k)
+        e1x, e1y = k * dx - h * dy, k * dy + h * dx
+        Bx, By = Ax + e1x, Ay + e1y
+        e2x, e2y = Bx - d, By
+        idet = 1.0 / (e1x * e2y - e1y * e2x)
+        b1 = e1x * VAx + e1y * VAy
+        VBx, VBy = b1 * e2y * idet, -b1 * e2x * idet
+        rvx, rvy = VBx - VAx, VBy - VAy
+        g1 = e1x * AAx + e1y * AAy - (rvx * rvx + rvy * rvy)
+        g2 = -(VBx * VBx + VBy * VBy)
+        ABx, ABy = (g1 * e2y - g2 * e1y) * idet, (e1x * g2 - e2x * g1) * idet
+        Px, Py = Ax + al * e1x - be * e1y, Ay + al * e1y + be * e1x
+        VPx, VPy = VAx + al * rvx - be * rvy, VAy + al * rvy + be * rvx
+        rax, ray = ABx - AAx, ABy - AAy
+        APx, APy = AAx + al * rax - be * ray, AAy + al * ray + be * rax
+        X[i, 0, 0] = 0.0; X[i, 0, 1] = 0.0; X[i, 3, 0] = d; X[i, 3, 1] = 0.0
+        X[i, 1, 0] = Ax; X[i, 1, 1] = Ay; X[i, 2, 0] = Bx; X[i, 2, 1] = By; X[i, 4, 0] = Px; X[i, 4, 1] = Py
+        for p in (0, 3):
+            V[i, p, 0] = 0.0; V[i, p, 1] = 0.0; A[i, p, 0] = 0.0; A[i, p, 1] = 0.0
+        V[i, 1, 0] = VAx; V[i, 1, 1] = VAy; V[i, 2, 0] = VBx; V[i, 2, 1] = VBy; V[i, 4, 0] = VPx; V[i, 4, 1] = VPy
+        A[i, 1, 0] = AAx; A[i, 1, 1] = AAy; A[i, 2, 0] = ABx; A[i, 2, 1] = ABy; A[i, 4, 0] = APx; A[i, 4, 1] = APy
+        raw0 = math.atan2(Ay, Ax); raw1 = math.atan2(e1y, e1x); raw2 = math.atan2(e2y, e2x)
+        for j, r in ((0, raw0), (1, raw1), (2, raw2)):
+            if i > 0:
+                dd = r - prev[j]
+                if not abs(dd) < math.pi:
+                    m = (dd + math.pi) % (2 * math.pi) - math.pi
+                    corr[j] += m - dd
+            prev[j] = r
+            ang[i, j] = r + corr[j]
+        W[i, 0] = omega; AL[i, 0] = 0.0
+        il2 = 1.0 / (e1x * e1x + e1y * e1y)
+        wj = (e1x * rvy - e1y * rvx) * il2
+        W[i, 1] = wj; AL[i, 1] = (e1x * ray - e1y * rax) * il2 - 2.0 * (e1x * rvx + e1y * rvy) * il2 * wj
+        il2 = 1.0 / (e2x * e2x + e2y * e2y)
+        wj = (e2x * VBy - e2y * VBx) * il2
+        W[i, 2] = wj; AL[i, 2] = (e2x * ABy - e2y * ABx) * il2 - 2.0 * (e2x * VBx + e2y * VBy) * il2 * wj
+        r = abs(Ax * Ax + Ay * Ay - a * a)
+        r = max(r, abs(Ay * ct - Ax * st)); r = max(r, abs(e1x * e1x + e1y * e1y - b * b))
+        r = max(r, abs(e2x * e2x + e2y * e2y - c * c))
+        res[i] = r
+        dA = 1.0 / (2 * Ax * ct + 2 * Ay * st)
+        iA00, iA01, iA10, iA11 = ct * dA, -2 * Ay * dA, st * dA, 2 * Ax * dA
+        dB = 1.0 / (4 * (e1x * e2y - e1y * e2x))
+        iB00, iB01, iB10, iB11 = 2 * e2y * dB, -2 * e1y * dB, -2 * e2x * dB, 2 * e1x * dB
+        t0 = -2 * e1x * iA00 - 2 * e1y * iA10
+        t1 = -2 * e1x * iA01 - 2 * e1y * iA11
+        x00, x01, x10, x11 = -iB00 * t0, -iB00 * t1, -iB10 * t0, -iB10 * t1
+        n00, n01, n10, n11 = -(1 - al), be, -be, -(1 - al)
+        q00, q01, q10, q11 = -al, -be, be, -al
+        m00 = n00 * iA00 + n01 * iA10 + q00 * x00 + q01 * x10
+        m01 = n00 * iA01 + n01 * iA11 + q00 * x01 + q01 * x11
+        m10 = n10 * iA00 + n11 * iA10 + q10 * x00 + q11 * x10
+        m11 = n10 * iA01 + n11 * iA11 + q10 * x01 + q11 * x11
+        p00 = -(q00 * iB00 + q01 * iB10); p01 = -(q00 * iB01 + q01 * iB11)
+        p10 = -(q10 * iB00 + q11 * iB10); p11 = -(q10 * iB01 + q11 * iB11)
+        c0 = abs(iA00) + abs(iA10) + abs(x00) + abs(x10) + abs(m00) + abs(m10)
+        c1 = abs(iA01) + abs(iA11) + abs(x01) + abs(x11) + abs(m01) + abs(m11)
+        c2 = abs(iB00) + abs(iB10) + abs(p00) + abs(p10)
+        c3 = abs(iB01) + abs(iB11) + abs(p01) + abs(p11)
+        inv1 = max(max(c0, c1), max(max(c2, c3), 1.0))
+        n1 = 2 * abs(Ax) + abs(st) + 2 * abs(e1x) + abs(1 - al) + be
+        n1 = max(n1, 2 * abs(Ay) + abs(ct) + 2 * abs(e1y) + be + abs(1 - al))
+        n1 = max(n1, 2 * abs(e1x) + 2 * abs(e2x) + al + be)
+        n1 = max(n1, 2 * abs(e1y) + 2 * abs(e2y) + be + al)
+        n1 = max(n1, 1.0)
+        cn = n1 * inv1
+        cond[i] = cn
+        status[i] = 0 if (cn * 1e-12 < 1.0) else 2
+
+
+def compiled_stage1(theta, omega: float = OMEGA):
+    """What :func:`numpy_stage1` computes, as one numba-compiled loop over the steps (the
+    rocker's and coupler's angles unwrapped as it goes): what a compiled stage 1 of this one
+    mechanism costs (a reference for issue 29, no target). None without numba."""
+    kernel = _compiled()
+    if kernel is None:
+        return None
+    S = len(theta)
+    out = (np.empty((S, 5, 2)), np.empty((S, 5, 2)), np.empty((S, 5, 2)), np.empty((S, 3)),
+           np.empty((S, 3)), np.empty((S, 3)), np.empty(S), np.empty(S), np.empty(S, np.int8))
+    kernel(theta, omega, *out)
+    return out
+
+
+_COMPILED = []
+
+
+def _compiled():
+    if not _COMPILED:
+        try:
+            import numba
+        except ImportError:
+            _COMPILED.append(None)
+        else:
+            _COMPILED.append(numba.njit(cache=True)(_compiled_stage1_kernel))
+    return _COMPILED[0]
+
 
 def linkpipe_model(S: int, method: str = "auto"):
     import dataclasses as dc
@@ -491,13 +607,19 @@ def part1(sizes, repeats):
         t_cfc, _ = best_of(lambda: closed_form_chunked(theta), repeats)
         t_floor, got_floor = best_of(lambda: numpy_stage1(theta), repeats)
         cpu_floor = best_cpu_of(lambda: numpy_stage1(theta), repeats)
+        compiled = compiled_stage1(theta[:10]) is not None  # compiled (or its cache loaded)
+        t_nb, got_nb = best_of(lambda: compiled_stage1(theta), repeats) if compiled else (None, None)
+        cpu_nb = best_cpu_of(lambda: compiled_stage1(theta), repeats) if compiled else None
         m_fast = linkpipe_model(S)
         t_fast, got_fast = best_of(lambda: linkpipe_fast(m_fast, theta), repeats)
         t_stage1, got_stage1 = best_of(lambda: linkpipe_stage1(m_fast, theta), repeats)
         m_newton = linkpipe_model(S, "newton")
         t_newton, got_newton = best_of(lambda: linkpipe_newton(m_newton, theta), repeats)
         row = dict(steps=S, closed_form=t_cf, closed_form_chunked=t_cfc, fast=t_fast, newton=t_newton,
-                   stage1=t_stage1, floor=t_floor, floor_cpu=cpu_floor,
+                   stage1=t_stage1, floor=t_floor, floor_cpu=cpu_floor, compiled=t_nb,
+                   compiled_cpu=cpu_nb,
+                   err_compiled=None if got_nb is None else [
+                       rel_errors(got_nb[i:i + 1], got_floor[i:i + 1])[0] for i in range(8)],
                    err_floor=rel_errors(got_floor[:3], ref),
                    floor_condition=stage1_condition_error(theta[:2000]),
                    err_fast=rel_errors(got_fast, ref),
@@ -533,6 +655,9 @@ def print_part1(rows, pyl, first_call):
                  ("closed form, numpy in cache-sized chunks", r["closed_form_chunked"], None),
                  ("hand-written numpy stage 1 (every array run stores, for this one "
                   "mechanism, chunked)", r["floor"], r["err_floor"])]
+        if r.get("compiled") is not None:
+            items.append(("numba-compiled stage 1 (the same arrays, one loop over the steps)",
+                          r["compiled"], r["err_compiled"][:3]))
         if "pylinkage" in r:
             items.append(("pylinkage + numba (step_fast_with_kinematics)", r["pylinkage"], r["err_pylinkage"]))
         for name, sec, err in items:
@@ -573,6 +698,14 @@ def print_part1(rows, pyl, first_call):
             f"({big['pylinkage_cpu']:.4f} / {big['floor_cpu']:.4f}) = {x:.2f}x (a reference, no "
             f"target; its condition agrees with numpy's dense 1-norm condition to "
             f"{big['floor_condition']:.1e})")
+        if big.get("compiled_cpu") is not None:
+            x = big["pylinkage_cpu"] / big["compiled_cpu"]
+            worst = max(big["err_compiled"])
+            lines.append(
+                f"- pylinkage+numba / numba-compiled stage 1, CPU seconds "
+                f"({big['pylinkage_cpu']:.4f} / {big['compiled_cpu']:.4f}) = {x:.2f}x (a "
+                f"reference, no target; its arrays equal the hand-written numpy ones to "
+                f"{worst:.1e} of each array's largest value)")
     e = max(big["err_fast"])
     lines.append(f"- dyads kernel max relative error {e:.1e} (target <= 1e-12): {verdict(e <= 1e-12)}")
     x = cps["newton"]
