@@ -658,19 +658,6 @@ def test_the_stacked_unit_cases_equal_the_cases_solved_one_by_one(name, monkeypa
         assert np.nanmax(np.abs(new - values), initial=0.0) <= 1e-12 * max(scale, 1e-300), key
 
 
-def test_the_row_maximum_column_by_column_is_numpys():
-    """The magnitudes' convergence test takes each row's largest change column by column
-    (:func:`linkpipe.forces.friction._row_max`): exactly ``max(axis=1, initial=0.0)``, NaN
-    rows included (a NaN step never converges), on random rows of 0 to 9 columns."""
-    from linkpipe.forces.friction import _row_max
-
-    rng = np.random.default_rng(35)
-    for m in range(10):
-        a = np.abs(rng.standard_normal((500, m))) * 10.0 ** rng.integers(-20, 20, (500, 1))
-        a[rng.random((500, m)) < 0.05] = np.nan
-        np.testing.assert_array_equal(_row_max(a), a.max(axis=1, initial=0.0))
-
-
 @pytest.mark.parametrize("name", ["excavator_arm", "five_bar", "jansen", "shear_press",
                                   "slider_crank"])
 def test_the_unit_loads_placed_at_their_few_points_equal_the_dense_loads(name, monkeypatch):

@@ -386,11 +386,13 @@ def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal
         resp = _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors)
         if kept is not None:
             kept[0][key] = resp
+    # every force pin (row) first, the step axis last: the base case's (S, ...) arrays as
+    # views, the unit cases' (K, S, ...) views as the (row, ..., K, S) memory they are
     torque, force, couples, converged = friction.solve_magnitudes(
-        ctx, layout, rates, friction.pair_forces(layout, pin_index, base.pins),
-        friction.normal_forces(ctx, layout, base.lam, Xz),
-        friction.pair_forces(layout, pin_index, resp["pins"]),
-        friction.normal_forces(ctx, layout, resp["lam"], Xz), base.ok)
+        ctx, layout, rates, friction.pair_forces(layout, pin_index, np.moveaxis(base.pins, 0, -1)),
+        friction.normal_forces(ctx, layout, base.lam.T, Xz),
+        friction.pair_forces(layout, pin_index, np.moveaxis(resp["pins"], (0, 1), (2, 3))),
+        friction.normal_forces(ctx, layout, np.moveaxis(resp["lam"], 2, 0), Xz), base.ok)
     _friction_term(ctx, influence, terms, layout, seal, (torque, force, couples), rates, Xz)
     u = np.concatenate([couples, -force], axis=1)
     status = np.where(base.ok & ~converged, NOT_CONVERGED, OK).astype(np.int8)
