@@ -230,15 +230,21 @@ def _friction_term(ctx, influence, terms, layout, seal, solved, rates, Xz) -> No
     n_pairs, n_slides = len(layout.pairs), len(layout.slides)
     torque = np.zeros((ctx.n_steps, n_pairs)) if solved is None else solved[0]
     force = np.zeros((ctx.n_steps, n_slides)) if solved is None else solved[1]
-    if solved is not None:
+    work = terms["friction"][0]  # the seals' virtual work, put there with their loads
+    if solved is not None:  # plus the pins' couples' and the sliders' forces'
         more = friction.applied_of(ctx, layout, solved[2], force, Xz)
-        applied = Applied(applied.point_forces + more.point_forces, applied.couples + more.couples)
+        if layout.slides:
+            applied = Applied(applied.point_forces + more.point_forces,
+                              applied.couples + more.couples)
+            work = work + influence.generalized(more)
+        else:  # couples alone: no point forces to add or to take the work of
+            applied = Applied(applied.point_forces, applied.couples + more.couples)
+            work = work + influence.couples_work(more.couples)
     if rates is None:
         rates = friction.Rates(np.zeros((ctx.n_steps, n_pairs)), np.zeros((ctx.n_steps, n_slides)))
     names, labels = friction.variables(ctx, layout, seal_signed, ctx.motion.s_dot, rates,
                                        torque, force)
-    terms["friction"] = (influence.generalized(applied), names, labels,
-                         Effect(applied, bodies=bodies))
+    terms["friction"] = (work, names, labels, Effect(applied, bodies=bodies))
 
 
 def _lagrange_sides(model, ctx, terms, Xz):
@@ -283,12 +289,12 @@ class _Case:
     def plus(self, u: np.ndarray, cases: dict) -> "_Case":
         """This case plus ``u[:, k]`` (S,) times each of ``cases`` ({name: (K, S, ...)})."""
         out = {}
+        uT = np.ascontiguousarray(u.T)  # (K, S)
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
-            # summed with the step axis last (where the stacked cases keep it contiguous)
-            total = np.moveaxis(getattr(self, name), 0, -1).copy()
-            scratch = np.empty_like(total)  # each product into one buffer (no temporaries)
-            for k, part in enumerate(cases[name]):
-                total += np.multiply(u[:, k], np.moveaxis(part, 0, -1), out=scratch)
+            # the cases' sum in one pass over them, the step axis last (where the stacked
+            # cases keep it contiguous), laid out (..., K, S)
+            total = np.einsum("...ks,ks->...s", np.moveaxis(cases[name], (0, 1), (-2, -1)), uT)
+            total += np.moveaxis(getattr(self, name), 0, -1)
             out[name] = np.moveaxis(total, -1, 0)
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)

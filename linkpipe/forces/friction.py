@@ -227,12 +227,13 @@ def pair_forces(layout: Layout, pin_index: dict, pins):
     the difference (second minus first)."""
     if not layout.pairs:
         return np.zeros((0,) + pins.shape[1:])
-    second = [pin_index[(j, p)] for _, p, i, j in layout.pairs]
-    first = [pin_index[(i, p)] if i >= 0 else pin_index[(j, p)] for _, p, i, j in layout.pairs]
-    out = pins[second]
-    between = [c for c, (_, _, i, _) in enumerate(layout.pairs) if i >= 0]
-    if between:
-        out[between] = 0.5 * (out[between] - pins[[first[c] for c in between]])
+    out = np.empty((len(layout.pairs),) + pins.shape[1:])
+    for c, (_, p, i, j) in enumerate(layout.pairs):  # row by row: no gathered temporaries
+        if i < 0:
+            out[c] = pins[pin_index[(j, p)]]
+        else:
+            np.subtract(pins[pin_index[(j, p)]], pins[pin_index[(i, p)]], out=out[c])
+            out[c] *= 0.5
     return out
 
 

@@ -65,7 +65,7 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
     if eng is None:
         return None
     K, n_steps = generalized_q.shape[:2]
-    lam = np.full((model.n_rows, K, n_steps), np.nan)  # as the block solve gives it; returned
+    lam = _nan_where_not(ok, (model.n_rows, K, n_steps))  # as the block solve gives it; returned
     # as a (K, S, n_rows) view (each row's cases contiguous: what stacked_reactions reads)
     factors = {} if factors is None else factors
     idx = np.flatnonzero(ok)
@@ -100,8 +100,8 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
     K, S = lam.shape[:2]
     # filled in the chunks' own layout (slot, axis, case, step: each chunk's block contiguous)
     # and returned as (K, S, slot, 2) views of it
-    R_ = np.full((len(fixed), 2, K, S), np.nan)
-    F_ = np.full((len(pairs), 2, K, S), np.nan)
+    R_ = _nan_where_not(ok, (len(fixed), 2, K, S))
+    F_ = _nan_where_not(ok, (len(pairs), 2, K, S))
     relative = bool((model.drv_kind == eq.RELATIVE).any())
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):
@@ -139,6 +139,15 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
             R_[..., ii] = Rc
             F_[..., ii] = Fc
     return np.moveaxis(R_, (0, 1), (2, 3)), np.moveaxis(F_, (0, 1), (2, 3))
+
+
+def _nan_where_not(ok, shape) -> np.ndarray:
+    """An array of ``shape`` (..., S) that is NaN at the steps not ``ok`` (S,) and left for the
+    caller to fill at every ok step (no pass over the ok steps' memory before they are written)."""
+    out = np.empty(shape)
+    if not ok.all():
+        out[..., ~ok] = np.nan
+    return out
 
 
 def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:
