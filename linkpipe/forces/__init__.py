@@ -39,6 +39,11 @@ __all__ = ["compute_forces", "EFFECTS"]
 #: a multiple of the sweep (benchmarks/bench_logs.py measures both)
 FORCE_CHUNK = 16384
 
+#: the same with pin or slider friction, whose unit load cases hold K + 1 times a frictionless
+#: chunk's multipliers and pin forces (K: the links a pin friction turns and the sliders with
+#: friction): half the steps keep them in cache (benchmarks/bench_friction.py; docs/performance.md)
+FRICTION_CHUNK = 8192
+
 
 #: the variables only the Lagrange multipliers give (an independent solve: skipped when a caller
 #: such as a fit's trial needs none of them)
@@ -47,7 +52,7 @@ LAGRANGE_VARIABLES = frozenset({"input_force_lagrange", "link_force", "slider_fo
 
 
 def compute_forces(model: Model, motion: Motion, units: dict,
-                   constants: ForceConstants | None = None, chunk: int = FORCE_CHUNK,
+                   constants: ForceConstants | None = None, chunk: int | None = None,
                    lagrange: bool = True, cache: dict | None = None) -> Forces:
     """Compute every named effect and the input force of a solved sweep, in chunks of steps.
 
@@ -62,8 +67,14 @@ def compute_forces(model: Model, motion: Motion, units: dict,
     leaves out the multipliers and what they give (:data:`LAGRANGE_VARIABLES`); then a
     ``cache`` dict kept with one stage 1 across calls (a fit's trials) saves the influence
     coefficients and every effect whose scene inputs did not change (:func:`_effect_terms`).
+    ``chunk``: steps per chunk (default :data:`FORCE_CHUNK`, :data:`FRICTION_CHUNK` where pin
+    or slider friction is solved).
     """
     n_steps = motion.position.shape[0]
+    if chunk is None:
+        coupled = ("friction" in model.scene.effects and model.scene.friction
+                   and friction.Layout.of(model).coupled)
+        chunk = FRICTION_CHUNK if coupled else FORCE_CHUNK
     if cache is not None and constants is not None:
         raise ValueError("a cache keys effects by the scene's tables: not with constants")
     if n_steps <= chunk:

@@ -299,20 +299,22 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     x = np.zeros((m, S))
     work = np.flatnonzero(ok)  # the steps the working arrays hold (failed steps never)
     Rw, gw, sw, vw = (a if len(work) == S else a[..., work] for a in (R, g0, sgn, visc))
+    sw = coef * sw  # the magnitudes' factors: mu r (mu) times the regularised sign
     # the first round from x = 0, where G = g0 (no unit case contributes)
-    xw = coef * np.hypot(gw[:, 0], gw[:, 1]) * sw + vw
+    xw = _magnitude(gw.copy()) * sw + vw
     for _ in range(scene.solver.max_iter):  # each later round tests convergence
         if not len(work):
             break
         u = CT @ xw  # (K, n): the unit cases' multiples
-        G = gw.copy()
-        tmp = np.empty_like(G)
-        for k in range(len(u)):
-            G += np.multiply(Rw[:, :, k], u[k], out=tmp)
-        new = coef * np.hypot(G[:, 0], G[:, 1]) * sw + vw
+        G = np.einsum("cdks,ks->cds", Rw, u)  # their sum in one pass over the responses
+        G += gw
+        new = _magnitude(G)
+        new *= sw
+        new += vw
+        change = np.abs(np.subtract(new, xw, out=xw), out=xw)  # xw is replaced below
         with np.errstate(invalid="ignore"):
-            done = (np.max(np.abs(new - xw), axis=0, initial=0.0)
-                    <= tol * np.max(np.abs(new), axis=0, initial=0.0))
+            done = (change.max(axis=0, initial=0.0)
+                    <= tol * np.abs(new).max(axis=0, initial=0.0))
         xw = new
         if done.any():  # converged steps leave the working arrays
             x[:, work[done]] = xw[:, done]
@@ -324,6 +326,15 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     converged[work] = False
     torque, force = x[:n_pairs].T, x[n_pairs:].T
     return torque, force, torque @ A, converged
+
+
+def _magnitude(G):
+    """(m, n) the length of each force ``G`` (m, 2, n), x then y: ``sqrt(x^2 + y^2)``, in
+    ``G``'s own memory (overwritten)."""
+    np.square(G, out=G)
+    out = G[:, 0]
+    out += G[:, 1]
+    return np.sqrt(out, out=out)
 
 
 def _joined(a, b):

@@ -80,9 +80,10 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
         at = ii
         if len(ii) and ii[-1] - ii[0] + 1 == len(ii):  # contiguous: a view, not a gather
             at = slice(int(ii[0]), int(ii[-1]) + 1)
-        rhs = list(np.ascontiguousarray(generalized_q[:, at].transpose(2, 0, 1)))
+        rhs = list(generalized_q[:, at].transpose(2, 0, 1))  # (K, n) rows: views where the
+        # right-hand sides are laid out (n_q, K, S), as friction's unit cases are
         for r, y in enumerate(eng.solve_transpose(E, rhs, inverses)):
-            lam[r][:, ii] = y
+            lam[r][:, at] = y
     return np.moveaxis(lam, 0, 2)
 
 
