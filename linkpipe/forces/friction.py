@@ -60,10 +60,13 @@ def seal_law(entry, v, scale):
     return level * smooth_sign(v, scale) + entry.viscous * v
 
 
-def link_angular_velocity(model: Model, X, V):
-    """(S, n_links) rad/s: each link's from its first two points' velocities."""
-    d = X[:, model.link_b] - X[:, model.link_a]
-    dv = V[:, model.link_b] - V[:, model.link_a]
+def link_angular_velocity(model: Model, X, V, links=None):
+    """(S, n_links) rad/s: each link's from its first two points' velocities (``links``: only
+    those link indices, in that order)."""
+    a, b = (model.link_a, model.link_b) if links is None else (model.link_a[list(links)],
+                                                               model.link_b[list(links)])
+    d = X[:, b] - X[:, a]
+    dv = V[:, b] - V[:, a]
     return (d[..., 0] * dv[..., 1] - d[..., 1] * dv[..., 0]) / (d[..., 0] ** 2 + d[..., 1] ** 2)
 
 
@@ -114,20 +117,25 @@ class Layout:
         return bool(self.pairs or self.slides)
 
 
-def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
-    """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies)``, the
-    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``)
-    and, for a driver whose row acts on bodies (an angle on one link, a relative angle), each body's part."""
+def seal_loads(ctx, layout: Layout, influence) -> tuple:
+    """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies, work)``, the
+    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``),
+    for a driver whose row acts on bodies (an angle on one link, a relative angle) each body's
+    part, and their work per unit driver value (S, nd) (:meth:`.Influence.generalized` at the
+    few points they load)."""
     model, X = ctx.model, ctx.position
+    phi_s = influence.phi_s
     scale = velocity_scale(model, ctx.constants.size)
     points, bodies = ctx.zeros_points(), {}
     signed = np.zeros((ctx.n_steps, len(layout.seals)))
+    work = np.zeros((ctx.n_steps, model.n_drivers))
     if not layout.seals:
-        return signed, Applied(points, ctx.zeros_links()), bodies
+        return signed, Applied(points, ctx.zeros_links()), bodies, work
     rows = (ctx.constants.model_rows or model.rows).drivers
     row_link = body_rows(model)
     xy = lambda p: (X[:, p, 0], X[:, p, 1])  # noqa: E731
     lam = np.zeros((ctx.n_steps, model.n_rows))
+    loaded = set()
     for c, (e, j) in enumerate(layout.seals):
         size = ctx.constants.size if model.scene.drivers[j].is_angle else 1.0
         signed[:, c] = seal_law(model.scene.friction[e], ctx.motion.s_dot[:, j], scale / size)
@@ -139,6 +147,7 @@ def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
         for _, p, gx, gy in eq.driver_jacobian_terms(rows[j], r, xy, np.cos(s), np.sin(s)):
             points[:, p, 0] += per * gx
             points[:, p, 1] += per * gy
+            loaded.add(p)
             if model.drv_kind[j] == eq.ANGLE and row_link[r] >= 0:  # on that body: its -Q_k
                 body = bodies.setdefault(int(row_link[r]), {})
                 merge_bodies(body, {p: np.stack([-per * gx, -per * gy], axis=1)})
@@ -148,7 +157,9 @@ def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
         for li, body in motor_terms(model, X, ctx.motion.s, lam,
                                     ctx.constants.model_rows).items():
             merge_bodies(bodies.setdefault(li, {}), body)
-    return signed, Applied(points, ctx.zeros_links()), bodies
+    for p in sorted(loaded):  # Q . dX/ds at the loaded points (zero elsewhere)
+        work += np.einsum("sj,sjd->sd", points[:, p], influence.points[:, p])
+    return signed, Applied(points, ctx.zeros_links()), bodies, work
 
 
 def unit_loads(ctx, layout: Layout, influence, Xz):
@@ -206,16 +217,21 @@ class Rates:
 
     @classmethod
     def of(cls, ctx, layout: Layout, Xz) -> "Rates":
-        V = np.where(np.isfinite(ctx.velocity), ctx.velocity, 0.0)
-        w = link_angular_velocity(ctx.model, Xz, V)
+        """The rates at every step (0 where the velocities are not finite), of the links and
+        points friction acts on alone."""
+        V = ctx.velocity
+        w = link_angular_velocity(ctx.model, Xz, V, layout.links)  # (S, len(layout.links))
         w = np.where(np.isfinite(w), w, 0.0)
         w = np.concatenate([w, np.zeros((ctx.n_steps, 1))], axis=1)  # index -1: ground
-        pairs = np.stack([w[:, j] - w[:, i] for _, _, i, j in layout.pairs], axis=1) \
+        at = {li: k for k, li in enumerate(layout.links)}
+        at[-1] = -1
+        pairs = np.stack([w[:, at[j]] - w[:, at[i]] for _, _, i, j in layout.pairs], axis=1) \
             if layout.pairs else np.zeros((ctx.n_steps, 0))
         slides = np.zeros((ctx.n_steps, len(layout.slides)))
         for c, (_, _, p, d, _) in enumerate(layout.slides):
             t = guide_direction(ctx, layout, p, d, Xz)
-            rel = V[:, p] - (V[:, d] if d >= 0 else 0.0)
+            finite = lambda q: np.where(np.isfinite(V[:, q]), V[:, q], 0.0)  # noqa: E731
+            rel = finite(p) - (finite(d) if d >= 0 else 0.0)
             slides[:, c] = rel[:, 0] * t[:, 0] + rel[:, 1] * t[:, 1]
         return cls(pairs, slides)
 
