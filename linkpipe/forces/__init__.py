@@ -197,7 +197,7 @@ def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
     terms = _effect_terms(ctx, influence, None if lagrange else cache, chunk_key)
     seal = None
     if layout is not None:  # the seals now, pins and sliders with the forces they change
-        seal = friction.seal_loads(ctx, layout, influence)
+        seal = friction.seal_loads(ctx, layout, influence.phi_s, influence)
         terms["friction"] = (seal[3], {}, {}, Effect(seal[1], bodies=seal[2]))
     if lagrange:
         return _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout, seal,

@@ -117,20 +117,20 @@ class Layout:
         return bool(self.pairs or self.slides)
 
 
-def seal_loads(ctx, layout: Layout, influence) -> tuple:
+def seal_loads(ctx, layout: Layout, phi_s, influence=None) -> tuple:
     """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies, work)``, the
     point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``),
     for a driver whose row acts on bodies (an angle on one link, a relative angle) each body's
-    part, and their work per unit driver value (S, nd) (:meth:`.Influence.generalized` at the
-    few points they load)."""
+    part and, given the :class:`.Influence`, their work per unit driver value (S, nd)
+    (:meth:`.Influence.generalized` at the few points they load; else None)."""
     model, X = ctx.model, ctx.position
-    phi_s = influence.phi_s
     scale = velocity_scale(model, ctx.constants.size)
     points, bodies = ctx.zeros_points(), {}
     signed = np.zeros((ctx.n_steps, len(layout.seals)))
     work = np.zeros((ctx.n_steps, model.n_drivers))
     if not layout.seals:
-        return signed, Applied(points, ctx.zeros_links()), bodies, work
+        return signed, Applied(points, ctx.zeros_links()), bodies, \
+            None if influence is None else work
     rows = (ctx.constants.model_rows or model.rows).drivers
     row_link = body_rows(model)
     xy = lambda p: (X[:, p, 0], X[:, p, 1])  # noqa: E731
@@ -157,7 +157,9 @@ def seal_loads(ctx, layout: Layout, influence) -> tuple:
         for li, body in motor_terms(model, X, ctx.motion.s, lam,
                                     ctx.constants.model_rows).items():
             merge_bodies(bodies.setdefault(li, {}), body)
-    for p in sorted(loaded):  # Q . dX/ds at the loaded points (zero elsewhere)
+    if influence is None:
+        work = None
+    for p in sorted(loaded) if influence is not None else ():  # Q . dX/ds where loaded
         work += np.einsum("sj,sjd->sd", points[:, p], influence.points[:, p])
     return signed, Applied(points, ctx.zeros_links()), bodies, work
 
