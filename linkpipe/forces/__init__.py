@@ -197,8 +197,9 @@ def _forces_computed(model: Model, motion: Motion, units: dict, constants=None,
     terms = _effect_terms(ctx, influence, None if lagrange else cache, chunk_key)
     seal = None
     if layout is not None:  # the seals now, pins and sliders with the forces they change
-        seal = friction.seal_loads(ctx, layout, influence.phi_s, influence)
-        terms["friction"] = (seal[3], {}, {}, Effect(seal[1], bodies=seal[2]))
+        seal = friction.seal_loads(ctx, layout, influence.phi_s)
+        terms["friction"] = (influence.generalized(seal[1]), {}, {},
+                             Effect(seal[1], bodies=seal[2]))
     if lagrange:
         return _with_lagrange(model, ctx, motion, units, influence, terms, Xz, layout, seal,
                               None if cache is None else (cache, chunk_key), wanted)
@@ -236,7 +237,7 @@ def _effect_variables(terms: dict, motion: Motion, units: dict) -> tuple[dict, d
 def _friction_term(ctx, influence, terms, layout, seal, solved, rates, Xz) -> None:
     """Put the whole friction effect in ``terms``: the seals' loads plus, where ``solved``
     (pair torques, slider forces, link couples), the pins' and sliders'."""
-    seal_signed, applied, bodies, _ = seal
+    seal_signed, applied, bodies = seal
     n_pairs, n_slides = len(layout.pairs), len(layout.slides)
     torque = np.zeros((ctx.n_steps, n_pairs)) if solved is None else solved[0]
     force = np.zeros((ctx.n_steps, n_slides)) if solved is None else solved[1]

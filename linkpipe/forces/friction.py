@@ -65,8 +65,11 @@ def link_angular_velocity(model: Model, X, V, links=None):
     those link indices, in that order)."""
     a, b = (model.link_a, model.link_b) if links is None else (model.link_a[list(links)],
                                                                model.link_b[list(links)])
-    d = X[:, b] - X[:, a]
-    dv = V[:, b] - V[:, a]
+    ends = np.concatenate([b, a])  # one gather of each array: (S, 2 n, 2)
+    Xe, Ve = X[:, ends], V[:, ends]
+    n = len(a)
+    d = Xe[:, :n] - Xe[:, n:]
+    dv = Ve[:, :n] - Ve[:, n:]
     return (d[..., 0] * dv[..., 1] - d[..., 1] * dv[..., 0]) / (d[..., 0] ** 2 + d[..., 1] ** 2)
 
 
@@ -117,25 +120,20 @@ class Layout:
         return bool(self.pairs or self.slides)
 
 
-def seal_loads(ctx, layout: Layout, phi_s, influence=None) -> tuple:
-    """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies, work)``, the
-    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``),
-    for a driver whose row acts on bodies (an angle on one link, a relative angle) each body's
-    part and, given the :class:`.Influence`, their work per unit driver value (S, nd)
-    (:meth:`.Influence.generalized` at the few points they load; else None)."""
+def seal_loads(ctx, layout: Layout, phi_s) -> tuple:
+    """The seals' signed friction (S, n_seals) and its loads: ``(Applied, bodies)``, the
+    point forces ``(f / Phi_s) dPhi_d/dX`` at each driver's points (virtual work ``-f ds``)
+    and, for a driver whose row acts on bodies (an angle on one link, a relative angle), each body's part."""
     model, X = ctx.model, ctx.position
     scale = velocity_scale(model, ctx.constants.size)
     points, bodies = ctx.zeros_points(), {}
     signed = np.zeros((ctx.n_steps, len(layout.seals)))
-    work = np.zeros((ctx.n_steps, model.n_drivers))
     if not layout.seals:
-        return signed, Applied(points, ctx.zeros_links()), bodies, \
-            None if influence is None else work
+        return signed, Applied(points, ctx.zeros_links()), bodies
     rows = (ctx.constants.model_rows or model.rows).drivers
     row_link = body_rows(model)
     xy = lambda p: (X[:, p, 0], X[:, p, 1])  # noqa: E731
     lam = np.zeros((ctx.n_steps, model.n_rows))
-    loaded = set()
     for c, (e, j) in enumerate(layout.seals):
         size = ctx.constants.size if model.scene.drivers[j].is_angle else 1.0
         signed[:, c] = seal_law(model.scene.friction[e], ctx.motion.s_dot[:, j], scale / size)
@@ -147,7 +145,6 @@ def seal_loads(ctx, layout: Layout, phi_s, influence=None) -> tuple:
         for _, p, gx, gy in eq.driver_jacobian_terms(rows[j], r, xy, np.cos(s), np.sin(s)):
             points[:, p, 0] += per * gx
             points[:, p, 1] += per * gy
-            loaded.add(p)
             if model.drv_kind[j] == eq.ANGLE and row_link[r] >= 0:  # on that body: its -Q_k
                 body = bodies.setdefault(int(row_link[r]), {})
                 merge_bodies(body, {p: np.stack([-per * gx, -per * gy], axis=1)})
@@ -157,11 +154,7 @@ def seal_loads(ctx, layout: Layout, phi_s, influence=None) -> tuple:
         for li, body in motor_terms(model, X, ctx.motion.s, lam,
                                     ctx.constants.model_rows).items():
             merge_bodies(bodies.setdefault(li, {}), body)
-    if influence is None:
-        work = None
-    for p in sorted(loaded) if influence is not None else ():  # Q . dX/ds where loaded
-        work += np.einsum("sj,sjd->sd", points[:, p], influence.points[:, p])
-    return signed, Applied(points, ctx.zeros_links()), bodies, work
+    return signed, Applied(points, ctx.zeros_links()), bodies
 
 
 def unit_loads(ctx, layout: Layout, influence, Xz):
