@@ -686,3 +686,24 @@ def test_the_unit_loads_placed_at_their_few_points_equal_the_dense_loads(name, m
     assert set(sparse.forces) == set(dense.forces)
     for key, (_, values, _) in dense.forces.items():
         np.testing.assert_array_equal(sparse.forces[key][1], values, err_msg=key)
+
+
+def test_friction_forces_do_not_depend_on_the_chunks_of_steps():
+    """Every step's friction is solved from that step alone (its unit cases, its magnitudes'
+    rounds), so the force stage cut into chunks of 7 or 64 steps (as a long sweep is cut into
+    FRICTION_CHUNK ones) gives the stored arrays of the whole sweep in one chunk, bit for bit."""
+    import pathlib
+
+    from linkpipe.forces import compute_forces
+    from linkpipe.output_units import units_of
+
+    path = pathlib.Path(__file__).resolve().parent.parent / "configs" / "excavator_arm.toml"
+    r = linkpipe.solve(_with_friction_everywhere(path))
+    motion, units = r.kinematics.motion(), units_of(r.scene)
+    whole = compute_forces(r.model, motion, units, chunk=r.n_steps)
+    assert (whole.status == OK).all()
+    for chunk in (7, 64):
+        cut = compute_forces(r.model, motion, units, chunk=chunk)
+        np.testing.assert_array_equal(cut.status, whole.status)
+        for name, (_, data, _) in whole.variables.items():
+            np.testing.assert_array_equal(cut.variables[name][1], data, err_msg=name)
