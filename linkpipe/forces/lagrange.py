@@ -126,16 +126,18 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
                 for part in (extra.get(li, {}).get(p), case_bodies.get(li, {}).get(p)):
                     if part is not None:
                         Fc[slot, :, k] += (part if part.shape[0] == n else part[ii]).T
+        tx, ty = np.empty((K, n)), np.empty((K, n))  # each term's products, made once
         for r, p, gx, gy in model.jacobian_terms(Xc, sc, rows_c):
+            kf, kp = fixed_slot.get(p), pair_slot.get((row_link[r], p))
+            if kf is None and kp is None:
+                continue
             lr = lam_c[r]
-            k = fixed_slot.get(p)
-            if k is not None:
-                Rc[k, 0] += lr * gx
-                Rc[k, 1] += lr * gy
-            k = pair_slot.get((row_link[r], p))
-            if k is not None:
-                Fc[k, 0] += lr * gx
-                Fc[k, 1] += lr * gy
+            np.multiply(lr, gx, out=tx)
+            np.multiply(lr, gy, out=ty)
+            for out, k in ((Rc, kf), (Fc, kp)):
+                if k is not None:
+                    out[k, 0] += tx
+                    out[k, 1] += ty
         if not in_place:
             R_[..., ii] = Rc
             F_[..., ii] = Fc
