@@ -41,7 +41,7 @@ def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, ro
                      if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
                 inverses = None
                 if factors is not None:
-                    inverses = factors[key] = E, _steps_last(eng.block_inverses(E))
+                    inverses = factors[key] = E, eng.block_inverses_steps_last(E)
                     inverses = inverses[1]
             rhs = list(np.ascontiguousarray(generalized_q[ii].T))
             lam[ii] = np.stack(eng.solve_transpose(E, rhs, inverses), axis=1)
@@ -75,7 +75,7 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
         if key not in factors:
             E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
                  if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
-            factors[key] = E, _steps_last(eng.block_inverses(E))
+            factors[key] = E, eng.block_inverses_steps_last(E)
         E, inverses = factors[key]
         at = ii
         if len(ii) and ii[-1] - ii[0] + 1 == len(ii):  # contiguous: a view, not a gather
@@ -142,14 +142,6 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
             R_[..., ii] = Rc
             F_[..., ii] = Fc
     return np.moveaxis(R_, (0, 1), (2, 3)), np.moveaxis(F_, (0, 1), (2, 3))
-
-
-def _steps_last(inverses: dict) -> dict:
-    """Block inverses {block: (S, k, k)} with the same values and shape, laid out step axis
-    last in memory: the block solves read each entry ``inv[:, j, a]`` over the steps as one
-    contiguous row (the same products, bit for bit, without strided reads)."""
-    return {i: np.ascontiguousarray(inv.transpose(1, 2, 0)).transpose(2, 0, 1)
-            for i, inv in inverses.items()}
 
 
 def _nan_where_not(ok, shape) -> np.ndarray:

@@ -330,6 +330,27 @@ class Engine:
                     out[i] = np.full_like(M, np.nan)
         return out
 
+    def block_inverses_steps_last(self, E: np.ndarray) -> dict:
+        """:meth:`block_inverses` by Gauss-Jordan elimination with partial pivoting, vectorised
+        over the steps (each block read from the entries' contiguous rows: no per-step LAPACK
+        call), returned as (S, k, k) views of (k, k, S) memory, so that a solve reads each
+        entry over the steps as one row. A singular step is NaN or inf alone (not its whole
+        chunk). For the force stage's several right-hand sides with one E (friction's load
+        cases); stage 1 keeps :meth:`block_inverses` (its condition estimates' thresholds)."""
+        out = {}
+        for i, (_, cols, inner, _) in enumerate(self.blocks):
+            k = len(cols)
+            if k > 2:
+                A = np.zeros((k, 2 * k, E.shape[1]))
+                for r in range(k):
+                    A[r, k + r] = 1.0
+                    for c in range(k):
+                        if inner[r][c] >= 0:
+                            A[r, c] = E[inner[r][c]]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    out[i] = _gauss_jordan(A).transpose(2, 0, 1)
+        return out
+
     def _solve(self, E, b, inverses: dict):
         x = [None] * self.model.n_q
         for i, (rows, cols, inner, outer) in enumerate(self.blocks):
@@ -480,6 +501,26 @@ class Engine:
         out = np.empty_like(sums)
         out[order] = sums
         return out
+
+
+def _gauss_jordan(W: np.ndarray) -> np.ndarray:
+    """The inverses (k, k, S) of k x k matrices given as ``W`` = [A | I] (k, 2k, S), by
+    Gauss-Jordan elimination with partial pivoting at every step at once (``W`` is overwritten)."""
+    k = W.shape[0]
+    for j in range(k):
+        if j < k - 1:  # the largest pivot candidate of column j, swapped into row j
+            p = j + np.argmax(np.abs(W[j:, j]), axis=0)
+            for i in range(j + 1, k):
+                m = p == i
+                if m.any():
+                    row = W[j].copy()
+                    np.copyto(W[j], W[i], where=m)
+                    np.copyto(W[i], row, where=m)
+        W[j] *= 1.0 / W[j, j]
+        for i in range(k):
+            if i != j:
+                W[i] -= W[i, j].copy() * W[j]
+    return W[:, k:]
 
 
 def _cramer2(a, b, c, d, r0, r1):
