@@ -223,9 +223,9 @@ class Rates:
         pairs = np.stack([w[:, at[j]] - w[:, at[i]] for _, _, i, j in layout.pairs], axis=1) \
             if layout.pairs else np.zeros((ctx.n_steps, 0))
         slides = np.zeros((ctx.n_steps, len(layout.slides)))
+        finite = lambda q: np.where(np.isfinite(V[:, q]), V[:, q], 0.0)  # noqa: E731
         for c, (_, _, p, d, _) in enumerate(layout.slides):
             t = guide_direction(ctx, layout, p, d, Xz)
-            finite = lambda q: np.where(np.isfinite(V[:, q]), V[:, q], 0.0)  # noqa: E731
             rel = finite(p) - (finite(d) if d >= 0 else 0.0)
             slides[:, c] = rel[:, 0] * t[:, 0] + rel[:, 1] * t[:, 1]
         return cls(pairs, slides)
