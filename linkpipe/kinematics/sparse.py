@@ -395,11 +395,15 @@ class Engine:
                 rows, cols, inner, _ = self.blocks[i]
                 rhs = []
                 for c in cols:
-                    acc = b[c]
+                    acc, tmp = b[c], None
                     for e in self.col_entries[c]:
                         r = int(self.rows[e])
-                        if r not in rows:
-                            acc = acc - E[e] * y[r]
+                        if r not in rows:  # b - E y - ...: in place after the first
+                            if tmp is None:
+                                acc = acc - E[e] * y[r]
+                                tmp = np.empty_like(acc)
+                            else:
+                                acc -= np.multiply(E[e], y[r], out=tmp)
                     rhs.append(acc)
                 k = len(cols)
                 if k == 1:
@@ -407,10 +411,14 @@ class Engine:
                 elif k == 2:  # the block transposed: [[a, c], [b, d]]
                     a, b_, c, d = _block2(E, inner)
                     y[rows[0]], y[rows[1]] = _cramer2(a, c, b_, d, *rhs)
-                elif i in inverses:  # (M^T)^-1 = (M^-1)^T
+                elif i in inverses:  # (M^T)^-1 = (M^-1)^T, summed in place in its order
                     inv = inverses[i]
+                    tmp = np.empty(np.broadcast_shapes(*(np.shape(x) for x in rhs),
+                                                       inv.shape[:1]))
                     for a, r in enumerate(rows):
-                        y[r] = sum(inv[:, j, a] * rhs[j] for j in range(k))
+                        y[r] = inv[:, 0, a] * rhs[0]
+                        for j in range(1, k):
+                            y[r] += np.multiply(inv[:, j, a], rhs[j], out=tmp)
                 else:
                     S = E.shape[1]
                     M = _dense_block(E, inner).transpose(0, 2, 1)
