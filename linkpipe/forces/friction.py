@@ -304,8 +304,8 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     R = _joined(resp_pairs, resp_normals)  # (m, 2, K, S): per unit of each load
     g0 = _joined(base_pairs, base_normals)  # (m, 2, S)
     coef = np.concatenate([mu_r, mu_s])[:, None]
-    sgn = np.concatenate([sgn_pair, sgn_slide], axis=1).T  # (m, S)
-    visc = np.concatenate([visc_pair, visc_slide], axis=1).T
+    sgn = np.ascontiguousarray(np.concatenate([sgn_pair, sgn_slide], axis=1).T)  # (m, S)
+    visc = np.ascontiguousarray(np.concatenate([visc_pair, visc_slide], axis=1).T)
     tol = scene.solver.tol
     x = np.zeros((m, S))
     work = np.flatnonzero(ok)  # the steps the working arrays hold (failed steps never)
