@@ -65,12 +65,12 @@ def link_angular_velocity(model: Model, X, V, links=None):
     those link indices, in that order)."""
     a, b = (model.link_a, model.link_b) if links is None else (model.link_a[list(links)],
                                                                model.link_b[list(links)])
-    ends = np.concatenate([b, a])  # one gather of each array: (S, 2 n, 2)
-    Xe, Ve = X[:, ends], V[:, ends]
-    n = len(a)
-    d = Xe[:, :n] - Xe[:, n:]
-    dv = Ve[:, :n] - Ve[:, n:]
-    return (d[..., 0] * dv[..., 1] - d[..., 1] * dv[..., 0]) / (d[..., 0] ** 2 + d[..., 1] ** 2)
+    out = np.empty((X.shape[0], len(a)))
+    for j, (pa, pb) in enumerate(zip(a, b)):  # link by link on columns (no gathered copies)
+        dx, dy = X[:, pb, 0] - X[:, pa, 0], X[:, pb, 1] - X[:, pa, 1]
+        dvx, dvy = V[:, pb, 0] - V[:, pa, 0], V[:, pb, 1] - V[:, pa, 1]
+        out[:, j] = (dx * dvy - dy * dvx) / (dx * dx + dy * dy)
+    return out
 
 
 @dataclass(frozen=True)
