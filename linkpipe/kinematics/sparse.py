@@ -413,10 +413,10 @@ class Engine:
                     y[rows[0]], y[rows[1]] = _cramer2(a, c, b_, d, *rhs)
                 elif i in inverses:  # (M^T)^-1 = (M^-1)^T, summed in place in its order
                     inv = inverses[i]
-                    tmp = np.empty(np.broadcast_shapes(*(np.shape(x) for x in rhs),
-                                                       inv.shape[:1]))
+                    shape = np.broadcast_shapes(*(np.shape(x) for x in rhs), inv.shape[:1])
+                    tmp = np.empty(shape)
                     for a, r in enumerate(rows):
-                        y[r] = inv[:, 0, a] * rhs[0]
+                        y[r] = np.multiply(inv[:, 0, a], rhs[0], out=np.empty(shape))
                         for j in range(1, k):
                             y[r] += np.multiply(inv[:, j, a], rhs[j], out=tmp)
                 else:
