@@ -39,6 +39,11 @@ __all__ = ["compute_forces", "EFFECTS"]
 #: a multiple of the sweep (benchmarks/bench_logs.py measures both)
 FORCE_CHUNK = 16384
 
+#: the same with pin or slider friction, whose unit load cases hold K + 1 times a frictionless
+#: chunk's multipliers and pin forces (K: the links a pin friction turns and the sliders with
+#: friction): half the steps keep them in cache (benchmarks/bench_friction.py; docs/performance.md)
+FRICTION_CHUNK = 8192
+
 
 #: the variables only the Lagrange multipliers give (an independent solve: skipped when a caller
 #: such as a fit's trial needs none of them)
@@ -47,7 +52,7 @@ LAGRANGE_VARIABLES = frozenset({"input_force_lagrange", "link_force", "slider_fo
 
 
 def compute_forces(model: Model, motion: Motion, units: dict,
-                   constants: ForceConstants | None = None, chunk: int = FORCE_CHUNK,
+                   constants: ForceConstants | None = None, chunk: int | None = None,
                    lagrange: bool = True, cache: dict | None = None) -> Forces:
     """Compute every named effect and the input force of a solved sweep, in chunks of steps.
 
@@ -62,8 +67,14 @@ def compute_forces(model: Model, motion: Motion, units: dict,
     leaves out the multipliers and what they give (:data:`LAGRANGE_VARIABLES`); then a
     ``cache`` dict kept with one stage 1 across calls (a fit's trials) saves the influence
     coefficients and every effect whose scene inputs did not change (:func:`_effect_terms`).
+    ``chunk``: steps per chunk (default :data:`FORCE_CHUNK`, :data:`FRICTION_CHUNK` where pin
+    or slider friction is solved).
     """
     n_steps = motion.position.shape[0]
+    if chunk is None:
+        coupled = ("friction" in model.scene.effects and model.scene.friction
+                   and friction.Layout.of(model).coupled)
+        chunk = FRICTION_CHUNK if coupled else FORCE_CHUNK
     if cache is not None and constants is not None:
         raise ValueError("a cache keys effects by the scene's tables: not with constants")
     if n_steps <= chunk:
@@ -230,15 +241,21 @@ def _friction_term(ctx, influence, terms, layout, seal, solved, rates, Xz) -> No
     n_pairs, n_slides = len(layout.pairs), len(layout.slides)
     torque = np.zeros((ctx.n_steps, n_pairs)) if solved is None else solved[0]
     force = np.zeros((ctx.n_steps, n_slides)) if solved is None else solved[1]
-    if solved is not None:
+    work = terms["friction"][0]  # the seals' virtual work, put there with their loads
+    if solved is not None:  # plus the pins' couples' and the sliders' forces'
         more = friction.applied_of(ctx, layout, solved[2], force, Xz)
-        applied = Applied(applied.point_forces + more.point_forces, applied.couples + more.couples)
+        if layout.slides:
+            applied = Applied(applied.point_forces + more.point_forces,
+                              applied.couples + more.couples)
+            work = work + influence.generalized(more)
+        else:  # couples alone: no point forces to add or to take the work of
+            applied = Applied(applied.point_forces, applied.couples + more.couples)
+            work = work + influence.couples_work(more.couples)
     if rates is None:
         rates = friction.Rates(np.zeros((ctx.n_steps, n_pairs)), np.zeros((ctx.n_steps, n_slides)))
     names, labels = friction.variables(ctx, layout, seal_signed, ctx.motion.s_dot, rates,
                                        torque, force)
-    terms["friction"] = (influence.generalized(applied), names, labels,
-                         Effect(applied, bodies=bodies))
+    terms["friction"] = (work, names, labels, Effect(applied, bodies=bodies))
 
 
 def _lagrange_sides(model, ctx, terms, Xz):
@@ -283,12 +300,12 @@ class _Case:
     def plus(self, u: np.ndarray, cases: dict) -> "_Case":
         """This case plus ``u[:, k]`` (S,) times each of ``cases`` ({name: (K, S, ...)})."""
         out = {}
+        uT = np.ascontiguousarray(u.T)  # (K, S)
         for name in ("input_force", "input_force_lagrange", "lam", "pins", "ground"):
-            # summed with the step axis last (where the stacked cases keep it contiguous)
-            total = np.moveaxis(getattr(self, name), 0, -1).copy()
-            scratch = np.empty_like(total)  # each product into one buffer (no temporaries)
-            for k, part in enumerate(cases[name]):
-                total += np.multiply(u[:, k], np.moveaxis(part, 0, -1), out=scratch)
+            # the cases' sum in one pass over them, the step axis last (where the stacked
+            # cases keep it contiguous), laid out (..., K, S)
+            total = np.einsum("...ks,ks->...s", np.moveaxis(cases[name], (0, 1), (-2, -1)), uT)
+            total += np.moveaxis(getattr(self, name), 0, -1)
             out[name] = np.moveaxis(total, -1, 0)
         return _Case(**out, undetermined=self.undetermined, status=self.status, unit=self.unit,
                      ok=self.ok, q_minus_m_qdd=self.q_minus_m_qdd)
@@ -386,11 +403,13 @@ def _with_friction(model, ctx, motion, units, influence, terms, Xz, layout, seal
         resp = _unit_cases(model, ctx, motion, units, influence, layout, Xz, factors)
         if kept is not None:
             kept[0][key] = resp
+    # every force pin (row) first, the step axis last: the base case's (S, ...) arrays as
+    # views, the unit cases' (K, S, ...) views as the (row, ..., K, S) memory they are
     torque, force, couples, converged = friction.solve_magnitudes(
-        ctx, layout, rates, friction.pair_forces(layout, pin_index, base.pins),
-        friction.normal_forces(ctx, layout, base.lam, Xz),
-        friction.pair_forces(layout, pin_index, resp["pins"]),
-        friction.normal_forces(ctx, layout, resp["lam"], Xz), base.ok)
+        ctx, layout, rates, friction.pair_forces(layout, pin_index, np.moveaxis(base.pins, 0, -1)),
+        friction.normal_forces(ctx, layout, base.lam.T, Xz),
+        friction.pair_forces(layout, pin_index, np.moveaxis(resp["pins"], (0, 1), (2, 3))),
+        friction.normal_forces(ctx, layout, np.moveaxis(resp["lam"], 2, 0), Xz), base.ok)
     _friction_term(ctx, influence, terms, layout, seal, (torque, force, couples), rates, Xz)
     u = np.concatenate([couples, -force], axis=1)
     status = np.where(base.ok & ~converged, NOT_CONVERGED, OK).astype(np.int8)

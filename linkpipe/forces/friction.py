@@ -60,11 +60,17 @@ def seal_law(entry, v, scale):
     return level * smooth_sign(v, scale) + entry.viscous * v
 
 
-def link_angular_velocity(model: Model, X, V):
-    """(S, n_links) rad/s: each link's from its first two points' velocities."""
-    d = X[:, model.link_b] - X[:, model.link_a]
-    dv = V[:, model.link_b] - V[:, model.link_a]
-    return (d[..., 0] * dv[..., 1] - d[..., 1] * dv[..., 0]) / (d[..., 0] ** 2 + d[..., 1] ** 2)
+def link_angular_velocity(model: Model, X, V, links=None):
+    """(S, n_links) rad/s: each link's from its first two points' velocities (``links``: only
+    those link indices, in that order)."""
+    a, b = (model.link_a, model.link_b) if links is None else (model.link_a[list(links)],
+                                                               model.link_b[list(links)])
+    out = np.empty((X.shape[0], len(a)))
+    for j, (pa, pb) in enumerate(zip(a, b)):  # link by link on columns (no gathered copies)
+        dx, dy = X[:, pb, 0] - X[:, pa, 0], X[:, pb, 1] - X[:, pa, 1]
+        dvx, dvy = V[:, pb, 0] - V[:, pa, 0], V[:, pb, 1] - V[:, pa, 1]
+        out[:, j] = (dx * dvy - dy * dvx) / (dx * dx + dy * dy)
+    return out
 
 
 @dataclass(frozen=True)
@@ -206,37 +212,47 @@ class Rates:
 
     @classmethod
     def of(cls, ctx, layout: Layout, Xz) -> "Rates":
-        V = np.where(np.isfinite(ctx.velocity), ctx.velocity, 0.0)
-        w = link_angular_velocity(ctx.model, Xz, V)
+        """The rates at every step (0 where the velocities are not finite), of the links and
+        points friction acts on alone."""
+        V = ctx.velocity
+        w = link_angular_velocity(ctx.model, Xz, V, layout.links)  # (S, len(layout.links))
         w = np.where(np.isfinite(w), w, 0.0)
         w = np.concatenate([w, np.zeros((ctx.n_steps, 1))], axis=1)  # index -1: ground
-        pairs = np.stack([w[:, j] - w[:, i] for _, _, i, j in layout.pairs], axis=1) \
+        at = {li: k for k, li in enumerate(layout.links)}
+        at[-1] = -1
+        pairs = np.stack([w[:, at[j]] - w[:, at[i]] for _, _, i, j in layout.pairs], axis=1) \
             if layout.pairs else np.zeros((ctx.n_steps, 0))
         slides = np.zeros((ctx.n_steps, len(layout.slides)))
+        finite = lambda q: np.where(np.isfinite(V[:, q]), V[:, q], 0.0)  # noqa: E731
         for c, (_, _, p, d, _) in enumerate(layout.slides):
             t = guide_direction(ctx, layout, p, d, Xz)
-            rel = V[:, p] - (V[:, d] if d >= 0 else 0.0)
+            rel = finite(p) - (finite(d) if d >= 0 else 0.0)
             slides[:, c] = rel[:, 0] * t[:, 0] + rel[:, 1] * t[:, 1]
         return cls(pairs, slides)
 
 
 def pair_forces(layout: Layout, pin_index: dict, pins):
-    """(..., n_pairs, 2) the force between each pair's bodies from the pins' forces on bodies
-    ``pins`` (..., n_joints, 2): the moving body's where the other is ground, else half the
-    difference (second minus first)."""
+    """(n_pairs, 2, ...) the force between each pair's bodies from the pins' forces on bodies
+    ``pins`` (n_joints, 2, ...), pin first (the step axis last: each row one contiguous block
+    where the pins are laid out so): the moving body's where the other is ground, else half
+    the difference (second minus first)."""
     if not layout.pairs:
-        return np.zeros(pins.shape[:-2] + (0, 2))
-    second = [pin_index[(j, p)] for _, p, i, j in layout.pairs]
-    first = [pin_index[(i, p)] if i >= 0 else pin_index[(j, p)] for _, p, i, j in layout.pairs]
-    ground = np.array([i < 0 for _, _, i, _ in layout.pairs])[:, None]
-    fj, fi = pins[..., second, :], pins[..., first, :]
-    return np.where(ground, fj, 0.5 * (fj - fi))
+        return np.zeros((0,) + pins.shape[1:])
+    out = np.empty((len(layout.pairs),) + pins.shape[1:])
+    for c, (_, p, i, j) in enumerate(layout.pairs):  # row by row: no gathered temporaries
+        if i < 0:
+            out[c] = pins[pin_index[(j, p)]]
+        else:
+            np.subtract(pins[pin_index[(j, p)]], pins[pin_index[(i, p)]], out=out[c])
+            out[c] *= 0.5
+    return out
 
 
 def normal_forces(ctx, layout: Layout, lam, Xz):
-    """(..., n_slides, 2) each friction slider's normal force on its point: its row's
-    multiplier times that row's gradient there (``lam`` (..., S, n_rows))."""
-    out = []
+    """(n_slides, 2, ...) each friction slider's normal force on its point: its row's
+    multiplier times that row's gradient there (``lam`` (n_rows, ..., S), row first)."""
+    if not layout.slides:
+        return np.zeros((0, 2) + lam.shape[1:])
     model = ctx.model
     want = {(r, p) for _, _, p, _, r in layout.slides}
     grads = {}
@@ -244,21 +260,24 @@ def normal_forces(ctx, layout: Layout, lam, Xz):
         if (r, p) in want:
             g = grads.get((r, p), (0.0, 0.0))
             grads[(r, p)] = (g[0] + gx, g[1] + gy)
-    for _, _, p, _, r in layout.slides:
+    out = np.empty((len(layout.slides), 2) + lam.shape[1:])
+    for c, (_, _, p, _, r) in enumerate(layout.slides):
         gx, gy = grads[(r, p)]
-        out.append(np.stack([lam[..., r] * gx, lam[..., r] * gy], axis=-1))
-    return np.stack(out, axis=-2) if out else np.zeros(lam.shape[:-1] + (0, 2))
+        np.multiply(lam[r], gx, out=out[c, 0])
+        np.multiply(lam[r], gy, out=out[c, 1])
+    return out
 
 
 def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals, resp_pairs,
                      resp_normals, ok):
     """Iterate the pins' couples and the sliders' forces to ``[solver] tol`` at every step.
 
-    ``base_pairs`` (S, n_pairs, 2), ``base_normals`` (S, n_slides, 2): the forces without these
-    frictions; ``resp_*`` (n_unknowns, S, ..., 2): their change per unit of each unknown (link
-    couples, then slider forces). Returns (pair torques (S, n_pairs) and slider forces
-    (S, n_slides), signed: positive opposes a positive relative rate; link couples (S, n_links
-    of layout.links); converged (S,) bool)."""
+    ``base_pairs`` (n_pairs, 2, S), ``base_normals`` (n_slides, 2, S): the forces without these
+    frictions; ``resp_*`` (n_pairs or n_slides, 2, K, S): their change per unit of each of the
+    K unknowns (link couples, then slider forces); the step axis last throughout, so every
+    operation of a round is on contiguous rows of steps. Returns (pair torques (S, n_pairs)
+    and slider forces (S, n_slides), signed: positive opposes a positive relative rate; link
+    couples (S, n_links of layout.links); converged (S,) bool)."""
     model, scene = ctx.model, ctx.model.scene
     scale = velocity_scale(model, ctx.constants.size)
     n_links = len(layout.links)
@@ -281,49 +300,57 @@ def solve_magnitudes(ctx, layout: Layout, rates: Rates, base_pairs, base_normals
     C = np.zeros((m, n_links + n_slides))  # the unit loads' multiples u = x C, x = (torques,
     C[:n_pairs, :n_links] = A  # slider forces): link couples A^T torques, minus each force
     C[n_pairs:, n_links:] = -np.eye(n_slides)
-    resp = np.concatenate([resp_pairs.reshape(resp_pairs.shape[:2] + (-1,)),
-                           resp_normals.reshape(resp_normals.shape[:2] + (-1,))], axis=2)
-    R = np.ascontiguousarray(resp.transpose(1, 0, 2))  # (S, K, 2m): per unit of each load
-    g0 = np.concatenate([base_pairs.reshape(S, -1), base_normals.reshape(S, -1)], axis=1)
-    coef = np.concatenate([mu_r, mu_s])
-    sgn = np.concatenate([sgn_pair, sgn_slide], axis=1)
-    visc = np.concatenate([visc_pair, visc_slide], axis=1)
-    x = np.zeros((S, m))
+    CT = np.ascontiguousarray(C.T)
+    R = _joined(resp_pairs, resp_normals)  # (m, 2, K, S): per unit of each load
+    g0 = _joined(base_pairs, base_normals)  # (m, 2, S)
+    coef = np.concatenate([mu_r, mu_s])[:, None]
+    sgn = np.ascontiguousarray(np.concatenate([sgn_pair, sgn_slide], axis=1).T)  # (m, S)
+    visc = np.ascontiguousarray(np.concatenate([visc_pair, visc_slide], axis=1).T)
     tol = scene.solver.tol
+    x = np.zeros((m, S))
     work = np.flatnonzero(ok)  # the steps the working arrays hold (failed steps never)
-    Rw, gw, sw, vw = (a if len(work) == S else a[work] for a in (R, g0, sgn, visc))
-    live = np.arange(len(work))  # their rows still iterated: converged steps leave
-    for _ in range(scene.solver.max_iter + 1):
-        if not len(live):
+    Rw, gw, sw, vw = (a if len(work) == S else a[..., work] for a in (R, g0, sgn, visc))
+    sw = coef * sw  # the magnitudes' factors: mu r (mu) times the regularised sign
+    # the first round from x = 0, where G = g0 (no unit case contributes)
+    xw = _magnitude(gw.copy()) * sw + vw
+    for _ in range(scene.solver.max_iter):  # each later round tests convergence
+        if not len(work):
             break
-        at = slice(None) if len(live) == len(work) else live
-        steps = work[at]
-        xs = x if len(steps) == S else x[steps]  # every step live: no gather
-        G = gw[at] + np.einsum("sk,skd->sd", xs @ C, Rw[at])
-        new = coef * np.hypot(G[:, 0::2], G[:, 1::2]) * sw[at] + vw[at]
+        u = CT @ xw  # (K, n): the unit cases' multiples
+        G = np.einsum("cdks,ks->cds", Rw, u)  # their sum in one pass over the responses
+        G += gw
+        new = _magnitude(G)
+        new *= sw
+        new += vw
+        change = np.abs(np.subtract(new, xw, out=xw), out=xw)  # xw is replaced below
         with np.errstate(invalid="ignore"):
-            done = _row_max(np.abs(new - xs)) <= tol * _row_max(np.abs(new))
-        if len(steps) == S:
-            x = new
-        else:
-            x[steps] = new
-        live = np.arange(len(work))[at][~done]
-        if len(live) < 0.5 * len(work):  # compact the working arrays to the live steps
-            work, Rw, gw, sw, vw = work[live], Rw[live], gw[live], sw[live], vw[live]
-            live = np.arange(len(work))
+            done = (change.max(axis=0, initial=0.0)
+                    <= tol * np.abs(new).max(axis=0, initial=0.0))
+        xw = new
+        if done.any():  # converged steps leave the working arrays
+            x[:, work[done]] = xw[:, done]
+            live = ~done
+            work, Rw, gw, sw, vw, xw = (work[live], Rw[..., live], gw[..., live],
+                                        sw[:, live], vw[:, live], xw[:, live])
+    x[:, work] = xw  # not converged: the last round's values (the caller's status says so)
     converged = ok.copy()
-    converged[work[live]] = False
-    torque, force = x[:, :n_pairs], x[:, n_pairs:]
+    converged[work] = False
+    torque, force = x[:n_pairs].T, x[n_pairs:].T
     return torque, force, torque @ A, converged
 
 
-def _row_max(a):
-    """``a.max(axis=1, initial=0.0)`` of an (n, m) array with few columns, column by column
-    (the same values, NaN included; a reduction along a short axis pays per row)."""
-    out = np.zeros(a.shape[0])
-    for c in range(a.shape[1]):
-        np.maximum(out, a[:, c], out=out)
-    return out
+def _magnitude(G):
+    """(m, n) the length of each force ``G`` (m, 2, n), x then y: ``sqrt(x^2 + y^2)``, in
+    ``G``'s own memory (overwritten)."""
+    np.square(G, out=G)
+    out = G[:, 0]
+    out += G[:, 1]
+    return np.sqrt(out, out=out)
+
+
+def _joined(a, b):
+    """``a`` and ``b`` one after the other along the first axis (no copy where one is empty)."""
+    return a if not len(b) else b if not len(a) else np.concatenate([a, b])
 
 
 def _column(x):

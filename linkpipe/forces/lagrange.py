@@ -41,7 +41,7 @@ def multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = False, ro
                      if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
                 inverses = None
                 if factors is not None:
-                    inverses = factors[key] = E, eng.block_inverses(E)
+                    inverses = factors[key] = E, eng.block_inverses_steps_last(E)
                     inverses = inverses[1]
             rhs = list(np.ascontiguousarray(generalized_q[ii].T))
             lam[ii] = np.stack(eng.solve_transpose(E, rhs, inverses), axis=1)
@@ -65,7 +65,7 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
     if eng is None:
         return None
     K, n_steps = generalized_q.shape[:2]
-    lam = np.full((model.n_rows, K, n_steps), np.nan)  # as the block solve gives it; returned
+    lam = _nan_where_not(ok, (model.n_rows, K, n_steps))  # as the block solve gives it; returned
     # as a (K, S, n_rows) view (each row's cases contiguous: what stacked_reactions reads)
     factors = {} if factors is None else factors
     idx = np.flatnonzero(ok)
@@ -75,14 +75,15 @@ def stacked_multipliers(model: Model, Xz, s, generalized_q, ok, pivots: bool = F
         if key not in factors:
             E = (entries_at(eng, Xz[ii], s[ii], None if rows is None else rows.take(ii))
                  if pivots or rows is not None else eng.entries_of(Xz[ii], s[ii]))
-            factors[key] = E, eng.block_inverses(E)
+            factors[key] = E, eng.block_inverses_steps_last(E)
         E, inverses = factors[key]
         at = ii
         if len(ii) and ii[-1] - ii[0] + 1 == len(ii):  # contiguous: a view, not a gather
             at = slice(int(ii[0]), int(ii[-1]) + 1)
-        rhs = list(np.ascontiguousarray(generalized_q[:, at].transpose(2, 0, 1)))
+        rhs = list(generalized_q[:, at].transpose(2, 0, 1))  # (K, n) rows: views where the
+        # right-hand sides are laid out (n_q, K, S), as friction's unit cases are
         for r, y in enumerate(eng.solve_transpose(E, rhs, inverses)):
-            lam[r][:, ii] = y
+            lam[r][:, at] = y
     return np.moveaxis(lam, 0, 2)
 
 
@@ -100,8 +101,8 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
     K, S = lam.shape[:2]
     # filled in the chunks' own layout (slot, axis, case, step: each chunk's block contiguous)
     # and returned as (K, S, slot, 2) views of it
-    R_ = np.full((len(fixed), 2, K, S), np.nan)
-    F_ = np.full((len(pairs), 2, K, S), np.nan)
+    R_ = _nan_where_not(ok, (len(fixed), 2, K, S))
+    F_ = _nan_where_not(ok, (len(pairs), 2, K, S))
     relative = bool((model.drv_kind == eq.RELATIVE).any())
     idx = np.flatnonzero(ok)
     for lo in range(0, len(idx), CHUNK):
@@ -125,20 +126,31 @@ def stacked_reactions(model: Model, lam, point_forces, bodies: list, X, s, ok, r
                 for part in (extra.get(li, {}).get(p), case_bodies.get(li, {}).get(p)):
                     if part is not None:
                         Fc[slot, :, k] += (part if part.shape[0] == n else part[ii]).T
+        tx, ty = np.empty((K, n)), np.empty((K, n))  # each term's products, made once
         for r, p, gx, gy in model.jacobian_terms(Xc, sc, rows_c):
+            kf, kp = fixed_slot.get(p), pair_slot.get((row_link[r], p))
+            if kf is None and kp is None:
+                continue
             lr = lam_c[r]
-            k = fixed_slot.get(p)
-            if k is not None:
-                Rc[k, 0] += lr * gx
-                Rc[k, 1] += lr * gy
-            k = pair_slot.get((row_link[r], p))
-            if k is not None:
-                Fc[k, 0] += lr * gx
-                Fc[k, 1] += lr * gy
+            np.multiply(lr, gx, out=tx)
+            np.multiply(lr, gy, out=ty)
+            for out, k in ((Rc, kf), (Fc, kp)):
+                if k is not None:
+                    out[k, 0] += tx
+                    out[k, 1] += ty
         if not in_place:
             R_[..., ii] = Rc
             F_[..., ii] = Fc
     return np.moveaxis(R_, (0, 1), (2, 3)), np.moveaxis(F_, (0, 1), (2, 3))
+
+
+def _nan_where_not(ok, shape) -> np.ndarray:
+    """An array of ``shape`` (..., S) that is NaN at the steps not ``ok`` (S,) and left for the
+    caller to fill at every ok step (no pass over the ok steps' memory before they are written)."""
+    out = np.empty(shape)
+    if not ok.all():
+        out[..., ~ok] = np.nan
+    return out
 
 
 def undetermined_rows(J: np.ndarray, tol: float = 1e-8) -> np.ndarray:

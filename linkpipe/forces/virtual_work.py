@@ -41,7 +41,11 @@ class Influence:
     def generalized(self, applied) -> np.ndarray:
         """(S, n_drivers) the work of ``applied`` loads per unit driver value: Q . dq/ds."""
         return (np.einsum("spj,spjd->sd", applied.point_forces, self.points)
-                + np.einsum("sl,sld->sd", applied.couples, self.link_angles))
+                + self.couples_work(applied.couples))
+
+    def couples_work(self, couples) -> np.ndarray:
+        """(S, n_drivers) the work of link couples ``couples`` (S, n_links) alone."""
+        return np.einsum("sl,sld->sd", couples, self.link_angles)
 
 
 def along_input_directions(model: Model, influence: Influence, forces: list, status, units: dict,

@@ -330,6 +330,27 @@ class Engine:
                     out[i] = np.full_like(M, np.nan)
         return out
 
+    def block_inverses_steps_last(self, E: np.ndarray) -> dict:
+        """:meth:`block_inverses` by Gauss-Jordan elimination with partial pivoting, vectorised
+        over the steps (each block read from the entries' contiguous rows: no per-step LAPACK
+        call), returned as (S, k, k) views of (k, k, S) memory, so that a solve reads each
+        entry over the steps as one row. A singular step is NaN or inf alone (not its whole
+        chunk). For the force stage's several right-hand sides with one E (friction's load
+        cases); stage 1 keeps :meth:`block_inverses` (its condition estimates' thresholds)."""
+        out = {}
+        for i, (_, cols, inner, _) in enumerate(self.blocks):
+            k = len(cols)
+            if k > 2:
+                A = np.zeros((k, 2 * k, E.shape[1]))
+                for r in range(k):
+                    A[r, k + r] = 1.0
+                    for c in range(k):
+                        if inner[r][c] >= 0:
+                            A[r, c] = E[inner[r][c]]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    out[i] = _gauss_jordan(A).transpose(2, 0, 1)
+        return out
+
     def _solve(self, E, b, inverses: dict):
         x = [None] * self.model.n_q
         for i, (rows, cols, inner, outer) in enumerate(self.blocks):
@@ -374,11 +395,15 @@ class Engine:
                 rows, cols, inner, _ = self.blocks[i]
                 rhs = []
                 for c in cols:
-                    acc = b[c]
+                    acc, tmp = b[c], None
                     for e in self.col_entries[c]:
                         r = int(self.rows[e])
-                        if r not in rows:
-                            acc = acc - E[e] * y[r]
+                        if r not in rows:  # b - E y - ...: in place after the first
+                            if tmp is None:
+                                acc = acc - E[e] * y[r]
+                                tmp = np.empty_like(acc)
+                            else:
+                                acc -= np.multiply(E[e], y[r], out=tmp)
                     rhs.append(acc)
                 k = len(cols)
                 if k == 1:
@@ -386,10 +411,14 @@ class Engine:
                 elif k == 2:  # the block transposed: [[a, c], [b, d]]
                     a, b_, c, d = _block2(E, inner)
                     y[rows[0]], y[rows[1]] = _cramer2(a, c, b_, d, *rhs)
-                elif i in inverses:  # (M^T)^-1 = (M^-1)^T
+                elif i in inverses:  # (M^T)^-1 = (M^-1)^T, summed in place in its order
                     inv = inverses[i]
+                    shape = np.broadcast_shapes(*(np.shape(x) for x in rhs), inv.shape[:1])
+                    tmp = np.empty(shape)
                     for a, r in enumerate(rows):
-                        y[r] = sum(inv[:, j, a] * rhs[j] for j in range(k))
+                        y[r] = np.multiply(inv[:, 0, a], rhs[0], out=np.empty(shape))
+                        for j in range(1, k):
+                            y[r] += np.multiply(inv[:, j, a], rhs[j], out=tmp)
                 else:
                     S = E.shape[1]
                     M = _dense_block(E, inner).transpose(0, 2, 1)
@@ -480,6 +509,26 @@ class Engine:
         out = np.empty_like(sums)
         out[order] = sums
         return out
+
+
+def _gauss_jordan(W: np.ndarray) -> np.ndarray:
+    """The inverses (k, k, S) of k x k matrices given as ``W`` = [A | I] (k, 2k, S), by
+    Gauss-Jordan elimination with partial pivoting at every step at once (``W`` is overwritten)."""
+    k = W.shape[0]
+    for j in range(k):
+        if j < k - 1:  # the largest pivot candidate of column j, swapped into row j
+            p = j + np.argmax(np.abs(W[j:, j]), axis=0)
+            for i in range(j + 1, k):
+                m = p == i
+                if m.any():
+                    row = W[j].copy()
+                    np.copyto(W[j], W[i], where=m)
+                    np.copyto(W[i], row, where=m)
+        W[j] *= 1.0 / W[j, j]
+        for i in range(k):
+            if i != j:
+                W[i] -= W[i, j].copy() * W[j]
+    return W[:, k:]
 
 
 def _cramer2(a, b, c, d, r0, r1):
