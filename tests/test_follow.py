@@ -199,6 +199,32 @@ def test_follow_resumes_after_a_clean_end_and_the_rows_stored_then_keep_their_va
             assert dv[0].max() < TOL   # and 24 rows before, not measurably
 
 
+def test_a_resume_onto_a_log_of_another_run_is_one_message_and_keeps_the_rows(rig, tmp_path):
+    """The rig restarted with other noise (another seed) writes a log whose time stamps match
+    the stored rows' but whose values do not: following it again is one message, exit 1, the
+    stored rows and their file untouched; the same run logged again (the same seed: the same
+    bytes) is the same log and is followed on."""
+    scene, log, out = rig
+    assert _logger(log, "--rate", 1000, "--seconds", 1, "--fast").wait(30) == 0
+    assert _follow(scene, out, "--idle", 0.5).wait(60) == 0
+    h5 = out / "fourbar_live.h5"
+    before = h5.read_bytes()
+    assert _logger(log, "--rate", 1000, "--seconds", 2, "--fast", "--seed", 11).wait(30) == 0
+    again = _follow(scene, out, "--idle", 0.5)
+    stdout, stderr = again.communicate(timeout=60)
+    assert again.returncode == 1, stderr
+    said = stdout + stderr
+    assert "its first row is not the one" in said and "the log was replaced" in said
+    assert "Traceback" not in said and h5.read_bytes() == before
+    assert _logger(log, "--rate", 1000, "--seconds", 2, "--fast").wait(30) == 0  # seed 3 again
+    same = _follow(scene, out, "--idle", 0.5)
+    stdout, stderr = same.communicate(timeout=60)
+    assert same.returncode == 0, stderr
+    assert "after its 1,000 stored rows" in stdout
+    with h5py.File(h5, "r") as f:
+        assert f["step"].shape == (2000,) and f.attrs["complete"] == 1
+
+
 # ------------------------------------------------------------------------------- faults
 HEADER = "t,crank_deg,rocker_deg,p_height_mm\n"
 

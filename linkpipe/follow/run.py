@@ -276,6 +276,14 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
                                                     for c in first.columns}, more.fault)
     if len(first) < 2:
         raise first.fault
+    first_row = {"t": float(first.t[0]),
+                 "columns": {c: float(v[0]) for c, v in first.columns.items()}}
+    if before is not None and before.rows and before.first_row is not None \
+            and not _same_row(before.first_row, first_row):
+        raise LogFault(f"{log}: its first row is not the one {path} was made from (t = "
+                       f"{first_row['t']!r} s against {before.first_row['t']!r} s, or other "
+                       "values): the log was replaced; the stored rows are kept (move the .h5 "
+                       "away to follow the new log)")
     template = solve(window_scene(scene, first.t[:2], {c: v[:2] for c, v in first.columns.items()}))
     recording = None
     if serve or connect or rrd:  # first: a port in use is said before any file is made
@@ -289,7 +297,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         if serve:
             say(f"serving the recording: rerun {recording.address}")
     try:
-        writer = GrowingWriter(path, template, before)
+        writer = GrowingWriter(path, template, before, first_row)
     except BaseException:
         if recording is not None:
             recording.close()
@@ -368,6 +376,16 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
     if fault is not None:
         outcome.why, outcome.code = str(fault), 1
     return outcome
+
+
+def _same_row(a: dict, b: dict) -> bool:
+    """Two first rows ({"t", "columns"}) read alike: every number equal, NaN (a missing value)
+    where the other is NaN."""
+    def same(x, y):
+        return x == y or (x != x and y != y)
+
+    return (same(a["t"], b["t"]) and a["columns"].keys() == b["columns"].keys()
+            and all(same(v, b["columns"][c]) for c, v in a["columns"].items()))
 
 
 def _check_resume(window: Window, before, log) -> None:

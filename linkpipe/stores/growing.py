@@ -16,6 +16,7 @@ its stored rows into a new file and goes on.
 """
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass, replace
@@ -53,6 +54,9 @@ class Stored:
     scene_toml: str
     flags: dict
     followed: bool = True
+    #: the log's first row as it was read when the file was made ({"t": seconds, "columns":
+    #: {name: value}}; None in a file without it): a log replaced by another with other rows
+    first_row: dict | None = None
 
 
 def stored(path) -> Stored | None:
@@ -77,9 +81,12 @@ def stored(path) -> Stored | None:
                 from .hdf5 import dimensions
 
                 flags[name] = (dimensions(ds), ds[()], ds.attrs.get("units", ""))
+        first = f.attrs.get("follow_first_row")
+        first = json.loads(first.decode() if isinstance(first, bytes) else first) \
+            if first is not None else None
         return Stored(n, t, ang, bool(f.attrs.get("complete", 1)), killed,
                       toml.decode() if isinstance(toml, bytes) else str(toml), flags,
-                      "complete" in f.attrs)
+                      "complete" in f.attrs, first)
 
 
 class GrowingWriter:
@@ -90,9 +97,13 @@ class GrowingWriter:
 
     stage = "hdf5"
 
-    def __init__(self, path, template: Result, resume: Stored | None = None):
+    def __init__(self, path, template: Result, resume: Stored | None = None,
+                 first_row: dict | None = None):
         self.path = Path(path)
         self.resume = resume
+        # the log's first row, kept in the file (a resumed file keeps its own)
+        self.first_row = (resume.first_row if resume is not None and resume.first_row
+                          else first_row)
         self.rows = resume.rows if resume else 0
         self.flags: dict = dict(resume.flags) if resume else {}
         self._file: h5py.File | None = None
@@ -136,6 +147,8 @@ class GrowingWriter:
         for key, value in root_attributes(part).items():
             _set_attr(f.attrs, key, value)
         f.attrs["complete"] = np.int8(0)
+        if self.first_row is not None:  # exact: json writes each float's shortest repr
+            f.attrs["follow_first_row"] = json.dumps(self.first_row)
         return f
 
     def _open(self, part: Result) -> None:
