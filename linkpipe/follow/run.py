@@ -40,7 +40,7 @@ MID_LINE_NOTICE = 5.0
 @dataclass
 class Outcome:
     """How a follow ended: ``rows`` stored in all, ``new`` this time, ``why`` it ended,
-    ``alarms`` per measurement, ``code`` the exit status."""
+    ``alarms`` per measurement, ``code`` the exit status, ``address`` the viewer's."""
 
     path: pathlib.Path
     rows: int = 0
@@ -49,6 +49,8 @@ class Outcome:
     alarms: dict = field(default_factory=dict)
     code: int = 0
     address: str | None = None
+    #: CPU seconds of the recording's own process (NaN without a viewer or .rrd; benchmarks)
+    recording_cpu: float = float("nan")
 
 
 def _log_entry(scene_path: str, data: dict) -> tuple[int, dict]:
@@ -363,6 +365,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         finally:
             if recording is not None:
                 recording.close()
+                outcome.recording_cpu = recording.cpu_seconds
     reports.end()
     outcome.rows, outcome.alarms = writer.rows, reports.alarms
     if fault is not None:

@@ -1,15 +1,25 @@
 """A recording that grows while ``follow`` runs: each block's rows logged as they are stored,
-to a gRPC server in this process that keeps the history for viewers that connect late
-(``--serve``, Rerun's ``serve_grpc``: its ``server_memory_limit`` bounds what it keeps, the
-oldest rows dropped first, static data never) or to a running viewer (``--connect ADDR``).
-Alarms and reports go to the ``alarms`` entity (a ``TextLog`` the viewer lists with its time
-and level)."""
+to a gRPC server that keeps the history for viewers that connect late (``--serve``, Rerun's
+``serve_grpc``: its ``server_memory_limit`` bounds what it keeps, the oldest rows dropped
+first, static data never) or to a running viewer (``--connect ADDR``). Alarms and reports go
+to the ``alarms`` entity (a ``TextLog`` the viewer lists with its time and level).
+
+The recording is made in a process of its own (:class:`LiveRecording` starts it; the stream,
+its sinks and the gRPC server live there, :class:`BlockLogger`): logging a block (building
+its archetypes, ~24 ``send_columns``, the flush) costs about as much CPU as solving it, and
+on a thread of follow's process it held the interpreter while the next block solved. The
+blocks go to it pickled through a pipe; it says when each one is with the sinks."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import multiprocessing
 import queue
+import signal
 import socket
 import threading
+import time
+import traceback
 import uuid
 
 from dataclasses import replace
@@ -24,29 +34,28 @@ from .layout import blueprint
 
 #: what the server keeps for late viewers by default (the oldest rows go first past it)
 SERVER_MEMORY = "512MiB"
-#: what ends the logging thread
+#: what ends the sending thread
 _END = object()
 #: the entity of alarms, no_input / no_assembly stretches and the source's faults
 ALARMS = "alarms"
+#: seconds the recording's process may take to start (import rerun, open its sinks)
+START_SECONDS = 120.0
 
 
-class LiveRecording:
-    """``serve``: start a gRPC server (``port``, default 9876; its address in
-    :attr:`address`); ``connect``: stream to a running viewer at that address; ``file``: also
-    write the recording to that ``.rrd`` as it grows (not bounded: the file keeps every row).
-    ``template``: a Result of the scene (the layout of the views)."""
+class BlockLogger:
+    """The stream of one followed recording, in the process that owns it: ``serve``: a gRPC
+    server (``port``, default 9876; its address in :attr:`address`); ``connect``: a running
+    viewer at that address; ``file``: also the ``.rrd`` as it grows (not bounded: the file
+    keeps every row). ``template``: a Result of the scene (the layout of the views)."""
 
     def __init__(self, template, serve: bool = False, connect: str | None = None,
-                 port: int | None = None, memory: str = SERVER_MEMORY, file=None,
-                 on_sent=None):
+                 port: int | None = None, memory: str = SERVER_MEMORY, file=None):
         name = template.scene.name
-        self.on_sent = on_sent  # on_sent(part): a block's rows are with the sinks (benchmarks)
         self.stream = rr.RecordingStream(APPLICATION_ID,
                                          recording_id=f"{name}-follow-{uuid.uuid4().hex}")
         self.address = None
         sinks = []
         if serve:
-            _check_port(port or 9876)
             server = rr.GrpcServerSink(port=port or 9876, server_memory_limit=memory)
             self.address = server.uri.replace("0.0.0.0", "127.0.0.1")
             sinks.append(server)
@@ -59,60 +68,16 @@ class LiveRecording:
         self.stream.send_recording_name(name)
         # what each block logs, with its static entities (styles, legends, series' names and
         # colours, ...) sent again only when their content changed since the last block
-        self._static = _UnchangedStaticSkipped(self.stream)
-        # the blocks are logged on a thread of their own while the next block solves (a
-        # bounded queue: a viewer slower than the log holds the solver back, never memory)
-        self._queue: queue.Queue = queue.Queue(maxsize=16)
-        self._failed: BaseException | None = None
-        self._thread = threading.Thread(target=self._work, name="linkpipe-live-rrd", daemon=True)
-        self._thread.start()
+        self.static = _UnchangedStaticSkipped(self.stream)
 
-    def add(self, part) -> None:
-        """Log the rows of one stored block (every entity ``run``'s recording has)."""
-        self._put((self._block, (part,)))
+    def block(self, part) -> None:
+        """Log the rows of one stored block (every entity ``run``'s recording has) and wait
+        until they are with the sinks."""
+        log_result(self.static, part)
+        self.stream.flush()
 
     def note(self, step: int, time: float | None, text: str, level: str = "WARN") -> None:
         """One line in the ``alarms`` entity at ``step`` (and ``time``)."""
-        self._put((self._note, (step, time, text, level)))
-
-    def _put(self, item) -> None:
-        if self._failed is not None:
-            raise self._failed
-        self._queue.put(item)
-
-    def _work(self) -> None:
-        """Log what comes, in order; blocks waiting one after another go out as one (a
-        block's logging costs mostly per call: a viewer behind catches up)."""
-        pending = None
-        while True:
-            item, pending = (pending if pending is not None else self._queue.get()), None
-            if item is _END:
-                return
-            if item[0] == self._block:
-                parts = [item[1][0]]
-                while pending is None:
-                    try:
-                        following = self._queue.get_nowait()
-                    except queue.Empty:
-                        break
-                    if following is not _END and following[0] == self._block:
-                        parts.append(following[1][0])
-                    else:
-                        pending = following  # a note, or the end: after these blocks
-                item = (self._block, (_joined(parts),))
-            if self._failed is None:
-                try:
-                    item[0](*item[1])
-                except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
-                    self._failed = exc
-
-    def _block(self, part) -> None:
-        log_result(self._static, part)
-        self.stream.flush()
-        if self.on_sent is not None:
-            self.on_sent(part)
-
-    def _note(self, step: int, time: float | None, text: str, level: str) -> None:
         self.stream.set_time("step", sequence=int(step))
         if time is not None and np.isfinite(time):
             self.stream.set_time("time", duration=np.timedelta64(int(round(time * 1e9)), "ns"))
@@ -121,10 +86,190 @@ class LiveRecording:
 
     def close(self) -> None:
         """Flush every row to the sinks and end them (the server with them)."""
-        self._queue.put(_END)
-        self._thread.join()
         self.stream.flush()
         self.stream.disconnect()
+
+
+class LiveRecording:
+    """A :class:`BlockLogger` in a process of its own (the same arguments), fed the blocks
+    stored: :meth:`add` and :meth:`note` return at once (a thread pickles each block into a
+    pipe; a bounded queue: a recording slower than the log holds the solver back, never the
+    memory); blocks waiting in the pipe go out as one (a block's logging costs mostly per
+    call: a viewer behind catches up). ``on_sent(part)``: called with each block once the
+    recording's process has flushed it to the sinks (benchmarks). The process ignores Ctrl-C
+    and SIGTERM (follow ends it, after the last rows) and ends by itself when follow's process
+    is gone. A failure there is raised here, at the next :meth:`add` or :meth:`note`."""
+
+    def __init__(self, template, serve: bool = False, connect: str | None = None,
+                 port: int | None = None, memory: str = SERVER_MEMORY, file=None,
+                 on_sent=None):
+        if serve:
+            _check_port(port or 9876)
+        self.on_sent = on_sent
+        context = multiprocessing.get_context("spawn")  # not fork: this process has threads
+        self._inbox, theirs_out = context.Pipe(duplex=False)   # the recording's process -> here
+        theirs_in, self._outbox = context.Pipe(duplex=False)   # here -> the recording's process
+        self._process = context.Process(
+            target=_record, name="linkpipe-live-rrd", daemon=True,
+            args=(theirs_in, theirs_out, template, serve, connect, port, memory,
+                  None if file is None else str(file)))
+        with _signals_ignored():  # inherited: follow's signal handling ends the process
+            self._process.start()
+        theirs_in.close()
+        theirs_out.close()
+        self._failed: BaseException | None = None
+        message = self._inbox.recv() if self._inbox.poll(START_SECONDS) else ("failed", (
+            f"the recording's process did not start in {START_SECONDS:g} s"))
+        if message[0] != "ready":
+            self._process.join(5)
+            raise LinkpipeError(message[1])
+        self.address = message[1]
+        #: the CPU seconds the recording's process used (set by :meth:`close`)
+        self.cpu_seconds = float("nan")
+        self._sent: dict[int, Result] = {}  # blocks sent, waiting for their flush (on_sent)
+        self._count = 0
+        self._queue: queue.Queue = queue.Queue(maxsize=16)
+        self._sender = threading.Thread(target=self._send, name="linkpipe-live-send", daemon=True)
+        self._receiver = threading.Thread(target=self._receive, name="linkpipe-live-receive",
+                                          daemon=True)
+        self._sender.start()
+        self._receiver.start()
+
+    def add(self, part) -> None:
+        """Log the rows of one stored block (every entity ``run``'s recording has)."""
+        self._put(("block", part))
+
+    def note(self, step: int, time: float | None, text: str, level: str = "WARN") -> None:
+        """One line in the ``alarms`` entity at ``step`` (and ``time``)."""
+        self._put(("note", int(step), None if time is None else float(time), text, level))
+
+    def _put(self, item) -> None:
+        if self._failed is not None:
+            raise self._failed
+        self._queue.put(item)
+
+    def _send(self) -> None:
+        """Pickle what comes into the pipe, in order, until the end."""
+        while True:
+            item = self._queue.get()
+            if item is _END:
+                message = ("end",)
+            elif item[0] == "block":
+                self._count += 1
+                if self.on_sent is not None:
+                    self._sent[self._count] = item[1]
+                message = ("block", self._count, item[1])
+            else:
+                message = item
+            if self._failed is None or item is _END:  # the end goes out after a failure too
+                try:
+                    self._outbox.send(message)
+                except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
+                    self._failed = self._failed or LinkpipeError(
+                        f"the recording's process is gone ({exc!r})")
+            if item is _END:
+                return
+
+    def _receive(self) -> None:
+        """What the recording's process says: blocks flushed, a failure, the end."""
+        while True:
+            try:
+                message = self._inbox.recv()
+            except (EOFError, OSError):
+                if self._failed is None:
+                    self._failed = LinkpipeError("the recording's process ended unexpectedly "
+                                                 f"(exit code {self._process.exitcode})")
+                return
+            if message[0] == "sent":
+                for k in message[1]:
+                    part = self._sent.pop(k, None)
+                    if part is not None:
+                        self.on_sent(part)
+            elif message[0] == "failed":
+                self._failed = LinkpipeError(message[1])
+            elif message[0] == "closed":
+                self.cpu_seconds = message[1]
+                return
+
+    def close(self) -> None:
+        """Flush every row to the sinks and end them (the server with them), and the
+        recording's process."""
+        self._queue.put(_END)
+        self._sender.join()
+        self._receiver.join()
+        self._process.join()
+        self._inbox.close()
+        self._outbox.close()
+
+
+def _record(inbox, outbox, template, serve, connect, port, memory, file) -> None:
+    """The recording's process: a :class:`BlockLogger` fed from ``inbox`` (``("block", k,
+    part)``, ``("note", step, time, text, level)``, ``("end",)``), saying on ``outbox`` when
+    it is ready (its address), each block flushed (``("sent", [k, ...])``), a failure, and
+    ``("closed", its CPU seconds)`` once every row is with the sinks."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)
+    try:
+        logger = BlockLogger(template, serve, connect, port, memory, file)
+    except BaseException as exc:  # noqa: BLE001 (said in follow's process)
+        outbox.send(("failed", f"the recording could not start: {exc}"))
+        return
+    outbox.send(("ready", logger.address))
+    failed, waiting = False, None
+    while True:
+        try:
+            message, waiting = waiting or inbox.recv(), None
+        except (EOFError, OSError):  # follow's process is gone: end the recording cleanly
+            message = ("end",)
+        if message[0] == "end":
+            break
+        if failed:
+            continue
+        try:
+            if message[0] == "block":
+                numbers, parts = [message[1]], [message[2]]
+                while waiting is None and inbox.poll(0):  # blocks waiting go out as one
+                    following = inbox.recv()
+                    if following[0] == "block":
+                        numbers.append(following[1])
+                        parts.append(following[2])
+                    else:
+                        waiting = following  # a note, or the end: after these blocks
+                logger.block(_joined(parts))
+                outbox.send(("sent", numbers))
+            else:
+                logger.note(*message[1:])
+        except (EOFError, OSError):
+            waiting = ("end",)
+        except BaseException as exc:  # noqa: BLE001 (said in follow's process)
+            failed = True
+            where = traceback.extract_tb(exc.__traceback__)[-1]
+            try:
+                outbox.send(("failed", f"logging to the recording failed: {exc!r} (in "
+                             f"{where.filename}, line {where.lineno})"))
+            except OSError:
+                pass
+    try:
+        logger.close()
+    finally:
+        try:
+            outbox.send(("closed", time.process_time()))
+        except OSError:
+            pass
+
+
+@contextlib.contextmanager
+def _signals_ignored():
+    """Ctrl-C and SIGTERM ignored while a child process starts (it inherits that), where this
+    is the main thread (elsewhere signals are not this thread's to set)."""
+    saved = {}
+    if threading.current_thread() is threading.main_thread():
+        saved = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in saved.items():
+            signal.signal(signum, handler)
 
 
 class _UnchangedStaticSkipped:
