@@ -282,6 +282,7 @@ class _UnchangedStaticSkipped:
     def __init__(self, stream: rr.RecordingStream):
         self._stream = stream
         self._sent: dict[tuple, bytes] = {}  # (path, components) -> digest of their data
+        self._last: dict[str, object] = {}  # path -> the archetype object last sent there
         self.logged = self.skipped = 0
 
     def __getattr__(self, name):
@@ -291,6 +292,9 @@ class _UnchangedStaticSkipped:
         if not static or extra or kwargs or not hasattr(archetype, "as_component_batches"):
             self._stream.log(entity, archetype, *extra, static=static, **kwargs)
             return
+        if self._last.get(str(entity)) is archetype:  # the very object sent there last
+            self.skipped += 1  # (a style built once, series.series_style): nothing to encode
+            return
         batches = archetype.as_component_batches()
         key = (str(entity), tuple(str(b.component_descriptor()) for b in batches))
         digest = _digest(batches)
@@ -299,6 +303,7 @@ class _UnchangedStaticSkipped:
             return
         self._stream.log(entity, archetype, static=True)
         self._sent[key] = digest
+        self._last[str(entity)] = archetype
         self.logged += 1
 
 
