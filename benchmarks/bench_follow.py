@@ -86,8 +86,10 @@ def latency(seconds: float, port: int) -> bool:
         at = {"h5": {}, "viewer": {}}  # step -> wall time its block was in the .h5 / sent
         blocks = {"h5": 0, "viewer": 0}
 
-        def on_block(part, where):
-            now = time.time()
+        def on_block(part, where, when=None):
+            # when: the recording's process had flushed the block (time.time() there, the
+            # clock of the logger's stamps); else now, in this process
+            now = time.time() if when is None else when
             at[where].update(dict.fromkeys(part.step_numbers.tolist(), now))
             blocks[where] += 1
 

@@ -383,6 +383,16 @@ def test_a_port_in_use_is_one_message_before_any_file(rig, capsys):
     assert not list(out.glob("*.h5"))
 
 
+def test_a_connect_address_rerun_cannot_take_is_one_message_before_any_file(rig, capsys):
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
+    assert main(["follow", str(scene), "--out", str(out), "--connect", "127.0.0.1:9876",
+                 "--idle", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "--connect 127.0.0.1:9876: invalid endpoint" in err and "Traceback" not in err
+    assert not list(out.glob("*.h5"))
+
+
 def test_a_window_resumed_after_stored_rows_takes_the_rows_in_any_pieces(rig):
     """Resuming after 700 stored rows, the log read in pieces of 37 rows (fewer than the rows
     stored): the blocks are the batch's rows 700.. (the window keeps the settling rows before

@@ -226,8 +226,9 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
            on_block=None, rrd: bool = False) -> Outcome:
     """Follow ``scene_path``'s ``[time]`` log into ``out/<name>.h5`` until ``idle`` seconds
     pass without a new row, ``stop`` is set, or the source fails; return the :class:`Outcome`.
-    ``on_block(part, where)``: called when a block's rows are in the .h5 (``where`` "h5") and
-    when they are with the viewer's sinks ("viewer"; benchmarks); ``rrd``: also write
+    ``on_block(part, where[, at])``: called when a block's rows are in the .h5 (``where``
+    "h5", now) and when they are with the viewer's sinks ("viewer", ``at`` the wall time the
+    recording's process flushed them; benchmarks); ``rrd``: also write
     ``out/<name>.rrd`` as it grows."""
     from ..stores import output_folder
 
@@ -286,7 +287,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY,
                                   path.with_suffix(".rrd") if rrd else None,
                                   None if on_block is None else
-                                  (lambda part: on_block(part, "viewer")))
+                                  (lambda part, at: on_block(part, "viewer", at)))
         outcome.address = recording.address
         if serve:
             say(f"serving the recording: rerun {recording.address}")

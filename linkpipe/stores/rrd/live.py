@@ -38,8 +38,6 @@ SERVER_MEMORY = "512MiB"
 _END = object()
 #: the entity of alarms, no_input / no_assembly stretches and the source's faults
 ALARMS = "alarms"
-#: seconds the recording's process may take to start (import rerun, open its sinks)
-START_SECONDS = 120.0
 
 
 class BlockLogger:
@@ -95,8 +93,9 @@ class LiveRecording:
     stored: :meth:`add` and :meth:`note` return at once (a thread pickles each block into a
     pipe; a bounded queue: a recording slower than the log holds the solver back, never the
     memory); blocks waiting in the pipe go out as one (a block's logging costs mostly per
-    call: a viewer behind catches up). ``on_sent(part)``: called with each block once the
-    recording's process has flushed it to the sinks (benchmarks). The process ignores Ctrl-C
+    call: a viewer behind catches up). ``on_sent(part, at)``: called with each block once the
+    recording's process has flushed it to the sinks, ``at`` the wall time (``time.time()``)
+    the flush returned there (benchmarks). The process ignores Ctrl-C
     and SIGTERM (follow ends it, after the last rows) and ends by itself when follow's process
     is gone. A failure there is raised here, at the next :meth:`add` or :meth:`note`."""
 
@@ -105,6 +104,8 @@ class LiveRecording:
                  on_sent=None):
         if serve:
             _check_port(port or 9876)
+        elif connect:
+            _check_address(connect)
         self.on_sent = on_sent
         context = multiprocessing.get_context("spawn")  # not fork: this process has threads
         self._inbox, theirs_out = context.Pipe(duplex=False)   # the recording's process -> here
@@ -118,12 +119,10 @@ class LiveRecording:
         theirs_in.close()
         theirs_out.close()
         self._failed: BaseException | None = None
-        message = self._inbox.recv() if self._inbox.poll(START_SECONDS) else ("failed", (
-            f"the recording's process did not start in {START_SECONDS:g} s"))
-        if message[0] != "ready":
-            self._process.join(5)
-            raise LinkpipeError(message[1])
-        self.address = message[1]
+        # not waited for: the process starts (imports rerun, opens its sinks) while follow
+        # solves its first block; it says "ready" with the address it serves or connects to
+        self.address = (f"rerun+http://127.0.0.1:{port or 9876}/proxy" if serve else
+                        connect or None)
         #: the CPU seconds the recording's process used (set by :meth:`close`)
         self.cpu_seconds = float("nan")
         self._sent: dict[int, Result] = {}  # blocks sent, waiting for their flush (on_sent)
@@ -183,8 +182,13 @@ class LiveRecording:
             if message[0] == "sent":
                 for k in message[1]:
                     part = self._sent.pop(k, None)
-                    if part is not None:
-                        self.on_sent(part)
+                    try:
+                        if part is not None:
+                            self.on_sent(part, message[2])
+                    except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
+                        self._failed = self._failed or exc
+            elif message[0] == "ready":
+                self.address = message[1] or self.address
             elif message[0] == "failed":
                 self._failed = LinkpipeError(message[1])
             elif message[0] == "closed":
@@ -205,7 +209,8 @@ class LiveRecording:
 def _record(inbox, outbox, template, serve, connect, port, memory, file) -> None:
     """The recording's process: a :class:`BlockLogger` fed from ``inbox`` (``("block", k,
     part)``, ``("note", step, time, text, level)``, ``("end",)``), saying on ``outbox`` when
-    it is ready (its address), each block flushed (``("sent", [k, ...])``), a failure, and
+    it is ready (its address), each block flushed (``("sent", [k, ...], the wall time)``), a
+    failure, and
     ``("closed", its CPU seconds)`` once every row is with the sinks."""
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, signal.SIG_IGN)
@@ -236,7 +241,7 @@ def _record(inbox, outbox, template, serve, connect, port, memory, file) -> None
                     else:
                         waiting = following  # a note, or the end: after these blocks
                 logger.block(_joined(parts))
-                outbox.send(("sent", numbers))
+                outbox.send(("sent", numbers, time.time()))
             else:
                 logger.note(*message[1:])
         except (EOFError, OSError):
@@ -332,6 +337,15 @@ def _check_port(port: int) -> None:
         except OSError:
             raise LinkpipeError(f"--serve: port {port} is in use (another viewer or server "
                                 "listens there); give --port another one") from None
+
+
+def _check_address(address: str) -> None:
+    """One message (exit 2) where ``address`` is not a viewer's address Rerun can take."""
+    try:
+        rr.GrpcSink(address)  # parses it (connects only once set as a stream's sink)
+    except (RuntimeError, ValueError) as exc:
+        raise LinkpipeError(f"--connect {address}: {exc}; a viewer listens on "
+                            "rerun+http://HOST:PORT/proxy") from None
 
 
 def _joined(parts: list) -> Result:
