@@ -10,9 +10,11 @@ latency     a logger process writes configs/logged/fourbar_live.toml's rig at 1 
             (the recording's process has flushed its stream and told follow's process so).
             It includes the rows each row waits for its spline to settle (SETTLE_ROWS of
             linkpipe/follow/blocks.py: 1 ms each at 1 kHz; docs/follow.md). Target: p95 <= 100
-            ms. Beside it: the CPU seconds of follow's process and of the recording's own
-            process over follow's wall seconds, per block stored (the steadier figure on a
-            shared machine).
+            ms. Live rows: those flushed after the first block reached that destination and
+            before the logger's last 64; each destination's start-up (its first row's
+            latency) is printed apart. Beside it: the CPU seconds of follow's process and of
+            the recording's own process over follow's wall seconds, per block stored (the
+            steadier figure on a shared machine).
 throughput  the same four-bar (gravity and inertia forces, two measurements with alarms)
             over a log of --rows rows written beforehand, followed from its first row to the
             idle end, BLAS on one thread (as run's default), no viewer: rows / wall seconds from
@@ -99,13 +101,14 @@ def latency(seconds: float, port: int) -> bool:
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         writer.wait()
         stamps = np.array(json.loads(pathlib.Path(str(log) + ".stamps.json").read_text()))
-    # live rows: flushed after follow's first block was stored (before it: its start-up,
-    # imports and the first solve, reported apart) and before the logger's last 64 rows (the
-    # last ones wait for the end: not live rows)
-    start = min(at["h5"].values())
-    first_lat = start - stamps[0]
+    # live rows: flushed after follow's first block reached that destination (before it: the
+    # start-up, imports, the first solve and, for the viewer, the recording's process opening
+    # its sinks, reported apart) and before the logger's last 64 rows (the last ones wait for
+    # the end: not live rows)
+    starts = {where: min(at[where].values()) for where in at if at[where]}
     ok = True
     for where in [w for w in ("h5", "viewer") if at[w]]:
+        start = starts[where]
         steps = np.array(sorted(k for k in at[where] if k < len(stamps) - 64
                                 and stamps[k] > start))
         lat = np.array([max(at[where][k], at["h5"][k]) for k in steps]) - stamps[steps]
@@ -123,8 +126,10 @@ def latency(seconds: float, port: int) -> bool:
           f"a core; the logger apart), the recording's process {rec:.2f} s CPU; "
           f"{blocks['h5']:,} blocks to the .h5 ({1e3 * both / max(blocks['h5'], 1):.2f} ms CPU "
           f"per block, both processes: {blocks['viewer']:,} sends)")
-    print(f"latency  start-up: the first row reached the .h5 {first_lat:.2f} s after its flush "
-          "(follow started with the logger: imports, the scene, the first solve)")
+    print(f"latency  start-up: the first row reached the .h5 {starts['h5'] - stamps[0]:.2f} s "
+          "after its flush (follow started with the logger: imports, the scene, the first "
+          "solve)" + (f", the gRPC server {starts['viewer'] - stamps[0]:.2f} s"
+                      if "viewer" in starts else ""))
     return ok
 
 

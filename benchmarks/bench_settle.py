@@ -1,6 +1,7 @@
 """How many rows settle a followed row: follow's blocks against a batch run, per ``settle``.
 
-    python benchmarks/bench_settle.py [--seconds 3] [--rates 1000,500,100] [--settle 24,16,12,10,8,6]
+    python benchmarks/bench_settle.py [--seconds 3] [--rates 1000,500,100]
+                                      [--settle 28,24,20,18,16,12]
 
 For each logging rate, a log of configs/logged/fourbar_live.toml's rig is written beforehand
 (configs/logged/rig_logger.py --fast: the crank's angle to 1e-9 degree, as the demo logger
@@ -83,7 +84,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=3.0)
     p.add_argument("--rates", default="1000,500,100")
-    p.add_argument("--settle", default="24,16,12,10,8,6")
+    p.add_argument("--settle", default="28,24,20,18,16,12")
     args = p.parse_args(argv)
     settles = [int(x) for x in args.settle.split(",")]
     for rate in [float(x) for x in args.rates.split(",")]:
@@ -108,7 +109,7 @@ def main(argv=None) -> int:
                     dev = deviation(scene, batch, settle)
                     worst = max(dev, key=dev.get)
                     pos = max(v for k, v in dev.items() if k in ("position", "link_angle"))
-                    print(f"settle  {rate:,.0f} Hz, {what}, {len(batch.step_numbers if batch.step_numbers is not None else batch.status):,} rows, "
+                    print(f"settle  {rate:,.0f} Hz, {what}, {batch.n_steps:,} rows, "
                           f"settle {settle:2d}: positions {pos:.1e}, largest {dev[worst]:.1e} "
                           f"({worst}); bound {BOUND:g}: "
                           f"{'within' if dev[worst] <= BOUND else 'BEYOND'}", flush=True)

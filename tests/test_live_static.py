@@ -107,7 +107,8 @@ def test_the_recording_made_in_its_own_process_is_the_one_made_here(blocks, tmp_
     sent = threading.Semaphore(0)
     said = []
     rec = LiveRecording(template, file=tmp_path / "there.rrd",
-                        on_sent=lambda part, at: (said.append(part.step_numbers[0]), sent.release()))
+                        on_sent=lambda part, at: (said.append(part.step_numbers[0]),
+                                                  sent.release()))
     pid = rec._process.pid
     assert pid != os.getpid()
     for part in parts:

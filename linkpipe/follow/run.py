@@ -241,20 +241,29 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
             return False
         return idle is None or _time.monotonic() - last_new[0] < idle
 
-    scene, tail, log = load_followed(scene_path, wait, say)
-    out = output_folder(out)
-    path = out / f"{scene.name}.h5"
-    lock = _lock(out, scene.name, pathlib.Path(scene_path))
+    started = None
+    if serve or connect or rrd:  # the recording's process imports while the scene is read
+        from ..stores.rrd.live import start_process
+
+        started = start_process()
     try:
-        return _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settle,
-                       wait, last_new, max_block, memory, on_block, rrd)
+        scene, tail, log = load_followed(scene_path, wait, say)
+        out = output_folder(out)
+        path = out / f"{scene.name}.h5"
+        lock = _lock(out, scene.name, pathlib.Path(scene_path))
+        try:
+            return _follow(scene, tail, log, path, serve, connect, port, idle, stop, say,
+                           settle, wait, last_new, max_block, memory, on_block, rrd, started)
+        finally:
+            tail.close()
+            lock.close()
     finally:
-        tail.close()
-        lock.close()
+        if started is not None and not started.taken:
+            started.cancel()
 
 
 def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settle, wait,
-            last_new, max_block, memory, on_block, rrd) -> Outcome:
+            last_new, max_block, memory, on_block, rrd, started=None) -> Outcome:
     from ..pipeline import solve
     from ..stores.growing import GrowingWriter, stored
 
@@ -287,7 +296,8 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY,
                                   path.with_suffix(".rrd") if rrd else None,
                                   None if on_block is None else
-                                  (lambda part, at: on_block(part, "viewer", at)))
+                                  (lambda part, at: on_block(part, "viewer", at)),
+                                  started)
         outcome.address = recording.address
         if serve:
             say(f"serving the recording: rerun {recording.address}")

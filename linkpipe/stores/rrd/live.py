@@ -97,28 +97,31 @@ class LiveRecording:
     recording's process has flushed it to the sinks, ``at`` the wall time (``time.time()``)
     the flush returned there (benchmarks). The process ignores Ctrl-C
     and SIGTERM (follow ends it, after the last rows) and ends by itself when follow's process
-    is gone. A failure there is raised here, at the next :meth:`add` or :meth:`note`."""
+    is gone. A failure there is raised here, at the next :meth:`add` or :meth:`note`.
+    ``started``: a process :func:`start_process` started earlier (its imports done while
+    follow read the scene and solved its first rows), else one is started here."""
 
     def __init__(self, template, serve: bool = False, connect: str | None = None,
                  port: int | None = None, memory: str = SERVER_MEMORY, file=None,
-                 on_sent=None):
-        if serve:
-            _check_port(port or 9876)
-        elif connect:
-            _check_address(connect)
+                 on_sent=None, started: StartedProcess | None = None):
+        try:
+            if serve:
+                _check_port(port or 9876)
+            elif connect:
+                _check_address(connect)
+        except BaseException:
+            if started is not None:
+                started.cancel()
+                started.taken = True
+            raise
         self.on_sent = on_sent
-        context = multiprocessing.get_context("spawn")  # not fork: this process has threads
-        self._inbox, theirs_out = context.Pipe(duplex=False)   # the recording's process -> here
-        theirs_in, self._outbox = context.Pipe(duplex=False)   # here -> the recording's process
-        self._process = context.Process(
-            target=_record, name="linkpipe-live-rrd", daemon=True,
-            args=(theirs_in, theirs_out, template, serve, connect, port, memory,
-                  None if file is None else str(file)))
-        with _signals_ignored():  # inherited: follow's signal handling ends the process
-            self._process.start()
-        theirs_in.close()
-        theirs_out.close()
+        started = started or start_process()
+        started.taken = True  # this recording ends it
+        self._process, self._inbox, self._outbox = started.process, started.inbox, started.outbox
+        self._opening = ("open", template, serve, connect, port, memory,
+                         None if file is None else str(file))
         self._failed: BaseException | None = None
+        self._ready = threading.Event()  # the process said "ready"
         # not waited for: the process starts (imports rerun, opens its sinks) while follow
         # solves its first block; it says "ready" with the address it serves or connects to
         self.address = (f"rerun+http://127.0.0.1:{port or 9876}/proxy" if serve else
@@ -148,26 +151,56 @@ class LiveRecording:
         self._queue.put(item)
 
     def _send(self) -> None:
-        """Pickle what comes into the pipe, in order, until the end."""
+        """Pickle what comes into the pipe, in order, until the end: what is waiting in the
+        queue goes as one message per run of blocks (joined), and nothing goes before the
+        process is ready (what comes meanwhile is held and joined: the queue never fills
+        while the process starts, so follow's first blocks never wait for it)."""
+        try:
+            self._outbox.send(self._opening)  # what to record: the sinks, the views' layout
+        except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
+            self._failed = LinkpipeError(f"the recording's process is gone ({exc!r})")
         while True:
-            item = self._queue.get()
-            if item is _END:
-                message = ("end",)
-            elif item[0] == "block":
+            items = [self._queue.get()]
+            while (not self._ready.is_set() and self._failed is None
+                   and items[-1] is not _END):
+                try:
+                    items.append(self._queue.get(timeout=0.02))
+                except queue.Empty:
+                    pass
+            while items[-1] is not _END:
+                try:
+                    items.append(self._queue.get_nowait())
+                except queue.Empty:
+                    break
+            for message in self._messages(items):
+                if self._failed is None or message[0] == "end":  # the end: after a failure too
+                    try:
+                        self._outbox.send(message)
+                    except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
+                        self._failed = self._failed or LinkpipeError(
+                            f"the recording's process is gone ({exc!r})")
+            if items[-1] is _END:
+                return
+
+    def _messages(self, items: list) -> list:
+        """The pipe's messages for queued ``items``: each run of blocks one ``("block",
+        [their numbers], the blocks joined)``, notes and the end as they are, in order."""
+        out, run = [], []
+        for item in items + [None]:
+            if item is not None and item is not _END and item[0] == "block":
                 self._count += 1
                 if self.on_sent is not None:
                     self._sent[self._count] = item[1]
-                message = ("block", self._count, item[1])
-            else:
-                message = item
-            if self._failed is None or item is _END:  # the end goes out after a failure too
-                try:
-                    self._outbox.send(message)
-                except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
-                    self._failed = self._failed or LinkpipeError(
-                        f"the recording's process is gone ({exc!r})")
+                run.append((self._count, item[1]))
+                continue
+            if run:
+                out.append(("block", [k for k, _ in run], _joined([p for _, p in run])))
+                run = []
             if item is _END:
-                return
+                out.append(("end",))
+            elif item is not None:
+                out.append(item)
+        return out
 
     def _receive(self) -> None:
         """What the recording's process says: blocks flushed, a failure, the end."""
@@ -189,6 +222,7 @@ class LiveRecording:
                         self._failed = self._failed or exc
             elif message[0] == "ready":
                 self.address = message[1] or self.address
+                self._ready.set()
             elif message[0] == "failed":
                 self._failed = LinkpipeError(message[1])
             elif message[0] == "closed":
@@ -206,16 +240,58 @@ class LiveRecording:
         self._outbox.close()
 
 
-def _record(inbox, outbox, template, serve, connect, port, memory, file) -> None:
-    """The recording's process: a :class:`BlockLogger` fed from ``inbox`` (``("block", k,
-    part)``, ``("note", step, time, text, level)``, ``("end",)``), saying on ``outbox`` when
-    it is ready (its address), each block flushed (``("sent", [k, ...], the wall time)``), a
-    failure, and
-    ``("closed", its CPU seconds)`` once every row is with the sinks."""
+class StartedProcess:
+    """A recording's process started and waiting to be told what to record (its imports,
+    rerun's among them, done meanwhile): :attr:`process` and its pipes."""
+
+    def __init__(self):
+        context = multiprocessing.get_context("spawn")  # not fork: this process has threads
+        self.inbox, theirs_out = context.Pipe(duplex=False)   # the recording's process -> here
+        theirs_in, self.outbox = context.Pipe(duplex=False)   # here -> the recording's process
+        self.process = context.Process(target=_record, args=(theirs_in, theirs_out),
+                                       name="linkpipe-live-rrd", daemon=True)
+        with _signals_ignored():  # inherited: follow's signal handling ends the process
+            self.process.start()
+        theirs_in.close()
+        theirs_out.close()
+        self.taken = False  # a LiveRecording took it (and ends it)
+
+    def cancel(self) -> None:
+        """End it unused (follow ended before its recording began)."""
+        try:
+            self.outbox.send(("end",))
+        except OSError:
+            pass
+        self.process.join(30)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join()
+        self.inbox.close()
+        self.outbox.close()
+
+
+def start_process() -> StartedProcess:
+    """Start a recording's process now, to be handed to :class:`LiveRecording` later."""
+    return StartedProcess()
+
+
+def _record(inbox, outbox) -> None:
+    """The recording's process: told what to record by the first message on ``inbox``
+    (``("open", template, serve, connect, port, memory, file)``: a :class:`BlockLogger`),
+    then fed ``("block", [k, ...], part)``, ``("note", step, time, text, level)`` and
+    ``("end",)``; saying on ``outbox`` when it is ready (its address), each block flushed
+    (``("sent", [k, ...], the wall time)``), a failure, and ``("closed", its CPU seconds)``
+    once every row is with the sinks."""
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, signal.SIG_IGN)
     try:
-        logger = BlockLogger(template, serve, connect, port, memory, file)
+        opening = inbox.recv()
+    except (EOFError, OSError):
+        return
+    if opening[0] != "open":  # ended unused
+        return
+    try:
+        logger = BlockLogger(*opening[1:])
     except BaseException as exc:  # noqa: BLE001 (said in follow's process)
         outbox.send(("failed", f"the recording could not start: {exc}"))
         return
@@ -232,11 +308,11 @@ def _record(inbox, outbox, template, serve, connect, port, memory, file) -> None
             continue
         try:
             if message[0] == "block":
-                numbers, parts = [message[1]], [message[2]]
+                numbers, parts = list(message[1]), [message[2]]
                 while waiting is None and inbox.poll(0):  # blocks waiting go out as one
                     following = inbox.recv()
                     if following[0] == "block":
-                        numbers.append(following[1])
+                        numbers += following[1]
                         parts.append(following[2])
                     else:
                         waiting = following  # a note, or the end: after these blocks
