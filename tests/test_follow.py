@@ -617,3 +617,35 @@ def test_a_coarsely_rounded_log_settles_with_more_rows_given_by_settle(rig, tmp_
         assert f.attrs["follow_settle_rows"] == 28
     with _batch(scene, tmp_path) as b:
         _assert_equal_to_batch(out / "fourbar_live.h5", b)
+
+
+def test_the_recording_process_ends_with_a_killed_follow_and_frees_the_port(rig, tmp_path):
+    """The recording (and with --serve its gRPC server) runs in a process of its own: when
+    follow's process is SIGKILLed it ends by itself (its pipe closes), so the port is free
+    again and the next ``follow --serve`` on it starts and ends cleanly."""
+    import socket
+
+    from test_rrd import _free_port
+
+    scene, log, out = rig
+    port = _free_port()
+    writer = _logger(log, "--rate", 1000, "--seconds", 3, "--burst", 20)
+    follower = _follow(scene, out, "--serve", "--port", port)
+    h5 = out / "fourbar_live.h5"
+    _wait_for(lambda: _rows(h5) > 300)
+
+    def listening() -> bool:
+        with socket.socket() as sock:
+            return sock.connect_ex(("127.0.0.1", port)) == 0
+
+    _wait_for(listening, seconds=30)  # the server is up (in the recording's process)
+    follower.send_signal(signal.SIGKILL)
+    follower.wait(10)
+    _wait_for(lambda: not listening(), seconds=30)  # its recording process went with it
+    again = _follow(scene, out, "--serve", "--port", port, "--idle", 1.5)
+    assert writer.wait(30) == 0
+    stdout, stderr = again.communicate(timeout=60)
+    assert again.returncode == 0, stderr
+    assert f"serving the recording: rerun rerun+http://127.0.0.1:{port}/proxy" in stdout
+    with _batch(scene, tmp_path) as batch:
+        _assert_equal_to_batch(h5, batch)
