@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import multiprocessing
+import pickle
 import queue
 import signal
 import socket
@@ -38,6 +39,9 @@ SERVER_MEMORY = "512MiB"
 _END = object()
 #: the entity of alarms, no_input / no_assembly stretches and the source's faults
 ALARMS = "alarms"
+#: the most rows that blocks waiting for the recording are joined into (a viewer behind
+#: catches up in fewer, larger calls; each message's pickle stays bounded)
+JOIN_ROWS = 4096
 
 
 class BlockLogger:
@@ -152,30 +156,37 @@ class LiveRecording:
 
     def _send(self) -> None:
         """Pickle what comes into the pipe, in order, until the end: what is waiting in the
-        queue goes as one message per run of blocks (joined), and nothing goes before the
-        process is ready (what comes meanwhile is held and joined: the queue never fills
-        while the process starts, so follow's first blocks never wait for it)."""
+        queue goes as one message per run of blocks (joined, up to :data:`JOIN_ROWS` rows),
+        and nothing goes before the process is ready (up to :data:`JOIN_ROWS` rows that come
+        meanwhile are held, so follow's first blocks do not wait for it; past them the queue
+        fills and holds follow back, as a slow viewer does)."""
         try:
-            self._outbox.send(self._opening)  # what to record: the sinks, the views' layout
+            _post(self._outbox, self._opening)  # what to record: the sinks, the views' layout
         except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
             self._failed = LinkpipeError(f"the recording's process is gone ({exc!r})")
         while True:
             items = [self._queue.get()]
+            rows = _rows_of(items[-1])
             while (not self._ready.is_set() and self._failed is None
                    and items[-1] is not _END):
+                if rows >= JOIN_ROWS:
+                    self._ready.wait(0.05)
+                    continue
                 try:
                     items.append(self._queue.get(timeout=0.02))
+                    rows += _rows_of(items[-1])
                 except queue.Empty:
                     pass
-            while items[-1] is not _END:
+            while items[-1] is not _END and rows < JOIN_ROWS:
                 try:
                     items.append(self._queue.get_nowait())
+                    rows += _rows_of(items[-1])
                 except queue.Empty:
                     break
             for message in self._messages(items):
                 if self._failed is None or message[0] == "end":  # the end: after a failure too
                     try:
-                        self._outbox.send(message)
+                        _post(self._outbox, message)
                     except BaseException as exc:  # noqa: BLE001 (raised in the caller's thread)
                         self._failed = self._failed or LinkpipeError(
                             f"the recording's process is gone ({exc!r})")
@@ -183,20 +194,22 @@ class LiveRecording:
                 return
 
     def _messages(self, items: list) -> list:
-        """The pipe's messages for queued ``items``: each run of blocks one ``("block",
-        [their numbers], the blocks joined)``, notes and the end as they are, in order."""
-        out, run = [], []
+        """The pipe's messages for queued ``items``, in order: each run of consecutive blocks
+        one ``("block", [their numbers], the blocks joined)`` of at most :data:`JOIN_ROWS`
+        rows (or one block, if larger), notes and the end as they are."""
+        out, run, rows = [], [], 0
         for item in items + [None]:
-            if item is not None and item is not _END and item[0] == "block":
+            block = item is not None and item is not _END and item[0] == "block"
+            if run and (not block or rows + item[1].n_steps > JOIN_ROWS):
+                out.append(("block", [k for k, _ in run], _joined([p for _, p in run])))
+                run, rows = [], 0
+            if block:
                 self._count += 1
                 if self.on_sent is not None:
                     self._sent[self._count] = item[1]
                 run.append((self._count, item[1]))
-                continue
-            if run:
-                out.append(("block", [k for k, _ in run], _joined([p for _, p in run])))
-                run = []
-            if item is _END:
+                rows += item[1].n_steps
+            elif item is _END:
                 out.append(("end",))
             elif item is not None:
                 out.append(item)
@@ -259,7 +272,7 @@ class StartedProcess:
     def cancel(self) -> None:
         """End it unused (follow ended before its recording began)."""
         try:
-            self.outbox.send(("end",))
+            _post(self.outbox, ("end",))
         except OSError:
             pass
         self.process.join(30)
@@ -285,7 +298,7 @@ def _record(inbox, outbox) -> None:
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, signal.SIG_IGN)
     try:
-        opening = inbox.recv()
+        opening = _take(inbox)
     except (EOFError, OSError):
         return
     if opening[0] != "open":  # ended unused
@@ -299,7 +312,7 @@ def _record(inbox, outbox) -> None:
     failed, waiting = False, None
     while True:
         try:
-            message, waiting = waiting or inbox.recv(), None
+            message, waiting = waiting or _take(inbox), None
         except (EOFError, OSError):  # follow's process is gone: end the recording cleanly
             message = ("end",)
         if message[0] == "end":
@@ -309,11 +322,13 @@ def _record(inbox, outbox) -> None:
         try:
             if message[0] == "block":
                 numbers, parts = list(message[1]), [message[2]]
-                while waiting is None and inbox.poll(0):  # blocks waiting go out as one
-                    following = inbox.recv()
+                rows = parts[0].n_steps
+                while waiting is None and rows < JOIN_ROWS and inbox.poll(0):  # as one
+                    following = _take(inbox)
                     if following[0] == "block":
                         numbers += following[1]
                         parts.append(following[2])
+                        rows += following[2].n_steps
                     else:
                         waiting = following  # a note, or the end: after these blocks
                 logger.block(_joined(parts))
@@ -401,6 +416,31 @@ def _digest(batches) -> bytes:
             if buffer is not None:
                 h.update(memoryview(buffer))
     return h.digest()
+
+
+def _post(connection, message) -> None:
+    """Send ``message`` (a tuple holding blocks' arrays) with pickle protocol 5, the arrays'
+    buffers sent from where they are (out of band): no pickled copy of a block's arrays is
+    made here (a 16,384-row block's was ~16 MB, whose repeated allocation grew follow's
+    memory through the C allocator's heap)."""
+    buffers: list = []
+    head = pickle.dumps(message, protocol=5, buffer_callback=buffers.append)
+    connection.send_bytes(len(buffers).to_bytes(4, "little") + head)
+    for buffer in buffers:
+        connection.send_bytes(buffer.raw())
+
+
+def _take(connection):
+    """The message :func:`_post` sent (its arrays in writable buffers of their own)."""
+    data = connection.recv_bytes()
+    count = int.from_bytes(data[:4], "little")
+    buffers = [bytearray(connection.recv_bytes()) for _ in range(count)]
+    return pickle.loads(data[4:], buffers=buffers)
+
+
+def _rows_of(item) -> int:
+    """The rows of a queued block (0 for a note or the end)."""
+    return item[1].n_steps if item is not _END and item[0] == "block" else 0
 
 
 def _check_port(port: int) -> None:
