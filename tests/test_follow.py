@@ -417,6 +417,8 @@ def test_a_window_resumed_after_stored_rows_takes_the_rows_in_any_pieces(rig):
         parts.append(part)
     steps = np.concatenate([p.step_numbers for p in parts])
     np.testing.assert_array_equal(steps, np.arange(700, 1000))
+    from linkpipe import log_splines
+    assert not log_splines._SPLINE_VALUES  # the windows' splines are not kept (memory)
     for name in ("position", "velocity", "acceleration", "link_angle", "driver_acceleration"):
         got = np.concatenate([getattr(p, name) for p in parts])
         np.testing.assert_allclose(got, getattr(batch, name)[700:], rtol=0, atol=TOL, err_msg=name)

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..cache import forget
 from ..errors import SceneError
+from ..log_splines import forget_spline_values
 from ..pipeline import solve
 from ..result import Result
 
@@ -154,6 +155,7 @@ class Window:
             whole.measurements, rows), kinematics=None)
         part = self._turns(part, whole, k)
         forget(whole.model)  # its engine and kernels refer back to it: freed with the block
+        forget_spline_values()  # a window's spline is never read again
         self.stored = lo + n
         self.poses = np.concatenate([self.poses, part.position])[-(self.settle + 1):]
         self.last_angles = part.link_angle[-1].copy()
