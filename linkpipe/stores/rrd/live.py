@@ -11,13 +11,16 @@ on a thread of follow's process it held the interpreter while the next block sol
 blocks go to it pickled through a pipe; it says when each one is with the sinks."""
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import multiprocessing
+import json
+import multiprocessing.connection
+import os
 import pickle
 import queue
 import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 import traceback
@@ -223,7 +226,7 @@ class LiveRecording:
             except (EOFError, OSError):
                 if self._failed is None:
                     self._failed = LinkpipeError("the recording's process ended unexpectedly "
-                                                 f"(exit code {self._process.exitcode})")
+                                                 f"(exit code {self._process.poll()})")
                 return
             if message[0] == "sent":
                 for k in message[1]:
@@ -248,25 +251,37 @@ class LiveRecording:
         self._queue.put(_END)
         self._sender.join()
         self._receiver.join()
-        self._process.join()
+        self._process.wait()
         self._inbox.close()
         self._outbox.close()
 
 
 class StartedProcess:
     """A recording's process started and waiting to be told what to record (its imports,
-    rerun's among them, done meanwhile): :attr:`process` and its pipes."""
+    rerun's among them, done meanwhile): :attr:`process` (a ``subprocess.Popen``) and its
+    pipes. A fresh interpreter that runs :func:`_record` on two pipes it inherits (not
+    ``fork``: this process has threads; not multiprocessing's ``spawn``, which runs the
+    calling script's ``__main__`` again in the child), with this process's ``sys.path``, in a
+    session of its own (Ctrl-C at a terminal reaches follow, which ends it after the last
+    rows)."""
 
     def __init__(self):
-        context = multiprocessing.get_context("spawn")  # not fork: this process has threads
-        self.inbox, theirs_out = context.Pipe(duplex=False)   # the recording's process -> here
-        theirs_in, self.outbox = context.Pipe(duplex=False)   # here -> the recording's process
-        self.process = context.Process(target=_record, args=(theirs_in, theirs_out),
-                                       name="linkpipe-live-rrd", daemon=True)
-        with _signals_ignored():  # inherited: follow's signal handling ends the process
-            self.process.start()
-        theirs_in.close()
-        theirs_out.close()
+        down_read, down_write = os.pipe()  # here -> the recording's process
+        up_read, up_write = os.pipe()      # the recording's process -> here
+        code = ("import json, sys; sys.path[:0] = json.loads(sys.argv[3]); "
+                "from linkpipe.stores.rrd.live import _record_on; "
+                "_record_on(int(sys.argv[1]), int(sys.argv[2]))")
+        try:
+            self.process = subprocess.Popen(
+                [sys.executable, "-c", code, str(down_read), str(up_write),
+                 json.dumps([p for p in sys.path if p])],
+                pass_fds=(down_read, up_write), stdin=subprocess.DEVNULL,
+                start_new_session=True)
+        finally:
+            os.close(down_read)
+            os.close(up_write)
+        self.inbox = multiprocessing.connection.Connection(up_read, writable=False)
+        self.outbox = multiprocessing.connection.Connection(down_write, readable=False)
         self.taken = False  # a LiveRecording took it (and ends it)
 
     def cancel(self) -> None:
@@ -275,10 +290,11 @@ class StartedProcess:
             _post(self.outbox, ("end",))
         except OSError:
             pass
-        self.process.join(30)
-        if self.process.is_alive():
+        try:
+            self.process.wait(30)
+        except subprocess.TimeoutExpired:
             self.process.terminate()
-            self.process.join()
+            self.process.wait()
         self.inbox.close()
         self.outbox.close()
 
@@ -286,6 +302,13 @@ class StartedProcess:
 def start_process() -> StartedProcess:
     """Start a recording's process now, to be handed to :class:`LiveRecording` later."""
     return StartedProcess()
+
+
+def _record_on(down: int, up: int) -> None:
+    """The recording's process (:class:`StartedProcess`): :func:`_record` on the pipes'
+    file descriptors it inherited."""
+    _record(multiprocessing.connection.Connection(down, writable=False),
+            multiprocessing.connection.Connection(up, readable=False))
 
 
 def _record(inbox, outbox) -> None:
@@ -352,20 +375,6 @@ def _record(inbox, outbox) -> None:
             outbox.send(("closed", time.process_time()))
         except OSError:
             pass
-
-
-@contextlib.contextmanager
-def _signals_ignored():
-    """Ctrl-C and SIGTERM ignored while a child process starts (it inherits that), where this
-    is the main thread (elsewhere signals are not this thread's to set)."""
-    saved = {}
-    if threading.current_thread() is threading.main_thread():
-        saved = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for signum, handler in saved.items():
-            signal.signal(signum, handler)
 
 
 class _UnchangedStaticSkipped:
