@@ -104,6 +104,10 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     fol.add_argument("--idle", type=_seconds, default=None, metavar="S",
                      help="end after S seconds without a new row (default: follow until "
                           "Ctrl-C or SIGTERM)")
+    fol.add_argument("--settle", type=_positive, default=None, metavar="N",
+                     help="rows held back for the spline's end to settle before a row is "
+                          "stored (default 20; a coarsely rounded log needs more: "
+                          "docs/follow.md)")
     fol.add_argument("--quiet", action="store_true", help="print only the final line and errors")
     return p
 
@@ -723,6 +727,7 @@ def _follow(args) -> int:
             done = follow(args.scene, args.out, serve=args.serve, connect=args.connect,
                           port=args.port, idle=args.idle, stop=stop, rrd=args.rrd,
                           memory=args.server_memory,
+                          **({} if args.settle is None else {"settle": args.settle}),
                           say=(lambda text: None) if args.quiet else print)
             if done.code:
                 print(f"error: {done.why}", file=sys.stderr)

@@ -70,6 +70,12 @@ def spline_values(t: np.ndarray, y: np.ndarray, smoothing: float, instants: np.n
     return values
 
 
+def forget_spline_values() -> None:
+    """Drop the splines' values kept by :func:`spline_values` (``follow`` solves each window of
+    its log once: kept, they only filled memory, up to :data:`MAX_SPLINE_BYTES`)."""
+    _SPLINE_VALUES.clear()
+
+
 def missing_at(t_log: np.ndarray, y: np.ndarray, instants: np.ndarray) -> np.ndarray:
     """(S,) True at the instants a missing sample leaves without a value: those strictly between
     the finite samples on either side of a missing row (with [time] log: exactly the missing

@@ -9,7 +9,7 @@ spline interpolates them). So :class:`Window` holds back the last ``settle`` row
 has arrived, and solves the rows before them with a spline through the rows from ``settle``
 before the block to the last row arrived: each stored row then has at least ``settle``
 samples on either side of it in its spline, where the end conditions reach it damped by
-0.268^settle (2e-14 at the default 24; docs/follow.md). At the end
+0.268^settle (4e-12 at the default 20; docs/follow.md). At the end
 (``final``), the held-back rows are solved with the spline ending at the log's last row,
 as a batch ``run`` of the same log ends.
 
@@ -25,12 +25,17 @@ import numpy as np
 
 from ..cache import forget
 from ..errors import SceneError
+from ..log_splines import forget_spline_values
 from ..pipeline import solve
 from ..result import Result
 
-#: rows held back at the end and taken before a block: 0.268^24 ~ 2e-14 of the end
-#: conditions' change reaches a stored row's rates (docs/follow.md)
-SETTLE_ROWS = 24
+#: rows held back at the end and taken before a block: 0.268^20 ~ 4e-12 of the end
+#: conditions' change reaches a stored row's rates. Measured (benchmarks/bench_settle.py,
+#: docs/follow.md): on the rig's log at 1 kHz, 500 Hz and 100 Hz every stored row equals the
+#: batch run's to the last bit with 20 (with 18: 4.5e-10 in the driver's acceleration, with
+#: 16: 1.4e-9); a log whose driver column is rounded coarsely (an encoder's 0.001 degree)
+#: moves its spline's ends more and needs up to 28 (``--settle``)
+SETTLE_ROWS = 20
 #: the fewest rows a block solves (smaller ones wait for more, unless the log ends)
 MIN_BLOCK_ROWS = 1
 
@@ -150,6 +155,7 @@ class Window:
             whole.measurements, rows), kinematics=None)
         part = self._turns(part, whole, k)
         forget(whole.model)  # its engine and kernels refer back to it: freed with the block
+        forget_spline_values()  # a window's spline is never read again
         self.stored = lo + n
         self.poses = np.concatenate([self.poses, part.position])[-(self.settle + 1):]
         self.last_angles = part.link_angle[-1].copy()

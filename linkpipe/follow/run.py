@@ -40,7 +40,7 @@ MID_LINE_NOTICE = 5.0
 @dataclass
 class Outcome:
     """How a follow ended: ``rows`` stored in all, ``new`` this time, ``why`` it ended,
-    ``alarms`` per measurement, ``code`` the exit status."""
+    ``alarms`` per measurement, ``code`` the exit status, ``address`` the viewer's."""
 
     path: pathlib.Path
     rows: int = 0
@@ -49,6 +49,8 @@ class Outcome:
     alarms: dict = field(default_factory=dict)
     code: int = 0
     address: str | None = None
+    #: CPU seconds of the recording's own process (NaN without a viewer or .rrd; benchmarks)
+    recording_cpu: float = float("nan")
 
 
 def _log_entry(scene_path: str, data: dict) -> tuple[int, dict]:
@@ -224,8 +226,9 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
            on_block=None, rrd: bool = False) -> Outcome:
     """Follow ``scene_path``'s ``[time]`` log into ``out/<name>.h5`` until ``idle`` seconds
     pass without a new row, ``stop`` is set, or the source fails; return the :class:`Outcome`.
-    ``on_block(part, where)``: called when a block's rows are in the .h5 (``where`` "h5") and
-    when they are with the viewer's sinks ("viewer"; benchmarks); ``rrd``: also write
+    ``on_block(part, where[, at])``: called when a block's rows are in the .h5 (``where``
+    "h5", now) and when they are with the viewer's sinks ("viewer", ``at`` the wall time the
+    recording's process flushed them; benchmarks); ``rrd``: also write
     ``out/<name>.rrd`` as it grows."""
     from ..stores import output_folder
 
@@ -238,20 +241,29 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
             return False
         return idle is None or _time.monotonic() - last_new[0] < idle
 
-    scene, tail, log = load_followed(scene_path, wait, say)
-    out = output_folder(out)
-    path = out / f"{scene.name}.h5"
-    lock = _lock(out, scene.name, pathlib.Path(scene_path))
+    started = None
+    if serve or connect or rrd:  # the recording's process imports while the scene is read
+        from ..stores.rrd.live import start_process
+
+        started = start_process()
     try:
-        return _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settle,
-                       wait, last_new, max_block, memory, on_block, rrd)
+        scene, tail, log = load_followed(scene_path, wait, say)
+        out = output_folder(out)
+        path = out / f"{scene.name}.h5"
+        lock = _lock(out, scene.name, pathlib.Path(scene_path))
+        try:
+            return _follow(scene, tail, log, path, serve, connect, port, idle, stop, say,
+                           settle, wait, last_new, max_block, memory, on_block, rrd, started)
+        finally:
+            tail.close()
+            lock.close()
     finally:
-        tail.close()
-        lock.close()
+        if started is not None and not started.taken:
+            started.cancel()
 
 
 def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settle, wait,
-            last_new, max_block, memory, on_block, rrd) -> Outcome:
+            last_new, max_block, memory, on_block, rrd, started=None) -> Outcome:
     from ..pipeline import solve
     from ..stores.growing import GrowingWriter, stored
 
@@ -292,7 +304,8 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         recording = LiveRecording(template, serve, connect, port, memory or SERVER_MEMORY,
                                   path.with_suffix(".rrd") if rrd else None,
                                   None if on_block is None else
-                                  (lambda part: on_block(part, "viewer")))
+                                  (lambda part, at: on_block(part, "viewer", at)),
+                                  started)
         outcome.address = recording.address
         if serve:
             say(f"serving the recording: rerun {recording.address}")
@@ -371,6 +384,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
         finally:
             if recording is not None:
                 recording.close()
+                outcome.recording_cpu = recording.cpu_seconds
     reports.end()
     outcome.rows, outcome.alarms = writer.rows, reports.alarms
     if fault is not None:

@@ -19,13 +19,19 @@ def sender(stream: rr.RecordingStream, result):
                    np.round(np.asarray(result.time, float) * 1e9).astype("timedelta64[ns]"))
     by_value = driver_timelines(result)
 
-    def send(entity: str, columns, rows: np.ndarray | None = None) -> None:
-        rows = slice(None) if rows is None else rows
+    def index_at(rows) -> list:
         index = [rr.TimeColumn("step", sequence=steps[rows])]
         if nanoseconds is not None:
             index.append(rr.TimeColumn("time", duration=nanoseconds[rows]))
         for name, values in by_value:
             index.append(rr.TimeColumn(name, sequence=values[rows]))
+        return index
+
+    every = index_at(slice(None))  # built once: most entities go out at every step (a
+    # TimeColumn holds its Arrow array, read and not changed by send_columns)
+
+    def send(entity: str, columns, rows: np.ndarray | None = None) -> None:
+        index = every if rows is None else index_at(rows)
         stream.send_columns(entity, indexes=index, columns=columns)
 
     return send

@@ -11,6 +11,8 @@ names carry no unit: the view's title has it.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import rerun as rr
 
@@ -156,6 +158,14 @@ def wrapped_degrees(angle: np.ndarray) -> tuple[np.ndarray, bool]:
     return (degrees + 180.0) % 360.0 - 180.0, True
 
 
+@functools.lru_cache(maxsize=4096)
+def series_style(title: str, colour: tuple) -> rr.SeriesLines:
+    """A plotted series' static style (its name and colour), built once per name and colour:
+    follow logs every series' style with each block, and its stream skips an archetype that
+    is the very object it last sent to that entity without encoding it again."""
+    return rr.SeriesLines(names=title, colors=[list(colour)])
+
+
 def log_series(stream, send, result) -> None:
     for entity, title, values, colour in series_of(result):
         values = np.asarray(values, dtype=float)
@@ -164,7 +174,7 @@ def log_series(stream, send, result) -> None:
         # step's residual) would wreck the axis
         if not finite.all():
             values = np.where(finite, values, np.nan)
-        stream.log(entity, rr.SeriesLines(names=title, colors=[colour]), static=True)
+        stream.log(entity, series_style(title, tuple(colour)), static=True)
         # every step, NaN included: the viewer breaks the line at a NaN, whereas a step left
         # out would be bridged by a straight segment that looks like data
         send(entity, rr.Scalars.columns(scalars=values))
