@@ -412,11 +412,79 @@ def test_a_port_in_use_is_one_message_before_any_file(rig, capsys):
 def test_a_connect_address_rerun_cannot_take_is_one_message_before_any_file(rig, capsys):
     scene, log, out = rig
     assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
-    assert main(["follow", str(scene), "--out", str(out), "--connect", "127.0.0.1:9876",
-                 "--idle", "0.1"]) == 2
+    with pytest.raises(SystemExit) as stop:  # the option's own check: usage and one line
+        main(["follow", str(scene), "--out", str(out), "--connect", "127.0.0.1:9876",
+              "--idle", "0.1"])
+    assert stop.value.code == 2
     err = capsys.readouterr().err
-    assert "--connect 127.0.0.1:9876: invalid endpoint" in err and "Traceback" not in err
+    assert "expected a viewer's address like rerun+http://127.0.0.1:9876/proxy, got " \
+           "'127.0.0.1:9876'" in err and "Traceback" not in err
     assert not list(out.glob("*.h5"))
+
+
+def test_a_connect_address_where_no_viewer_listens_is_one_message_before_any_file(rig, capsys):
+    """Nothing listens there: one message at once, exit 1, no file (follow had hung on the
+    recording's flush, deaf to SIGTERM, its .h5 left with the held-back rows unstored)."""
+    import socket
+
+    scene, log, out = rig
+    assert _logger(log, "--rate", 100, "--seconds", 0.1, "--fast").wait(30) == 0
+    with socket.socket() as sock:  # a port nobody listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    t0 = time.monotonic()
+    assert main(["follow", str(scene), "--out", str(out), "--connect",
+                 f"rerun+http://127.0.0.1:{port}/proxy", "--idle", "0.1"]) == 1
+    assert time.monotonic() - t0 < 10
+    err = capsys.readouterr().err
+    assert err.count("error:") == 1 and f"no viewer listens at 127.0.0.1:{port}" in err
+    assert "Traceback" not in err and not list(out.glob("*.h5"))
+
+
+def test_a_viewer_that_takes_nothing_holds_follow_at_most_close_seconds(rig, capsys, monkeypatch):
+    """A peer that accepts the connection and never answers (a hung viewer): follow stores
+    every row, ends its .h5 complete, then waits at most CLOSE_SECONDS for the recording and
+    stops it: one message, exit 1 (it had waited for the peer for minutes, deaf to SIGTERM)."""
+    import socket
+    import threading
+
+    from linkpipe.stores.rrd import live
+
+    monkeypatch.setattr(live, "CLOSE_SECONDS", 3.0)
+    scene, log, out = rig
+    assert _logger(log, "--rate", 200, "--seconds", 2, "--fast").wait(30) == 0
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    held, done = [], threading.Event()
+
+    def accept():  # take every connection, read nothing, answer nothing
+        server.settimeout(0.2)
+        while not done.is_set():
+            try:
+                held.append(server.accept()[0])
+            except OSError:
+                pass
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    try:
+        t0 = time.monotonic()
+        code = main(["follow", str(scene), "--out", str(out), "--idle", "0.5", "--connect",
+                     f"rerun+http://127.0.0.1:{server.getsockname()[1]}/proxy"])
+        took = time.monotonic() - t0
+    finally:
+        done.set()
+        thread.join()
+        for c in held:
+            c.close()
+        server.close()
+    assert code == 1 and took < 30
+    captured = capsys.readouterr()
+    assert captured.err.count("error:") == 1 and "took none of the last rows for 3 s" in captured.err
+    assert "Traceback" not in captured.err
+    with h5py.File(out / "fourbar_live.h5", "r") as f:
+        assert f.attrs["complete"] == 1 and f["step"].shape == (400,)
 
 
 def test_a_window_resumed_after_stored_rows_takes_the_rows_in_any_pieces(rig):

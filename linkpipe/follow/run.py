@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..errors import SceneError
+from ..errors import LinkpipeError, SceneError
 from ..status import Status
 from .blocks import SETTLE_ROWS, Window, followed_columns, window_scene
 from .tail import CsvTail, LogFault, ParquetTail
@@ -241,6 +241,10 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
             return False
         return idle is None or _time.monotonic() - last_new[0] < idle
 
+    if connect:  # nothing listening there: said at once, before any file or process
+        from ..stores.rrd import check_listening
+
+        check_listening(connect)
     started = None
     if serve or connect or rrd:  # the recording's process imports while the scene is read
         from ..stores.rrd.live import start_process
@@ -316,6 +320,7 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
             recording.close()
         raise
     reports = Reports(scene, say, recording)
+    viewer_error = None
     seconds: dict[str, float] = {}
     checked = before is None or before.rows == 0
     rows, partial_since, told_partial = first, None, False
@@ -383,12 +388,18 @@ def _follow(scene, tail, log, path, serve, connect, port, idle, stop, say, settl
             writer.finish(seconds, {"follow_log": str(log), "follow_settle_rows": settle})
         finally:
             if recording is not None:
-                recording.close()
+                try:
+                    recording.close()
+                except LinkpipeError as exc:  # the viewer's end: said with the summary
+                    viewer_error = exc
                 outcome.recording_cpu = recording.cpu_seconds
     reports.end()
     outcome.rows, outcome.alarms = writer.rows, reports.alarms
     if fault is not None:
         outcome.why, outcome.code = str(fault), 1
+    if viewer_error is not None:
+        outcome.why = f"{outcome.why}; {viewer_error}" if outcome.why else str(viewer_error)
+        outcome.code = max(outcome.code, 1)
     return outcome
 
 

@@ -176,7 +176,7 @@ def _streamed(result, logged, spawn: bool, connect: str | None, path) -> None:
                                 recording_id=f"{result.scene.name}-{uuid.uuid4().hex}")
     sinks, where = [], []
     if connect:
-        _check_listening(connect, path)
+        check_listening(connect, path)
         sinks.append(rr.GrpcSink(connect))
         where.append(f"the viewer at {connect}")
     try:
@@ -216,7 +216,7 @@ def integration_end(result) -> int | None:
     return last if last < result.n_steps - 1 else None
 
 
-def _check_listening(url: str, path) -> None:
+def check_listening(url: str, path=None) -> None:
     """:class:`OutputError` at once where nothing listens at ``url``'s host and port (rerun's
     own client would retry for 6 s, then fill the terminal with its log lines)."""
     parts = urllib.parse.urlsplit(url)

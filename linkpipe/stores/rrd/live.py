@@ -95,6 +95,11 @@ class BlockLogger:
         self.stream.disconnect()
 
 
+#: seconds :meth:`LiveRecording.close` waits for the recording's process to hand its last
+#: rows to the sinks and end
+CLOSE_SECONDS = 15.0
+
+
 class LiveRecording:
     """A :class:`BlockLogger` in a process of its own (the same arguments), fed the blocks
     stored: :meth:`add` and :meth:`note` return at once (a thread pickles each block into a
@@ -128,6 +133,7 @@ class LiveRecording:
         self._opening = ("open", template, serve, connect, port, memory,
                          None if file is None else str(file))
         self._failed: BaseException | None = None
+        self._failed_at_end = self._queue_ended = False  # a failure after the last rows went
         self._ready = threading.Event()  # the process said "ready"
         # not waited for: the process starts (imports rerun, opens its sinks) while follow
         # solves its first block; it says "ready" with the address it serves or connects to
@@ -194,6 +200,7 @@ class LiveRecording:
                         self._failed = self._failed or LinkpipeError(
                             f"the recording's process is gone ({exc!r})")
             if items[-1] is _END:
+                self._queue_ended = True
                 return
 
     def _messages(self, items: list) -> list:
@@ -241,19 +248,51 @@ class LiveRecording:
                 self._ready.set()
             elif message[0] == "failed":
                 self._failed = LinkpipeError(message[1])
+                self._failed_at_end = self._queue_ended
             elif message[0] == "closed":
                 self.cpu_seconds = message[1]
                 return
 
     def close(self) -> None:
         """Flush every row to the sinks and end them (the server with them), and the
-        recording's process."""
-        self._queue.put(_END)
-        self._sender.join()
-        self._receiver.join()
-        self._process.wait()
+        recording's process: within :data:`CLOSE_SECONDS`, else the process is stopped and
+        :class:`ViewerTimeout` says so (a viewer that accepted the connection and then took
+        nothing had held follow at its end for minutes, deaf to Ctrl-C; the .h5 is finished
+        before this is called)."""
+        deadline = time.monotonic() + CLOSE_SECONDS
+
+        def left() -> float:
+            return max(0.1, deadline - time.monotonic())
+
+        stopped = False
+        try:
+            self._queue.put(_END, timeout=left())
+        except queue.Full:
+            stopped = True
+        self._sender.join(left())
+        try:
+            self._process.wait(timeout=left())
+        except subprocess.TimeoutExpired:
+            stopped = True
+        if stopped:
+            self._process.kill()
+            self._process.wait()
+        self._sender.join(5.0)
+        self._receiver.join(5.0)
         self._inbox.close()
         self._outbox.close()
+        if stopped:
+            raise ViewerTimeout(f"the viewer at {self.address} took none of the last rows for "
+                                f"{CLOSE_SECONDS:g} s: its stream was stopped (every row is in "
+                                "the .h5)")
+        if self._failed is not None and self._failed_at_end:
+            raise self._failed
+
+
+class ViewerTimeout(LinkpipeError):
+    """The viewer did not take follow's last rows in time (exit 1: an output not delivered)."""
+
+    exit_code = 1
 
 
 class StartedProcess:
@@ -370,11 +409,15 @@ def _record(inbox, outbox) -> None:
                 pass
     try:
         logger.close()
-    finally:
+    except BaseException as exc:  # noqa: BLE001 (said in follow's process, not a traceback here)
         try:
-            outbox.send(("closed", time.process_time()))
+            outbox.send(("failed", f"the viewer's stream did not end cleanly: {exc}"))
         except OSError:
             pass
+    try:
+        outbox.send(("closed", time.process_time()))
+    except OSError:
+        pass
 
 
 class _UnchangedStaticSkipped:
