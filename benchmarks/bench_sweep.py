@@ -130,6 +130,44 @@ def closed_form_chunked(theta, chunk=8192):
     return X, V, A
 
 
+def _crank_rocker_motion(th, omega):
+    """The crank-rocker's closed form at crank angles ``th`` (an array, or one float in the
+    compiled loop) and constant rate ``omega``: (cos, sin, then A, its velocity and
+    acceleration, the coupler and rocker vectors, B's, the relative velocity, P's, ...), the
+    one source of :func:`numpy_stage1`'s and :func:`compiled_stage1`'s kinematics."""
+    a, b, c, d, u, v = A_, B_, C_, D_, U_, V_
+    al, be = u / b, v / b
+    ct, st = np.cos(th), np.sin(th)
+    Ax, Ay = a * ct, a * st
+    VAx, VAy = -omega * Ay, omega * Ax
+    w2 = omega * omega
+    AAx, AAy = -w2 * Ax, -w2 * Ay
+    dx, dy = d - Ax, -Ay
+    inv = 1.0 / (dx * dx + dy * dy)
+    k = 0.5 + 0.5 * (b * b - c * c) * inv
+    h = np.sqrt(b * b * inv - k * k)
+    e1x, e1y = k * dx - h * dy, k * dy + h * dx
+    Bx, By = Ax + e1x, Ay + e1y
+    e2x, e2y = Bx - d, By
+    idet = 1.0 / (e1x * e2y - e1y * e2x)
+    b1 = e1x * VAx + e1y * VAy
+    VBx, VBy = b1 * e2y * idet, -b1 * e2x * idet
+    rvx, rvy = VBx - VAx, VBy - VAy
+    g1 = e1x * AAx + e1y * AAy - (rvx * rvx + rvy * rvy)
+    g2 = -(VBx * VBx + VBy * VBy)
+    ABx, ABy = (g1 * e2y - g2 * e1y) * idet, (e1x * g2 - e2x * g1) * idet
+    Px, Py = Ax + al * e1x - be * e1y, Ay + al * e1y + be * e1x
+    VPx, VPy = VAx + al * rvx - be * rvy, VAy + al * rvy + be * rvx
+    rax, ray = ABx - AAx, ABy - AAy
+    APx, APy = AAx + al * rax - be * ray, AAy + al * ray + be * rax
+    return (ct, st, Ax, Ay, VAx, VAy, AAx, AAy, e1x, e1y, Bx, By, e2x, e2y, VBx, VBy, rvx, rvy,
+            ABx, ABy, Px, Py, VPx, VPy, rax, ray, APx, APy)
+
+
+#: :func:`_crank_rocker_motion` compiled (set by :func:`_compiled` before the loop that calls it)
+_motion_compiled = None
+
+
 def numpy_stage1(theta, omega=OMEGA, chunk=8192):
     """Every array ``run`` stores for the crank-rocker's sweep at constant crank rate, in plain
     numpy written for this one mechanism, in cache-sized chunks: positions, velocities and
@@ -148,29 +186,8 @@ def numpy_stage1(theta, omega=OMEGA, chunk=8192):
     for lo in range(0, S, chunk):
         hi = min(S, lo + chunk)
         th = theta[lo:hi]
-        ct, st = np.cos(th), np.sin(th)
-        Ax, Ay = a * ct, a * st
-        VAx, VAy = -omega * Ay, omega * Ax
-        w2 = omega * omega
-        AAx, AAy = -w2 * Ax, -w2 * Ay
-        dx, dy = d - Ax, -Ay
-        inv = 1.0 / (dx * dx + dy * dy)
-        k = 0.5 + 0.5 * (b * b - c * c) * inv
-        h = np.sqrt(b * b * inv - k * k)
-        e1x, e1y = k * dx - h * dy, k * dy + h * dx
-        Bx, By = Ax + e1x, Ay + e1y
-        e2x, e2y = Bx - d, By
-        idet = 1.0 / (e1x * e2y - e1y * e2x)
-        b1 = e1x * VAx + e1y * VAy
-        VBx, VBy = b1 * e2y * idet, -b1 * e2x * idet
-        rvx, rvy = VBx - VAx, VBy - VAy
-        g1 = e1x * AAx + e1y * AAy - (rvx * rvx + rvy * rvy)
-        g2 = -(VBx * VBx + VBy * VBy)
-        ABx, ABy = (g1 * e2y - g2 * e1y) * idet, (e1x * g2 - e2x * g1) * idet
-        Px, Py = Ax + al * e1x - be * e1y, Ay + al * e1y + be * e1x
-        VPx, VPy = VAx + al * rvx - be * rvy, VAy + al * rvy + be * rvx
-        rax, ray = ABx - AAx, ABy - AAy
-        APx, APy = AAx + al * rax - be * ray, AAy + al * ray + be * rax
+        (ct, st, Ax, Ay, VAx, VAy, AAx, AAy, e1x, e1y, Bx, By, e2x, e2y, VBx, VBy, rvx, rvy,
+         ABx, ABy, Px, Py, VPx, VPy, rax, ray, APx, APy) = _crank_rocker_motion(th, omega)
         for arr, cols in ((X, (Ax, Ay, Bx, By, Px, Py)), (V, (VAx, VAy, VBx, VBy, VPx, VPy)),
                           (A, (AAx, AAy, ABx, ABy, APx, APy))):
             blk = arr[lo:hi]
@@ -262,29 +279,8 @@ def _compiled_stage1_kernel(theta, omega, X, V, A, ang, W, AL, res, cond, status
     prev = np.zeros(3); corr = np.zeros(3)
     for i in range(S):
         th = theta[i]
-        ct, st = math.cos(th), math.sin(th)
-        Ax, Ay = a * ct, a * st
-        VAx, VAy = -omega * Ay, omega * Ax
-        w2 = omega * omega
-        AAx, AAy = -w2 * Ax, -w2 * Ay
-        dx, dy = d - Ax, -Ay
-        inv = 1.0 / (dx * dx + dy * dy)
-        k = 0.5 + 0.5 * (b * b - c * c) * inv
-        h = math.sqrt(b * b * inv - k * k)
-        e1x, e1y = k * dx - h * dy, k * dy + h * dx
-        Bx, By = Ax + e1x, Ay + e1y
-        e2x, e2y = Bx - d, By
-        idet = 1.0 / (e1x * e2y - e1y * e2x)
-        b1 = e1x * VAx + e1y * VAy
-        VBx, VBy = b1 * e2y * idet, -b1 * e2x * idet
-        rvx, rvy = VBx - VAx, VBy - VAy
-        g1 = e1x * AAx + e1y * AAy - (rvx * rvx + rvy * rvy)
-        g2 = -(VBx * VBx + VBy * VBy)
-        ABx, ABy = (g1 * e2y - g2 * e1y) * idet, (e1x * g2 - e2x * g1) * idet
-        Px, Py = Ax + al * e1x - be * e1y, Ay + al * e1y + be * e1x
-        VPx, VPy = VAx + al * rvx - be * rvy, VAy + al * rvy + be * rvx
-        rax, ray = ABx - AAx, ABy - AAy
-        APx, APy = AAx + al * rax - be * ray, AAy + al * ray + be * rax
+        (ct, st, Ax, Ay, VAx, VAy, AAx, AAy, e1x, e1y, Bx, By, e2x, e2y, VBx, VBy, rvx, rvy,
+         ABx, ABy, Px, Py, VPx, VPy, rax, ray, APx, APy) = _motion_compiled(th, omega)
         X[i, 0, 0] = 0.0; X[i, 0, 1] = 0.0; X[i, 3, 0] = d; X[i, 3, 1] = 0.0
         X[i, 1, 0] = Ax; X[i, 1, 1] = Ay; X[i, 2, 0] = Bx; X[i, 2, 1] = By; X[i, 4, 0] = Px; X[i, 4, 1] = Py
         for p in (0, 3):
@@ -365,6 +361,8 @@ def _compiled():
         except ImportError:
             _COMPILED.append(None)
         else:
+            global _motion_compiled
+            _motion_compiled = numba.njit(cache=True)(_crank_rocker_motion)
             _COMPILED.append(numba.njit(cache=True)(_compiled_stage1_kernel))
     return _COMPILED[0]
 

@@ -627,23 +627,11 @@ def test_follow_connects_to_a_running_viewer_and_every_row_arrives(rig, tmp_path
     itself, listening and saving what it receives, as test_rrd's ``run --connect`` test): a
     logger writes in real time while follow runs; the server gets every stored row once on
     the ``step`` timeline, the alarm, and every entity of the ``.rrd`` follow writes beside."""
-    import os
-    import socket
-
-    from test_rrd import RERUN, _free_port, _stream_entities
+    from test_rrd import _stream_entities, saving_rerun_server
 
     scene, log, out = rig
-    port = _free_port()
     saved = tmp_path / "streamed.rrd"
-    # its own process group: the rerun launcher may leave the server as a child of its own
-    server = subprocess.Popen([str(RERUN), "--port", str(port), "--save", str(saved)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)
-    try:
-        def listening():
-            with socket.socket() as sock:
-                return sock.connect_ex(("127.0.0.1", port)) == 0
-        _wait_for(listening, seconds=30, every=0.1)
+    with saving_rerun_server(saved) as port:
         writer = _logger(log, "--rate", 500, "--seconds", 2, "--burst", 5, "--jam-at", 1)
         follower = _follow(scene, out, "--connect", f"rerun+http://127.0.0.1:{port}/proxy",
                            "--idle", 1.5, "--rrd")
@@ -651,13 +639,6 @@ def test_follow_connects_to_a_running_viewer_and_every_row_arrives(rig, tmp_path
         stdout, stderr = follower.communicate(timeout=60)
         assert follower.returncode == 0, stderr
         assert "1,000 rows (1,000 new), complete" in stdout
-        size = -1
-        while saved.exists() and saved.stat().st_size != size:  # until the server has it all
-            size = saved.stat().st_size
-            time.sleep(0.5)
-    finally:
-        os.killpg(server.pid, signal.SIGTERM)
-        server.wait(timeout=30)
     import warnings
 
     from rerun.chunk import RrdReader

@@ -1,4 +1,5 @@
 """The Rerun store against the output contract: write real .rrd files, read them back."""
+import contextlib
 import dataclasses
 import os
 import pathlib
@@ -453,6 +454,37 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
+@contextlib.contextmanager
+def saving_rerun_server(saved):
+    """A real Rerun gRPC server (the rerun binary itself) saving what it receives to ``saved``,
+    listening when this yields its port; ended (with its own children) at the exit, once the
+    file has stopped growing."""
+    import socket
+
+    port = _free_port()
+    # its own process group: the rerun launcher may leave the server as a child of its own,
+    # which must go too (it outlived the test when only the launcher was terminated)
+    server = subprocess.Popen([str(RERUN), "--port", str(port), "--save", str(saved)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
+    try:
+        deadline = time.monotonic() + 30
+        while True:  # wait until the server listens
+            with socket.socket() as sock:
+                if sock.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            assert time.monotonic() < deadline, "the rerun server did not start"
+            time.sleep(0.1)
+        yield port
+        size = -1
+        while saved.exists() and saved.stat().st_size != size:  # until the server has it all
+            size = saved.stat().st_size
+            time.sleep(0.5)
+    finally:
+        os.killpg(server.pid, signal.SIGTERM)
+        server.wait(timeout=30)
+
+
 def _stream_entities(path) -> dict:
     """Entity path -> archetypes of a streamed .rrd (no footer: read eagerly, not lazily)."""
     import warnings
@@ -469,37 +501,14 @@ def _stream_entities(path) -> dict:
 def test_connect_streams_the_recording_to_a_running_viewer(tmp_path):
     """`run --connect ADDR` streams to a running Rerun server (here the rerun binary itself,
     listening and saving what it receives): it gets every entity the written file has."""
-    import socket
-    import time
-
     from linkpipe.__main__ import main
     from conftest import CONFIG_DIR
 
-    port = _free_port()
     saved = tmp_path / "streamed.rrd"
-    # its own process group: the rerun launcher may leave the server as a child of its own,
-    # which must go too (it outlived the test when only the launcher was terminated)
-    server = subprocess.Popen([str(RERUN), "--port", str(port), "--save", str(saved)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)
-    try:
-        deadline = time.monotonic() + 30
-        while True:  # wait until the server listens
-            with socket.socket() as sock:
-                if sock.connect_ex(("127.0.0.1", port)) == 0:
-                    break
-            assert time.monotonic() < deadline, "the rerun server did not start"
-            time.sleep(0.1)
-        out = tmp_path / "out"
+    out = tmp_path / "out"
+    with saving_rerun_server(saved) as port:
         assert main(["run", str(CONFIG_DIR / "fourbar_crank_rocker.toml"), "--out", str(out),
                      "--no-h5", "--quiet", "--connect", f"rerun+http://127.0.0.1:{port}/proxy"]) == 0
-        size = -1
-        while saved.exists() and saved.stat().st_size != size:  # until the server has it all
-            size = saved.stat().st_size
-            time.sleep(0.5)
-    finally:
-        os.killpg(server.pid, signal.SIGTERM)
-        server.wait(timeout=30)
     written = _stream_entities(out / "fourbar_crank_rocker.rrd")
     streamed = _stream_entities(saved)
     assert "/mechanism/points" in streamed and "/solver/log10_residual" in streamed
