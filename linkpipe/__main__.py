@@ -144,18 +144,15 @@ def _number(text: str, kind, low, what: str):
 
 
 def _address(text: str) -> str:
-    """``--connect``: a viewer's address, rerun+http(s)://host[:port]/proxy."""
-    import urllib.parse
+    """``--connect``: a viewer's address as Rerun parses it (rerun+http://host:port/proxy)."""
+    from .stores.rrd import check_address
 
     try:
-        parts = urllib.parse.urlsplit(text)
-        parts.port  # a port that is not a number raises here
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: {exc}; write e.g. "
-                                         "rerun+http://127.0.0.1:9876/proxy") from None
-    if parts.scheme not in ("rerun+http", "rerun+https", "rerun") or not parts.hostname:
+        check_address(text)
+    except LinkpipeError as exc:
         raise argparse.ArgumentTypeError(f"expected a viewer's address like "
-                                         f"rerun+http://127.0.0.1:9876/proxy, got {text!r}")
+                                         f"rerun+http://127.0.0.1:9876/proxy, got {text!r} "
+                                         f"({str(exc).split(': ', 1)[1]})") from None
     return text
 
 

@@ -216,15 +216,24 @@ def integration_end(result) -> int | None:
     return last if last < result.n_steps - 1 else None
 
 
+def check_address(address: str) -> None:
+    """:class:`LinkpipeError` (exit 2) where ``address`` is not a viewer's address Rerun can
+    take: Rerun's own parser decides (``GrpcSink`` parses it; it connects only once set as a
+    stream's sink)."""
+    try:
+        rr.GrpcSink(address)
+    except (RuntimeError, ValueError) as exc:
+        raise LinkpipeError(f"--connect {address}: {exc}; a viewer listens on "
+                            "rerun+http://HOST:PORT/proxy") from None
+
+
 def check_listening(url: str, path=None) -> None:
     """:class:`OutputError` at once where nothing listens at ``url``'s host and port (rerun's
-    own client would retry for 6 s, then fill the terminal with its log lines)."""
+    own client would retry for 6 s, then fill the terminal with its log lines); ``url`` a
+    valid address (:func:`check_address`)."""
+    check_address(url)
     parts = urllib.parse.urlsplit(url)
-    try:
-        host, port = parts.hostname or "127.0.0.1", parts.port or 9876
-    except ValueError as exc:  # a port that is not a number
-        raise LinkpipeError(f"--connect {url}: {exc} — write e.g. "
-                            "rerun+http://127.0.0.1:9876/proxy") from None
+    host, port = parts.hostname or "127.0.0.1", parts.port or 9876
     try:
         socket.create_connection((host, port), timeout=2.0).close()
     except OSError as exc:

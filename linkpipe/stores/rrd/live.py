@@ -33,7 +33,7 @@ import rerun as rr
 
 from ...errors import LinkpipeError
 from ...result import Result
-from . import APPLICATION_ID, log_result
+from . import APPLICATION_ID, check_address, log_result
 from .layout import blueprint
 
 #: what the server keeps for late viewers by default (the oldest rows go first past it)
@@ -120,7 +120,7 @@ class LiveRecording:
             if serve:
                 _check_port(port or 9876)
             elif connect:
-                _check_address(connect)
+                check_address(connect)
         except BaseException:
             if started is not None:
                 started.cancel()
@@ -505,15 +505,6 @@ def _check_port(port: int) -> None:
         except OSError:
             raise LinkpipeError(f"--serve: port {port} is in use (another viewer or server "
                                 "listens there); give --port another one") from None
-
-
-def _check_address(address: str) -> None:
-    """One message (exit 2) where ``address`` is not a viewer's address Rerun can take."""
-    try:
-        rr.GrpcSink(address)  # parses it (connects only once set as a stream's sink)
-    except (RuntimeError, ValueError) as exc:
-        raise LinkpipeError(f"--connect {address}: {exc}; a viewer listens on "
-                            "rerun+http://HOST:PORT/proxy") from None
 
 
 def _joined(parts: list) -> Result:
