@@ -76,17 +76,11 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     _fleet_options(fit)
     study = sub.add_parser("study", help="solve the variants of a [study]: <name>_study.h5 and .rrd")
     study.add_argument("study", help="a study file (configs/studies/*.toml) or a scene with [study]")
-    study.add_argument("--out", default="outputs", help="output folder (default: outputs)")
-    _executor_options(study)
-    study.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
-    study.add_argument("--quiet", action="store_true", help="print only errors")
+    _variants_options(study)
     opt = sub.add_parser("optimize", help="search [optimize] parameters for the best design: "
                          "<name>_optimize.h5, .toml and .rrd")
     opt.add_argument("file", help="a study file or scene with [optimize] and [study.metrics]")
-    opt.add_argument("--out", default="outputs", help="output folder (default: outputs)")
-    _executor_options(opt)
-    opt.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
-    opt.add_argument("--quiet", action="store_true", help="print only errors")
+    _variants_options(opt)
     fol = sub.add_parser("follow", help="follow a log while it is written: <name>.h5 grows, "
                          "the viewer streams")
     fol.add_argument("scene", help="a scene with [time] log = <the growing log>")
@@ -129,6 +123,15 @@ def _executor_options(p) -> None:
                        help="run batches on a local Dask cluster of N worker processes")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run batches on an existing Dask cluster (tcp://host:8786)")
+
+
+def _variants_options(p) -> None:
+    """What ``study`` and ``optimize`` (many variants of a scene) both take: --out, where the
+    batches run, --no-rrd, --quiet."""
+    p.add_argument("--out", default="outputs", help="output folder (default: outputs)")
+    _executor_options(p)
+    p.add_argument("--no-rrd", action="store_true", help="do not write the Rerun recording")
+    p.add_argument("--quiet", action="store_true", help="print only errors")
 
 
 def _number(text: str, kind, low, what: str):

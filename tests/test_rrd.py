@@ -45,62 +45,48 @@ class Recording:
         """Return the pandas frame of ``entity`` on the ``step`` timeline (static columns too)."""
         return self.store.reader(index="step", contents=entity).to_pandas()
 
-    def view_titles(self) -> set[str]:
-        """The display names of the embedded blueprint's views."""
+    def _named(self, contents: str, kind: str):
+        """(the blueprint's frame of ``contents``, [(path, display name)] of each ``kind``
+        ("ViewBlueprint", "ContainerBlueprint") that has one)."""
         (entry,) = self.blueprints
         store = self.reader.store(store=entry).stream().collect()
-        frame = _frame(store.reader(index="blueprint", contents="/view/**"))
-        return {str(name) for col in frame.columns if col.endswith("ViewBlueprint:display_name")
-                for value in frame[col].dropna() for name in value}
+        frame = _frame(store.reader(index="blueprint", contents=contents))
+        named = [(col.split(":", 1)[0], str(name)) for col in frame.columns
+                 if col.endswith(f":{kind}:display_name")
+                 for (name,) in [[n for v in frame[col].dropna() for n in v]]]  # one each
+        return frame, named
+
+    def view_titles(self) -> set[str]:
+        """The display names of the embedded blueprint's views."""
+        return {name for _, name in self._named("/view/**", "ViewBlueprint")[1]}
 
     def views(self) -> dict[str, list[str]]:
         """{display name: the view's contents queries} of the embedded blueprint."""
-        (entry,) = self.blueprints
-        store = self.reader.store(store=entry).stream().collect()
-        frame = _frame(store.reader(index="blueprint", contents="/view/**"))
-        out = {}
-        for col in frame.columns:
-            if col.endswith(":ViewBlueprint:display_name"):
-                view = col.split(":", 1)[0]
-                (name,) = [n for v in frame[col].dropna() for n in v]
-                query = f"{view}/ViewContents:ViewContents:query"
-                out[str(name)] = [str(q) for v in frame[query].dropna() for q in v]
-        return out
+        frame, named = self._named("/view/**", "ViewBlueprint")
+        return {name: [str(q) for v in frame[f"{view}/ViewContents:ViewContents:query"].dropna()
+                       for q in v] for view, name in named}
 
     def legends(self) -> dict[str, bool]:
         """{display name: whether its plot legend is visible} of the embedded blueprint's
         views that set one (a legend set only by its corner is visible)."""
-        (entry,) = self.blueprints
-        store = self.reader.store(store=entry).stream().collect()
-        frame = _frame(store.reader(index="blueprint", contents="/view/**"))
+        frame, named = self._named("/view/**", "ViewBlueprint")
         out = {}
-        for col in frame.columns:
-            if col.endswith(":ViewBlueprint:display_name"):
-                view = col.split(":", 1)[0]
-                (name,) = [n for v in frame[col].dropna() for n in v]
-                corner = f"{view}/PlotLegend:PlotLegend:corner"
-                visible = f"{view}/PlotLegend:PlotLegend:visible"
-                if visible in frame.columns:
-                    out[str(name)] = bool([x for v in frame[visible].dropna() for x in v][0])
-                elif corner in frame.columns:
-                    out[str(name)] = True
+        for view, name in named:
+            corner = f"{view}/PlotLegend:PlotLegend:corner"
+            visible = f"{view}/PlotLegend:PlotLegend:visible"
+            if visible in frame.columns:
+                out[name] = bool([x for v in frame[visible].dropna() for x in v][0])
+            elif corner in frame.columns:
+                out[name] = True
         return out
 
     def containers(self) -> dict[str, dict[str, object]]:
         """{display name: {component: value}} of the embedded blueprint's named containers
         (``container_kind``, ``grid_columns``, ...)."""
-        (entry,) = self.blueprints
-        store = self.reader.store(store=entry).stream().collect()
-        frame = _frame(store.reader(index="blueprint", contents="/container/**"))
-        out = {}
-        for col in frame.columns:
-            if col.endswith(":ContainerBlueprint:display_name"):
-                path = col.split(":", 1)[0]
-                (name,) = [n for v in frame[col].dropna() for n in v]
-                out[str(name)] = {
-                    c.rsplit(":", 1)[1]: [x for v in frame[c].dropna() for x in v]
-                    for c in frame.columns if c.startswith(f"{path}:")}
-        return out
+        frame, named = self._named("/container/**", "ContainerBlueprint")
+        return {name: {c.rsplit(":", 1)[1]: [x for v in frame[c].dropna() for x in v]
+                       for c in frame.columns if c.startswith(f"{path}:")}
+                for path, name in named}
 
     def static(self, entity, component):
         return self.store.reader(index=None, contents=entity).to_pandas()[f"{entity}:{component}"][0]
