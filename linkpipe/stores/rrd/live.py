@@ -133,7 +133,7 @@ class LiveRecording:
         self._opening = ("open", template, serve, connect, port, memory,
                          None if file is None else str(file))
         self._failed: BaseException | None = None
-        self._failed_at_end = self._queue_ended = False  # a failure after the last rows went
+        self._told = False  # _failed raised here already (by add or note)
         self._ready = threading.Event()  # the process said "ready"
         # not waited for: the process starts (imports rerun, opens its sinks) while follow
         # solves its first block; it says "ready" with the address it serves or connects to
@@ -160,6 +160,7 @@ class LiveRecording:
 
     def _put(self, item) -> None:
         if self._failed is not None:
+            self._told = True
             raise self._failed
         self._queue.put(item)
 
@@ -200,7 +201,6 @@ class LiveRecording:
                         self._failed = self._failed or LinkpipeError(
                             f"the recording's process is gone ({exc!r})")
             if items[-1] is _END:
-                self._queue_ended = True
                 return
 
     def _messages(self, items: list) -> list:
@@ -248,7 +248,6 @@ class LiveRecording:
                 self._ready.set()
             elif message[0] == "failed":
                 self._failed = LinkpipeError(message[1])
-                self._failed_at_end = self._queue_ended
             elif message[0] == "closed":
                 self.cpu_seconds = message[1]
                 return
@@ -285,7 +284,7 @@ class LiveRecording:
             raise ViewerTimeout(f"the viewer at {self.address} took none of the last rows for "
                                 f"{CLOSE_SECONDS:g} s: its stream was stopped (every row is in "
                                 "the .h5)")
-        if self._failed is not None and self._failed_at_end:
+        if self._failed is not None and not self._told:  # after the last add: said here
             raise self._failed
 
 
