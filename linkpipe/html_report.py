@@ -37,15 +37,17 @@ def write_report(h5_path, out_path=None) -> pathlib.Path:
     h5_path = pathlib.Path(h5_path)
     out = pathlib.Path(out_path) if out_path else h5_path.with_suffix(".html")
     root, variables = read_plain(h5_path)
-    if not {"evaluation", "variant", "status"} & set(variables):
+    draw = next((draw for marker, draw in (("evaluation", _optimize_page),
+                                           ("variant", _study_page), ("status", _run_page))
+                 if marker in variables), None)  # the file's kind: the variable only it has
+    if draw is None:
         what = ("a fit's file (its figures are the table `fit` printed and the fitted scene "
                 "beside it)" if "fitted" in variables else
                 "an accuracy ladder's file (its recording shows the trade)" if "knob" in variables
                 else "not a file that run, study or optimize wrote")
         raise LinkpipeError(f"{h5_path}: {what}; report takes a .h5 that run, study or "
                             "optimize wrote")
-    page = (_optimize_page if "evaluation" in variables else
-            _study_page if "variant" in variables else _run_page)(h5_path, root, variables)
+    page = draw(h5_path, root, variables)
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(page, encoding="utf-8")
     os.replace(tmp, out)
