@@ -241,10 +241,6 @@ def follow(scene_path: str, out="outputs", serve: bool = False, connect: str | N
             return False
         return idle is None or _time.monotonic() - last_new[0] < idle
 
-    if connect:  # nothing listening there: said at once, before any file or process
-        from ..stores.rrd import check_listening
-
-        check_listening(connect)
     started = None
     if serve or connect or rrd:  # the recording's process imports while the scene is read
         from ..stores.rrd.live import start_process

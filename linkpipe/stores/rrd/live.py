@@ -33,7 +33,7 @@ import rerun as rr
 
 from ...errors import LinkpipeError
 from ...result import Result
-from . import APPLICATION_ID, check_address, log_result
+from . import APPLICATION_ID, check_listening, log_result
 from .layout import blueprint
 
 #: what the server keeps for late viewers by default (the oldest rows go first past it)
@@ -119,8 +119,8 @@ class LiveRecording:
         try:
             if serve:
                 _check_port(port or 9876)
-            elif connect:
-                check_address(connect)
+            elif connect:  # a valid address where a viewer listens: said before any file
+                check_listening(connect)
         except BaseException:
             if started is not None:
                 started.cancel()
