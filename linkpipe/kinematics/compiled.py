@@ -1,0 +1,57 @@
+"""Whether stage 1 takes its compiled loops (numba) or numpy: the one place that decides.
+
+The compiled loops (:mod:`.chain_kernel`: the closed-form dyads; :mod:`.block_kernel`: the
+sparse engine's exact condition) run the numpy path's arithmetic in its order, step by step,
+with the same transcendental functions taken from numpy beforehand (cos and sin of the
+drivers, arctan2 of the links): they give the numpy path's numbers to the bit, which
+``tests/test_compiled.py`` proves on families of mechanisms. So the choice changes no stored
+number, only the time.
+
+They pay for themselves on long sweeps: importing numba and loading the cached machine code
+costs about 0.4 s once per process (about 10 s the first time after an install, when numba
+compiles them into ``__pycache__``), and they save about 0.2 us a step
+(``benchmarks/bench_sweep.py``). A sweep of :data:`COMPILED_FROM` steps or more takes them;
+``LINKPIPE_COMPILED=0`` in the environment turns them off, ``=1`` takes them at any length.
+"""
+from __future__ import annotations
+
+import functools
+import os
+
+#: a sweep of this many steps or more takes the compiled loops (when numba imports)
+COMPILED_FROM = 100_000
+
+
+def wanted(n_steps: int) -> bool:
+    """True when a sweep of ``n_steps`` steps takes the compiled loops."""
+    flag = os.environ.get("LINKPIPE_COMPILED", "")
+    if flag == "0":
+        return False
+    if flag != "1" and n_steps < COMPILED_FROM:
+        return False
+    return available()
+
+
+@functools.cache
+def available() -> bool:
+    """True when numba imports (it is a dependency; a broken install falls back to numpy)."""
+    try:
+        import numba  # noqa: F401
+    except Exception:  # noqa: BLE001 - any failure to import means: numpy
+        return False
+    return True
+
+
+def loop(fn):
+    """``fn``, a module-level function of scalar loops over steps, to be compiled by numba on
+    first use: returns ``get()`` -> the compiled function (numba is imported then, not when
+    the module defining ``fn`` is). Cached on disk, without the GIL, IEEE semantics (division
+    by zero gives inf or NaN, as numpy's; no fast-math, so no fused multiply-adds: every
+    operation rounds as numpy's)."""
+    @functools.cache
+    def get():
+        import numba
+
+        return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=False)(fn)
+
+    return get
