@@ -42,6 +42,20 @@ def available() -> bool:
     return True
 
 
+def jit(fn=None, *, inline: bool = False):
+    """``fn`` compiled by numba, now (numba is imported here: a module of compiled loops is
+    imported only where :func:`wanted` said so), with :func:`loop`'s options; ``inline``: a
+    small function inlined where it is called (so that a loop calling it stays one loop the
+    compiler can vectorise)."""
+    import numba
+
+    def wrap(f):
+        return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=False,
+                          inline="always" if inline else "never")(f)
+
+    return wrap if fn is None else wrap(fn)
+
+
 def loop(fn):
     """``fn``, a module-level function of scalar loops over steps, to be compiled by numba on
     first use: returns ``get()`` -> the compiled function (numba is imported then, not when

@@ -324,7 +324,7 @@ class ChainSweep:
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
           order: int = 2, gaps: bool = False, max_abs_phi=None, chunk: int = CHUNK,
           fixed_position: np.ndarray | None = None, period: int = 0, rows=None,
-          carry: dict | None = None, links: bool = False) -> ChainSweep:
+          carry: dict | None = None, links: bool = False, compiled: bool = False) -> ChainSweep:
     """Solve every step: positions, and velocities (order >= 1) and accelerations (order 2).
 
     ``s``, ``s_dot``, ``s_ddot`` (S, n_drivers) in internal units. Steps where a dyad has no real
@@ -350,7 +350,17 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     buffers while they are in cache: the same formulas, so the same numbers as the separate
     passes over the whole arrays at every step whose points are all finite (the others are
     the caller's to recompute from the final arrays).
+
+    ``compiled`` (:func:`.compiled.wanted` of the sweep's length): the same numbers by the
+    compiled loop (:mod:`.chain_kernel`) where it takes the solve (plain constants: not a
+    study's per-row numbers, pivots or runs of variants).
     """
+    if compiled and fixed_position is None and not period and rows is None and all(
+            st.take(slice(0, 1)) is st for st in plan.steps):
+        from . import chain_kernel  # imports numba: only where the compiled loop is taken
+
+        return chain_kernel.solve(plan, s, s_dot, s_ddot, order, gaps, max_abs_phi, carry,
+                                  links, chunk)
     model = plan.model
     S = s.shape[0]
     P = model.n_points

@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import SceneError
 from ..model import Model
 from ..status import NO_ASSEMBLY, NO_INPUT, OK
+from . import compiled
 from .branches import refine_branches, set_branches
 from .decompose import decompose
 from .dyads import branch_check, solve_chain
@@ -103,14 +104,17 @@ def dyad_plan(model: Model, s, forced: bool):
 
 
 def dyad_sweep(model: Model, chain, s, s_dot, s_ddot, order: int, forced: bool,
-               carry: dict | None = None, links: bool = False) -> Sweep | None:
+               carry: dict | None = None, links: bool = False,
+               compiled: bool = False) -> Sweep | None:
     """The dyads' Sweep of the steps ``s`` (S, nd), or None where auto must leave them for
     Newton (a step fails :func:`branch_check`). ``carry``: kept across the segments of one
     sweep (:func:`solve_chain`), so that segments give the whole sweep's rows and checks;
-    ``links``: the links' directions and rates from the same pass."""
+    ``links``: the links' directions and rates from the same pass; ``compiled``: by the
+    compiled loop (the same numbers: :func:`solve_chain`)."""
     tol_abs = model.tolerance()
     sw = solve_chain(chain, s, s_dot, s_ddot, order=order, gaps=not forced,
-                     max_abs_phi=max_abs_phi(model), carry=carry, links=links)
+                     max_abs_phi=max_abs_phi(model), carry=carry, links=links,
+                     compiled=compiled)
     if not (forced or branch_check(chain, sw)):
         return None
     bad = sw.ok & ~(sw.residual <= 10 * tol_abs)  # a redundant constraint not met
@@ -188,6 +192,7 @@ class Plan:
     def __init__(self, model: Model, s: np.ndarray):
         self.model, self.s = model, s
         self.method = METHODS[model.scene.solver.method]
+        self.compiled = compiled.wanted(len(s))  # the dyads' compiled loop on a long sweep
         self.present = np.isfinite(s).all(axis=1)  # False where a logged value is missing
         self.solvable, self.unreached, self.reach_note = self.present, 0, ""
         try:
@@ -257,10 +262,11 @@ class Plan:
         model, chain, forced = self.model, self.chain, self.method.forced
         present, s = self.solvable[rows], self.s[rows]
         if present.all():
-            return dyad_sweep(model, chain, s, sd, sdd, order, forced, self.chain_carry, links)
+            return dyad_sweep(model, chain, s, sd, sdd, order, forced, self.chain_carry, links,
+                              self.compiled)
         idx = np.flatnonzero(present)
         sub = (dyad_sweep(model, chain, s[idx], sd[idx], sdd[idx], order, forced,
-                          self.chain_carry) if len(idx) else None)
+                          self.chain_carry, compiled=self.compiled) if len(idx) else None)
         if sub is None and len(idx):
             return None
         if sub is None:  # no step of these solved: every one out of reach or without a value
