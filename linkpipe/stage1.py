@@ -209,8 +209,8 @@ class Stage1:
         if raw is not None:
             redo = np.flatnonzero(sweep.status != OK)
             raw[redo] = model.link_angles(X[redo])
-        link_angle, self.angle_carry = kin.link_angles_unwrapped(model, X, carry=self.angle_carry,
-                                                                 s=s, raw=raw)
+        link_angle, self.angle_carry = kin.link_angles_unwrapped(
+            model, X, carry=self.angle_carry, s=s, raw=raw, compiled=self.plan.compiled)
         self._add("positions", t0)
         self.tell("jacobian")
         t0 = _time.perf_counter()
