@@ -190,7 +190,7 @@ def test_solve_takes_the_compiled_loop_on_a_long_sweep_and_every_stored_array_is
         monkeypatch):
     """``linkpipe.solve`` of the crank-rocker: LINKPIPE_COMPILED=1 (the loop at any length)
     and =0 (numpy) store the same numbers in every variable; the loop is taken where asked
-    (counted), and not for a sweep shorter than COMPILED_FROM when the environment is silent."""
+    (counted), and not for a sweep shorter than WARM_FROM when the environment is silent."""
     scene = linkpipe.load_scene(CONFIG_DIR / "fourbar_crank_rocker.toml")
     calls = []
     real = chain_kernel.solve
@@ -207,7 +207,7 @@ def test_solve_takes_the_compiled_loop_on_a_long_sweep_and_every_stored_array_is
         np.testing.assert_array_equal(b.data, a.data, err_msg=a.name)
     monkeypatch.delenv("LINKPIPE_COMPILED")
     calls.clear()
-    assert len(numpy_result.status) < compiled.COMPILED_FROM
+    assert len(numpy_result.status) < compiled.WARM_FROM
     linkpipe.solve(scene)
     assert not calls
 
@@ -234,3 +234,18 @@ def test_steps_out_of_reach_are_nan_in_the_same_places():
     out = _assert_same(*_chain_of(scene), chunk=7, segments=3)
     assert 0 < (~out["ok"]).sum() < len(out["ok"])
     assert np.isnan(out["position"][~out["ok"]]).any() and np.isnan(out["residual"][~out["ok"]]).all()
+
+
+def test_the_compiled_loops_are_taken_where_they_pay(monkeypatch):
+    """compiled.wanted: a process that has not loaded them takes them from COLD_FROM steps
+    (where their saving repays loading them), one that has from WARM_FROM;
+    LINKPIPE_COMPILED=0 never, =1 at any length."""
+    monkeypatch.delenv("LINKPIPE_COMPILED", raising=False)
+    monkeypatch.setattr(compiled, "_loaded", False)
+    assert not compiled.wanted(360_000) and compiled.wanted(compiled.COLD_FROM)
+    monkeypatch.setattr(compiled, "_loaded", True)
+    assert compiled.wanted(360_000) and not compiled.wanted(compiled.WARM_FROM - 1)
+    monkeypatch.setenv("LINKPIPE_COMPILED", "0")
+    assert not compiled.wanted(10 * compiled.COLD_FROM)
+    monkeypatch.setenv("LINKPIPE_COMPILED", "1")
+    assert compiled.wanted(2)

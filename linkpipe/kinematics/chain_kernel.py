@@ -94,8 +94,7 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
     gap = np.full(S, np.inf) if gaps else np.empty(0)
     miss = np.full(S, np.inf) if gaps else np.empty(0)
     residual = np.empty(S) if max_abs_phi is not None else None
-    angle = np.empty((S, L)) if links else np.empty((0, L))
-    ldy = np.empty((S, L)) if links else np.empty((0, L))
+    angle = np.empty((S, L)) if links else None
     w = np.empty((S, L)) if links and order >= 1 else np.empty((0, L))
     al = np.empty((S, L)) if links and order >= 2 else np.empty((0, L))
     prev = np.zeros((G, 3))
@@ -127,12 +126,12 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
                    X0[:, 1].copy(), fixed, moving, link_a, link_b, sT, sdT, sddT, cosv, sinv,
                    order, 1 if gaps else 0, 1 if links else 0, BRANCH_MARGIN, *cols, geo, g2,
                    total, rt, lc, X[lo:hi], V[lo:hi], A[lo:hi], ok[lo:hi], miss[lo:hi], gap[lo:hi],
-                   prev, has_prev, angle[lo:hi], ldy[lo:hi], w[lo:hi], al[lo:hi])
+                   prev, has_prev, w[lo:hi], al[lo:hi])
+            if links:  # the links' directions from the kernel's (dx, dy) columns (L, n)
+                angle[lo:hi] = np.arctan2(lc[1, :, :n], lc[0, :, :n]).T
             if max_abs_phi is not None:
                 pts = {int(p): (cols[0][p, :n], cols[1][p, :n]) for p in moving}
                 residual[lo:hi] = max_abs_phi(pts, sT if nd else np.zeros((0, n)), trig)
-    if links:  # the kernel left each link's (dx, dy) in (angle, ldy)
-        np.arctan2(ldy, angle, out=angle)
     if gaps:
         for k, p in enumerate(gap_points):
             if has_prev[k]:
@@ -147,7 +146,7 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
         if residual is not None:
             residual[bad] = np.nan
     return ChainSweep(X, V if order >= 1 else None, A if order >= 2 else None, ok, residual,
-                      gap if gaps else None, angle if links else None,
+                      gap if gaps else None, angle,
                       (w, al if order >= 2 else None) if links and order >= 1 else None,
                       miss if gaps else None)
 
@@ -155,12 +154,12 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
 @jit
 def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, link_a,
            link_b, sT, sdT, sddT, cosv, sinv, order, gaps, links, margin, PX, PY, VX, VY,
-           AX, AY, GEO, G2, TOT, RT, LC, X, V, A, ok, miss, gap, prev, has_prev, ldx, ldy, w, al):
+           AX, AY, GEO, G2, TOT, RT, LC, X, V, A, ok, miss, gap, prev, has_prev, w, al):
     """One chunk of n steps (``sT``, ``sdT``, ``sddT`` (nd, n)), dyad by dyad, each over the
     chunk's steps (loops the compiler vectorises, as numpy's passes are), on columns (point,
     step) ``PX`` .. ``AY`` (P, >= n), ``GEO`` (P, 5, >= n), ``G2`` (G, >= n): writes X, V, A
-    (n, P, 2), ok, miss, gap (n,), the links' (dx, dy) into ldx, ldy and their rates into w,
-    al (n, L); ``prev`` (G, 3) / ``has_prev`` (G,): each two-root dyad's (x, y, gap^2) at the
+    (n, P, 2), ok, miss, gap (n,), the links' (dx, dy) into ``LC[0]``, ``LC[1]`` (L, >= n)
+    and their rates into w, al (n, L); ``prev`` (G, 3) / ``has_prev`` (G,): each two-root dyad's (x, y, gap^2) at the
     step before the chunk, updated to its last step."""
     n, P = sT.shape[1], x0.shape[0]
     K, G, L = ops_i.shape[0], gap_points.shape[0], link_a.shape[0]
@@ -330,7 +329,7 @@ def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, li
                 oy[i] = (b2 * g1x - b1 * g2x) * idet
         _rows_of(RX, RY, V if o == 1 else A, n)
     # -------------------------------------------------------------------- links
-    if links:  # link by link over the steps, into columns (L, m), then rows (n, L)
+    if links:  # link by link over the steps, into columns (L, m); the rates then into rows
         for j in range(L):
             xa, ya, xb, yb = PX[link_a[j]], PY[link_a[j]], PX[link_b[j]], PY[link_b[j]]
             cx, cy = LC[0, j], LC[1, j]
@@ -350,12 +349,13 @@ def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, li
                     n2 = dx * dx + dy * dy
                     ca[i] = ((dx * (ayb[i] - aya[i]) - dy * (axb[i] - axa[i])) / n2
                              - (wj * 2.0) * (dx * (vxb[i] - vxa[i]) + dy * (vyb[i] - vya[i])) / n2)
-        for i in range(n):
-            for j in range(L):
-                ldx[i, j], ldy[i, j] = LC[0, j, i], LC[1, j, i]
-                if order >= 1:
+        if order >= 1:
+            for i in range(n):
+                for j in range(L):
                     w[i, j] = LC[2, j, i]
-                if order >= 2:
+        if order >= 2:
+            for i in range(n):
+                for j in range(L):
                     al[i, j] = LC[3, j, i]
 
 

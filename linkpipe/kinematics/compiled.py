@@ -7,10 +7,13 @@ drivers, arctan2 of the links): they give the numpy path's numbers to the bit, w
 ``tests/test_compiled.py`` proves on families of mechanisms. So the choice changes no stored
 number, only the time.
 
-They pay for themselves on long sweeps: importing numba and loading the cached machine code
-costs about 0.4 s once per process (about 10 s the first time after an install, when numba
-compiles them into ``__pycache__``), and they save about 0.2 us a step
-(``benchmarks/bench_sweep.py``). A sweep of :data:`COMPILED_FROM` steps or more takes them;
+They are taken where they pay for themselves. Loading them costs about 0.45 s once per
+process (importing numba, starting its compiler and loading the machine code it cached in
+``__pycache__``; about 7 s the first time after an install, when it compiles them), and they
+save about 0.2 us a step (``benchmarks/bench_sweep.py``). So a sweep takes them from
+:data:`COLD_FROM` steps in a process that has not loaded them, and from :data:`WARM_FROM` steps
+once it has (a second long scene of ``run configs/*.toml``, a study, a fit, a notebook's later
+solves). As the numbers are the same either way, this history decides only the time.
 ``LINKPIPE_COMPILED=0`` in the environment turns them off, ``=1`` takes them at any length.
 """
 from __future__ import annotations
@@ -18,18 +21,27 @@ from __future__ import annotations
 import functools
 import os
 
-#: a sweep of this many steps or more takes the compiled loops (when numba imports)
-COMPILED_FROM = 100_000
+#: a sweep of this many steps or more takes the compiled loops where they are not loaded yet:
+#: about where their saving (~0.2 us a step) repays loading them (~0.45 s)
+COLD_FROM = 2_000_000
+#: ... and from this many where they are (shorter sweeps gain too little to matter)
+WARM_FROM = 100_000
+_loaded = False  # a module of compiled loops has been imported in this process
 
 
 def wanted(n_steps: int) -> bool:
-    """True when a sweep of ``n_steps`` steps takes the compiled loops."""
+    """True when a sweep of ``n_steps`` steps takes the compiled loops (module docstring)."""
     flag = os.environ.get("LINKPIPE_COMPILED", "")
     if flag == "0":
         return False
-    if flag != "1" and n_steps < COMPILED_FROM:
+    if flag != "1" and n_steps < (WARM_FROM if _loaded else COLD_FROM):
         return False
     return available()
+
+
+def loaded() -> bool:
+    """True once a module of compiled loops has been imported in this process."""
+    return _loaded
 
 
 @functools.cache
@@ -48,6 +60,9 @@ def jit(fn=None, *, inline: bool = False):
     small function inlined where it is called (so that a loop calling it stays one loop the
     compiler can vectorise)."""
     import numba
+
+    global _loaded
+    _loaded = True
 
     def wrap(f):
         return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=False,
