@@ -69,6 +69,9 @@ def _solved(chain, s, s_dot, s_ddot, use_compiled, chunk, segments=1):
     joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in FIELDS}
     joined["w"] = np.concatenate([p.link_rates[0] for p in parts])
     joined["al"] = np.concatenate([p.link_rates[1] for p in parts])
+    for j in parts[0].trig:  # the angle drivers' cos and sin, handed to the condition
+        joined[f"cos{j}"] = np.concatenate([p.trig[j][0] for p in parts])
+        joined[f"sin{j}"] = np.concatenate([p.trig[j][1] for p in parts])
     return joined, carry
 
 
@@ -76,6 +79,7 @@ def _assert_same(chain, s, s_dot, s_ddot, chunk=8192, segments=1):
     with np.errstate(invalid="ignore", divide="ignore"):
         a, carry_a = _solved(chain, s, s_dot, s_ddot, False, chunk, segments)
         b, carry_b = _solved(chain, s, s_dot, s_ddot, True, chunk, segments)
+    assert a.keys() == b.keys()
     for name in a:
         np.testing.assert_array_equal(b[name], a[name], err_msg=name)
     assert carry_b.keys() == carry_a.keys()

@@ -110,6 +110,7 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
     geo, g2, total = np.empty((P, 5, m)), np.empty((G, m)), np.empty(m)
     rt, lc = np.empty((2, m)), np.empty((4, L, m))  # driven radii's terms; links' columns
     cosv, sinv = np.zeros((nd, m)), np.zeros((nd, m))
+    trig_all = {j: (np.empty(S), np.empty(S)) for j in angle_drivers}
     zeros = np.zeros((nd, m))
     with np.errstate(invalid="ignore", divide="ignore"):
         for lo in range(0, S, chunk):
@@ -120,8 +121,9 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
             sddT = np.ascontiguousarray(s_ddot[lo:hi].T) if order >= 2 else zeros[:, :n]
             trig = {}
             for j in angle_drivers:
-                trig[j] = (np.cos(sT[j]), np.sin(sT[j]))
-                cosv[j, :n], sinv[j, :n] = trig[j]
+                c, sn = trig_all[j][0][lo:hi], trig_all[j][1][lo:hi]
+                trig[j] = (np.cos(sT[j], out=c), np.sin(sT[j], out=sn))
+                cosv[j, :n], sinv[j, :n] = c, sn
             _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, X0[:, 0].copy(),
                    X0[:, 1].copy(), fixed, moving, link_a, link_b, sT, sdT, sddT, cosv, sinv,
                    order, 1 if gaps else 0, 1 if links else 0, BRANCH_MARGIN, *cols, geo, g2,
@@ -148,7 +150,7 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
     return ChainSweep(X, V if order >= 1 else None, A if order >= 2 else None, ok, residual,
                       gap if gaps else None, angle,
                       (w, al if order >= 2 else None) if links and order >= 1 else None,
-                      miss if gaps else None)
+                      miss if gaps else None, trig_all)
 
 
 @jit

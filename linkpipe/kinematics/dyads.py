@@ -319,6 +319,9 @@ class ChainSweep:
     #: dyad's two roots at the step; negative where a dyad has no real root (its circles, or its
     #: circle and line, miss each other), by as much as the chord they would need
     miss: np.ndarray | None = None
+    #: {angle driver: (cos, sin) (S,)} of the driver values the angle dyads turned by
+    #: (numpy's: the condition's entries take them, :func:`linkpipe.kinematics.derivatives`)
+    trig: dict | None = None
 
 
 def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None, s_ddot: np.ndarray | None = None,
@@ -397,6 +400,7 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
     ch.period = period
     fixed_at = _fixed_columns(fixed_position, fixed)
     prev = {} if carry is None else carry  # dyad point -> (x, y, gap^2) at the step before
+    trig = {st.driver: (np.empty(S), np.empty(S)) for st in plan.steps if st.kind == "angle"}
     with np.errstate(invalid="ignore", divide="ignore"):
         for lo in range(0, S, chunk):
             hi = min(S, lo + chunk)
@@ -405,6 +409,8 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             part = plan.take(slice(lo, hi))  # per-row constants cut to the chunk
             total = _position_pass(part, ch, fixed_at, lo, hi, bufs[0], moving)
             X[lo:hi] = bufs[0][:n]
+            for j, (c, sn) in ch.trig.items():
+                trig[j][0][lo:hi], trig[j][1][lo:hi] = c, sn
             if moving:
                 ok[lo:hi] = np.isfinite(total)
             if gaps:
@@ -440,7 +446,8 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             A[np.ix_(bad, moving)] = np.nan
         if residual is not None:
             residual[bad] = np.nan
-    return ChainSweep(X, V, A, ok, residual, gap, angle, None if w is None else (w, al), miss)
+    return ChainSweep(X, V, A, ok, residual, gap, angle, None if w is None else (w, al), miss,
+                      trig)
 
 
 def _position_pass(plan: DyadChain, ch: _Chunk, fixed_at: dict, lo: int, hi: int,

@@ -49,6 +49,8 @@ class Sweep:
     #: ok steps only (the others are recomputed from the final arrays: linkpipe.stage1)
     link_angle: np.ndarray | None = None
     link_rates: tuple | None = None
+    #: {angle driver: (cos, sin) (S,)}, numpy's, where the dyads computed them (else None)
+    trig: dict | None = None
 
     def rows(self, rows: slice) -> "Sweep":
         """The steps ``rows`` of this sweep (positions and statuses; a general path's)."""
@@ -124,7 +126,7 @@ def dyad_sweep(model: Model, chain, s, s_dot, s_ddot, order: int, forced: bool,
     status = np.where(sw.ok & ~bad, OK, NO_ASSEMBLY).astype(np.int8)
     return Sweep(sw.position, sw.residual, np.zeros(s.shape[0], dtype=np.int32), status,
                  "dyads", chain.describe(), sw.velocity, sw.acceleration, sw.link_angle,
-                 sw.link_rates)
+                 sw.link_rates, sw.trig)
 
 
 def start_branches(model: Model, chain, s: np.ndarray):
