@@ -1,0 +1,273 @@
+"""The sparse engine's exact 1-norm condition as one compiled loop over the steps.
+
+What :meth:`.sparse.Engine.condition` computes without an inverse, ``|J|_1 max(|J^-1|'s column
+sums)`` at every step (inf where not finite), in the numpy path's arithmetic and order, so to
+the bit (``tests/test_block_kernel.py``):
+
+* the 1-norm as :meth:`.sparse.Engine.norm1` adds it: each column's ``|entries|`` in the
+  engine's entry order, the largest column (NaN anywhere: NaN);
+* the inverse's column sums as :meth:`.sparse.Engine.inverse_column_sums` forms them: the unit
+  right-hand sides by blocks, each block's right-hand side ``b - E x - ...`` in its ``outer``
+  order, a 1x1 block by one division, a 2x2 block by Cramer's rule as ``_cramer2_into`` does it
+  (``idet = 1 / (a d - b c)``; ``(r0 d - r1 b) idet``, ``(a r1 - c r0) idet``), then
+  ``|x|`` summed over the unknowns in their order, the largest sum (NaN anywhere: NaN);
+* ``cond = norm1 * largest``, inf where not finite.
+
+Only engines whose diagonal blocks are all 1x1 or 2x2 take it (:func:`supported`): a larger
+block is solved by LAPACK (``np.linalg.solve``), whose blocked, FMA-using factorisation this
+loop cannot repeat to the bit, so those engines (the dump truck's and the excavator's 4x4
+blocks) stay on the numpy path.
+
+The steps go in runs of a few dozen, each operation a loop over the run's steps (contiguous,
+so the compiler vectorises it without reordering any sum), every intermediate in the cache.
+With positions instead of entries (:func:`condition`'s ``X``, ``s``), the Jacobian's entries
+are made in the loop too, from the engine's own affine terms (:attr:`.sparse.Engine._terms`,
+read off ``model/equations.py``'s Jacobian) in :meth:`.sparse.Engine.entries_T`'s order, with
+cos and sin of the angle drivers taken from numpy as ``entries_T`` takes them: no (nnz, S)
+array and no gather of the coordinates. An engine with relative angle rows (their entries come
+from the equations at every step, :func:`.affine.relative_entries`) has its entries made by
+numpy and only the condition compiled.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cache import derived
+from . import compiled
+
+#: steps per run of the loop: its scratch (n_q x n_q x RUN doubles for the solves) stays in
+#: the cache for the small Jacobians that take the loop
+RUN = 64
+#: scratch doubles the solves' run may hold (the run is shortened for larger Jacobians)
+RUN_DOUBLES = 1 << 16
+
+
+@dataclass(frozen=True)
+class Tables:
+    """An engine's block structure and affine terms as flat arrays (built once per engine).
+
+    ``nnz`` entries, ``n`` unknowns (= rows), ``nb`` blocks in the engine's order.
+    """
+    nnz: int
+    n: int
+    fused: bool  # the entries can be made in the loop (no relative angle rows)
+    # blocks (nb,): first unknown's position in the block order, end, size (1 or 2)
+    b_start: np.ndarray
+    b_end: np.ndarray
+    b_size: np.ndarray
+    b_cols: np.ndarray  # (nb, 2) the block's unknowns (second -1 for a 1x1 block)
+    b_inner: np.ndarray  # (nb, 4) entries a, b, c, d of the block (nnz: the zero row)
+    o_ptr: np.ndarray  # (2 nb + 1,) outer entries of the block's row j at o_ptr[2b + j] ...
+    o_e: np.ndarray    # outer entries, in each row's order
+    o_c: np.ndarray    # their unknowns
+    col_end: np.ndarray  # (n,) how many unit columns unknown c's solution has (its block's end)
+    ce_ptr: np.ndarray   # (n + 1,) column c's entries ce_e[ce_ptr[c]:ce_ptr[c + 1]]
+    ce_e: np.ndarray
+    # the affine terms (entries_T): entry e = feature[t_f[t_ptr[e]]] * t_c[...] (+ c0) + ...
+    t_ptr: np.ndarray
+    t_f: np.ndarray
+    t_c: np.ndarray
+    c0: np.ndarray
+    add_c0: np.ndarray  # (nnz,) bool(c0), as ``if c0:`` decides
+    q_point: np.ndarray  # (n,) each coordinate's point and axis in X (S, P, 2)
+    q_axis: np.ndarray
+
+
+def supported(eng) -> bool:
+    """True when every diagonal block of the engine is 1x1 or 2x2 (see the module doc)."""
+    return all(len(cols) <= 2 for _, cols, _, _ in eng.blocks)
+
+
+def tables(eng) -> Tables:
+    """The engine's :class:`Tables`, built once per engine."""
+    return derived(eng, "block_kernel", _tables)
+
+
+def _tables(eng) -> Tables:
+    nnz, n = len(eng.rows), eng.model.n_q
+    nb = len(eng.blocks)
+    b_start, b_end, b_size = (np.zeros(nb, np.int64) for _ in range(3))
+    b_cols = np.full((nb, 2), -1, np.int64)
+    b_inner = np.full((nb, 4), nnz, np.int64)
+    o_ptr, o_e, o_c = [0], [], []
+    col_end = np.zeros(n, np.int64)
+    end = 0
+    for b, (rows, cols, inner, outer) in enumerate(eng.blocks):
+        k = len(cols)
+        b_start[b], b_size[b] = end, k
+        end += len(rows)
+        b_end[b] = end
+        for a, c in enumerate(cols[:2]):
+            b_cols[b, a] = c
+            col_end[c] = end
+        flat = [e for row in inner[:2] for e in row[:2]] if k == 2 else [inner[0][0], -1, -1, -1]
+        b_inner[b] = [e if e >= 0 else nnz for e in flat]
+        for j in range(2):
+            for e, c in (outer[j] if j < k else ()):
+                o_e.append(int(e))
+                o_c.append(int(c))
+            o_ptr.append(len(o_e))
+    ce_ptr = np.cumsum([0] + [len(ce) for ce in eng.col_entries])
+    ce_e = np.concatenate([np.asarray(ce, np.int64) for ce in eng.col_entries])
+    t_ptr, t_f, t_c = [0], [], []
+    for _, terms in eng._terms:
+        for f, c in terms:
+            t_f.append(f)
+            t_c.append(c)
+        t_ptr.append(len(t_f))
+    c0 = np.array([c for c, _ in eng._terms], dtype=float)
+    moving = eng.model.moving
+    i64 = lambda a: np.asarray(a, dtype=np.int64)  # noqa: E731
+    return Tables(nnz=nnz, n=n, fused=not len(eng.relative), b_start=b_start, b_end=b_end,
+                  b_size=b_size, b_cols=b_cols, b_inner=b_inner, o_ptr=i64(o_ptr), o_e=i64(o_e),
+                  o_c=i64(o_c), col_end=col_end, ce_ptr=i64(ce_ptr), ce_e=ce_e, t_ptr=i64(t_ptr),
+                  t_f=i64(t_f), t_c=np.asarray(t_c, dtype=float), c0=c0,
+                  add_c0=np.array([bool(c) for c in c0]),
+                  q_point=i64(np.repeat(moving, 2)), q_axis=i64(np.tile([0, 1], len(moving))))
+
+
+def condition(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
+              s: np.ndarray | None = None) -> np.ndarray:
+    """The exact 1-norm condition (S,) of the engine's Jacobians, :meth:`.sparse.Engine.condition`
+    without an inverse to the bit, compiled (the engine :func:`supported`): from entries E
+    (nnz, S), or from positions X (S, P, 2) and driver values s (S, nd), the entries then made
+    in the loop (by numpy first where the engine has relative angle rows)."""
+    t = tables(eng)
+    if E is None and not t.fused:
+        E = eng.entries_of(X, s)
+    S = E.shape[1] if E is not None else X.shape[0]
+    out = np.empty(S)
+    run = max(4, min(RUN, RUN_DOUBLES // max(1, t.n * t.n)))
+    if E is not None:
+        no_x = np.empty((0, 1, 2))
+        _loop()(np.ascontiguousarray(E), True, no_x, np.empty((0, 0)), np.empty((0, 0)), t.t_ptr,
+                t.t_f, t.t_c, t.c0, t.add_c0, t.q_point, t.q_axis, t.n, t.b_start, t.b_end,
+                t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e, t.o_c, t.col_end, t.ce_ptr,
+                t.ce_e, t.nnz, run, out)
+        return out
+    th = np.ascontiguousarray(s.T)[eng.angle]  # cos and sin as entries_T takes them
+    cos, sin = (np.cos(th), np.sin(th)) if len(eng.angle) else (np.empty((0, S)),) * 2
+    _loop()(np.empty((0, 0)), False, np.ascontiguousarray(X, dtype=float), cos, sin, t.t_ptr,
+            t.t_f, t.t_c, t.c0, t.add_c0, t.q_point, t.q_axis, t.n, t.b_start, t.b_end,
+            t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e, t.o_c, t.col_end, t.ce_ptr,
+            t.ce_e, t.nnz, run, out)
+    return out
+
+
+def _condition_loop(E, from_entries, X, cos, sin, t_ptr, t_f, t_c, c0, add_c0, q_point, q_axis,
+                    n, b_start, b_end, b_size, b_cols, b_inner, o_ptr, o_e, o_c, col_end,
+                    ce_ptr, ce_e, nnz, run, out):  # pragma: no cover - compiled by numba
+    """The loop of :func:`condition`; writes ``out`` (S,). Arrays steps last within a run."""
+    S = out.shape[0]
+    na = cos.shape[0]
+    nb = b_start.shape[0]
+    F = np.empty((1 + n + 2 * na, run))    # features of the run
+    ent = np.zeros((nnz + 1, run))          # entries of the run; the last row: the zero entry
+    x = np.empty((n, n, run))               # x[c, i]: unknown c for unit column i (block order)
+    R = np.empty((2, n, run))               # a block's right-hand sides
+    acc = np.empty(run)
+    n1 = np.empty(run)
+    big = np.empty(run)
+    idet = np.empty(run)
+    sums = np.empty((n, run))
+    for lo in range(0, S, run):
+        m = min(run, S - lo)
+        # ---- the entries
+        if from_entries:
+            for e in range(nnz):
+                for t in range(m):
+                    ent[e, t] = E[e, lo + t]
+        else:
+            for k in range(n):
+                p, ax = q_point[k], q_axis[k]
+                for t in range(m):
+                    F[1 + k, t] = X[lo + t, p, ax]
+            for a in range(na):
+                for t in range(m):
+                    F[1 + n + a, t] = cos[a, lo + t]
+                    F[1 + n + na + a, t] = sin[a, lo + t]
+            for e in range(nnz):  # Engine.entries_T: f0 c (+ c0) + f1 c1 + ...
+                p0, p1 = t_ptr[e], t_ptr[e + 1]
+                if p0 == p1:
+                    for t in range(m):
+                        ent[e, t] = c0[e]
+                    continue
+                f, c = t_f[p0], t_c[p0]
+                for t in range(m):
+                    ent[e, t] = F[f, t] * c
+                if add_c0[e]:
+                    for t in range(m):
+                        ent[e, t] = ent[e, t] + c0[e]
+                for p in range(p0 + 1, p1):
+                    f, c = t_f[p], t_c[p]
+                    for t in range(m):
+                        ent[e, t] = ent[e, t] + F[f, t] * c
+        # ---- the 1-norm (Engine.norm1): each column's |entries| in order, the largest
+        for col in range(n):
+            e0 = ce_e[ce_ptr[col]]
+            for t in range(m):
+                acc[t] = abs(ent[e0, t])
+            for p in range(ce_ptr[col] + 1, ce_ptr[col + 1]):
+                e = ce_e[p]
+                for t in range(m):
+                    acc[t] = acc[t] + abs(ent[e, t])
+            if col == 0:
+                for t in range(m):
+                    n1[t] = acc[t]
+            else:
+                for t in range(m):
+                    v, w = acc[t], n1[t]
+                    n1[t] = v if (v > w) | (v != v) else w  # np.maximum: NaN wins
+        # ---- the inverse's columns by blocks (Engine.inverse_column_sums)
+        for b in range(nb):
+            start, end, k = b_start[b], b_end[b], b_size[b]
+            for j in range(k):
+                for i in range(end):
+                    for t in range(m):
+                        R[j, i, t] = 0.0
+                for t in range(m):
+                    R[j, start + j, t] = 1.0
+                for p in range(o_ptr[2 * b + j], o_ptr[2 * b + j + 1]):
+                    e, c = o_e[p], o_c[p]
+                    for i in range(col_end[c]):
+                        for t in range(m):
+                            R[j, i, t] = R[j, i, t] - ent[e, t] * x[c, i, t]
+            c0_ = b_cols[b, 0]
+            if k == 1:
+                d = b_inner[b, 0]
+                for i in range(end):
+                    for t in range(m):
+                        x[c0_, i, t] = R[0, i, t] / ent[d, t]
+            else:
+                c1_ = b_cols[b, 1]
+                ia, ib, ic, id_ = b_inner[b, 0], b_inner[b, 1], b_inner[b, 2], b_inner[b, 3]
+                for t in range(m):
+                    idet[t] = 1.0 / (ent[ia, t] * ent[id_, t] - ent[ib, t] * ent[ic, t])
+                for i in range(end):
+                    for t in range(m):
+                        r0, r1 = R[0, i, t], R[1, i, t]
+                        x[c0_, i, t] = (r0 * ent[id_, t] - r1 * ent[ib, t]) * idet[t]
+                        x[c1_, i, t] = (ent[ia, t] * r1 - ent[ic, t] * r0) * idet[t]
+        # ---- |x| summed over the unknowns in their order; the largest sum; the condition
+        for i in range(n):
+            for t in range(m):
+                sums[i, t] = 0.0
+        for c in range(n):
+            for i in range(col_end[c]):
+                for t in range(m):
+                    sums[i, t] = sums[i, t] + abs(x[c, i, t])
+        for t in range(m):
+            big[t] = sums[0, t]
+        for i in range(1, n):
+            for t in range(m):
+                v, w = sums[i, t], big[t]
+                big[t] = v if (v > w) | (v != v) else w
+        for t in range(m):
+            cond = n1[t] * big[t]
+            out[lo + t] = cond if abs(cond) < np.inf else np.inf
+    return out
+
+
+_loop = compiled.loop(_condition_loop)
