@@ -73,6 +73,7 @@ class Tables:
     add_c0: np.ndarray  # (nnz,) bool(c0), as ``if c0:`` decides
     q_point: np.ndarray  # (n,) each coordinate's point and axis in X (S, P, 2)
     q_axis: np.ndarray
+    order: np.ndarray  # (n,) the rows in block order (inverse_column_sums's unit columns)
 
 
 def supported(eng) -> bool:
@@ -125,7 +126,8 @@ def _tables(eng) -> Tables:
                   o_c=i64(o_c), col_end=col_end, ce_ptr=i64(ce_ptr), ce_e=ce_e, t_ptr=i64(t_ptr),
                   t_f=i64(t_f), t_c=np.asarray(t_c, dtype=float), c0=c0,
                   add_c0=np.array([bool(c) for c in c0]),
-                  q_point=i64(np.repeat(moving, 2)), q_axis=i64(np.tile([0, 1], len(moving))))
+                  q_point=i64(np.repeat(moving, 2)), q_axis=i64(np.tile([0, 1], len(moving))),
+                  order=i64([r for rows, _, _, _ in eng.blocks for r in rows]))
 
 
 def condition(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
@@ -134,32 +136,47 @@ def condition(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
     without an inverse to the bit, compiled (the engine :func:`supported`): from entries E
     (nnz, S), or from positions X (S, P, 2) and driver values s (S, nd), the entries then made
     in the loop (by numpy first where the engine has relative angle rows)."""
+    return _run(eng, E, X, s, False)[0]
+
+
+def parts(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
+          s: np.ndarray | None = None) -> tuple:
+    """(condition (S,), the 1-norm (S,) as :meth:`.sparse.Engine.norm1`, the inverse's column
+    sums (m, S) as :meth:`.sparse.Engine.inverse_column_sums`) from the same loop, arguments as
+    :func:`condition` (the checks compare each with numpy's)."""
+    return _run(eng, E, X, s, True)
+
+
+def _run(eng, E, X, s, keep: bool) -> tuple:
     t = tables(eng)
     if E is None and not t.fused:
         E = eng.entries_of(X, s)
     S = E.shape[1] if E is not None else X.shape[0]
     out = np.empty(S)
+    n1, sums = (np.empty(S), np.empty((t.n, S))) if keep else (np.empty(0), np.empty((0, 0)))
     run = max(4, min(RUN, RUN_DOUBLES // max(1, t.n * t.n)))
-    if E is not None:
-        no_x = np.empty((0, 1, 2))
-        _loop()(np.ascontiguousarray(E), True, no_x, np.empty((0, 0)), np.empty((0, 0)), t.t_ptr,
-                t.t_f, t.t_c, t.c0, t.add_c0, t.q_point, t.q_axis, t.n, t.b_start, t.b_end,
-                t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e, t.o_c, t.col_end, t.ce_ptr,
-                t.ce_e, t.nnz, run, out)
-        return out
-    th = np.ascontiguousarray(s.T)[eng.angle]  # cos and sin as entries_T takes them
-    cos, sin = (np.cos(th), np.sin(th)) if len(eng.angle) else (np.empty((0, S)),) * 2
-    _loop()(np.empty((0, 0)), False, np.ascontiguousarray(X, dtype=float), cos, sin, t.t_ptr,
-            t.t_f, t.t_c, t.c0, t.add_c0, t.q_point, t.q_axis, t.n, t.b_start, t.b_end,
-            t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e, t.o_c, t.col_end, t.ce_ptr,
-            t.ce_e, t.nnz, run, out)
-    return out
+    given = E is not None
+    if given:
+        E, X, cos, sin = np.ascontiguousarray(E), np.empty((0, 1, 2)), np.empty((0, 0)), np.empty((0, 0))
+    else:
+        th = np.ascontiguousarray(s.T)[eng.angle]  # cos and sin as entries_T takes them
+        cos, sin = (np.cos(th), np.sin(th)) if len(eng.angle) else (np.empty((0, S)),) * 2
+        E, X = np.empty((0, 0)), np.ascontiguousarray(X, dtype=float)
+    _loop()(E, given, X, cos, sin, t.t_ptr, t.t_f, t.t_c, t.c0, t.add_c0, t.q_point,
+            t.q_axis, t.n, t.b_start, t.b_end, t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e,
+            t.o_c, t.col_end, t.ce_ptr, t.ce_e, t.nnz, run, out, n1, sums)
+    if not keep:
+        return out, None, None
+    by_row = np.empty_like(sums)
+    by_row[t.order] = sums  # block order -> the rows' order, as inverse_column_sums
+    return out, n1, by_row
 
 
 def _condition_loop(E, from_entries, X, cos, sin, t_ptr, t_f, t_c, c0, add_c0, q_point, q_axis,
                     n, b_start, b_end, b_size, b_cols, b_inner, o_ptr, o_e, o_c, col_end,
-                    ce_ptr, ce_e, nnz, run, out):  # pragma: no cover - compiled by numba
-    """The loop of :func:`condition`; writes ``out`` (S,). Arrays steps last within a run."""
+                    ce_ptr, ce_e, nnz, run, out, n1_out, sums_out):  # pragma: no cover - numba
+    """The loop of :func:`condition`; writes ``out`` (S,) (and the 1-norm ``n1_out`` (S,)
+    and the column sums ``sums_out`` (n, S) in block order where they are not empty)."""
     S = out.shape[0]
     na = cos.shape[0]
     nb = b_start.shape[0]
@@ -267,6 +284,12 @@ def _condition_loop(E, from_entries, X, cos, sin, t_ptr, t_f, t_c, c0, add_c0, q
         for t in range(m):
             cond = n1[t] * big[t]
             out[lo + t] = cond if abs(cond) < np.inf else np.inf
+        if n1_out.shape[0]:
+            for t in range(m):
+                n1_out[lo + t] = n1[t]
+            for i in range(n):
+                for t in range(m):
+                    sums_out[i, lo + t] = sums[i, t]
     return out
 
 
