@@ -206,21 +206,22 @@ def _condition_loop(E, from_entries, X, cos, sin, t_ptr, t_f, t_c, c0, add_c0, q
                     F[1 + n + a, t] = cos[a, lo + t]
                     F[1 + n + na + a, t] = sin[a, lo + t]
             for e in range(nnz):  # Engine.entries_T: f0 c (+ c0) + f1 c1 + ...
-                p0, p1 = t_ptr[e], t_ptr[e + 1]
+                p0, p1, k0 = t_ptr[e], t_ptr[e + 1], c0[e]
+                row = ent[e]
                 if p0 == p1:
                     for t in range(m):
-                        ent[e, t] = c0[e]
+                        row[t] = k0
                     continue
-                f, c = t_f[p0], t_c[p0]
+                fr, c = F[t_f[p0]], t_c[p0]
                 for t in range(m):
-                    ent[e, t] = F[f, t] * c
+                    row[t] = fr[t] * c
                 if add_c0[e]:
                     for t in range(m):
-                        ent[e, t] = ent[e, t] + c0[e]
+                        row[t] = row[t] + k0
                 for p in range(p0 + 1, p1):
-                    f, c = t_f[p], t_c[p]
+                    fr, c = F[t_f[p]], t_c[p]
                     for t in range(m):
-                        ent[e, t] = ent[e, t] + F[f, t] * c
+                        row[t] = row[t] + fr[t] * c
         # ---- the 1-norm (Engine.norm1): each column's |entries| in order, the largest
         for col in range(n):
             e0 = ce_e[ce_ptr[col]]
