@@ -11,7 +11,8 @@ in the same minutes, best CPU seconds (``time.process_time``) and wall seconds o
   ``linalg.CHUNK`` steps: ``Engine.entries_of`` (the Jacobian's entries) and
   ``Engine.condition(E)`` (the 1-norm and the inverse's column sums by block solves);
 * condition, compiled: ``block_kernel.condition(eng, X=..., s=...)`` on the same chunks (the
-  entries made in the loop), the same numbers to the bit (checked here);
+  entries made in the loop), the same numbers to the bit (checked here); and the same given
+  the crank's cos and sin (``trig=``, computed before the timing, as the dyads have them);
 * ``kin.derivatives`` as stage 1 calls it (the dyads' rates given, no influence
   coefficients) with ``compiled=False`` and ``compiled=True``: the whole "jacobian" stage;
 * the first call in a fresh process: ``import numba`` and the loop loaded from numba's cache
@@ -76,12 +77,14 @@ def cases(model, sweep, s, s_dot, s_ddot):
 
     eng = engine(model)
     X, S = sweep.position, len(s)
+    trig = {lo: {0: (np.cos(s[lo:lo + CHUNK, 0]), np.sin(s[lo:lo + CHUNK, 0]))}
+            for lo in range(0, S, CHUNK)}  # the crank's cos and sin, as the dyads have them
 
     def chunked(fn):
         def run():
             out = np.empty(S)
             for lo in range(0, S, CHUNK):
-                out[lo:lo + CHUNK] = fn(X[lo:lo + CHUNK], s[lo:lo + CHUNK])
+                out[lo:lo + CHUNK] = fn(X[lo:lo + CHUNK], s[lo:lo + CHUNK], lo)
             return out
         return run
 
@@ -92,13 +95,15 @@ def cases(model, sweep, s, s_dot, s_ddot):
                                        velocity=sweep.velocity, acceleration=sweep.acceleration,
                                        need_influence=False, compiled=compiled)
 
-    return {
-        "condition, numpy (entries_of + Engine.condition)":
-            chunked(lambda x, ss: eng.condition(eng.entries_of(x, ss))),
-        "condition, compiled (block_kernel.condition)":
-            chunked(lambda x, ss: block_kernel.condition(eng, X=x, s=ss)),
-        "kin.derivatives as stage 1 calls it, compiled=False": derivatives(False),
-        "kin.derivatives as stage 1 calls it, compiled=True": derivatives(True),
+    return {  # key: (what is timed, the function)
+        "numpy": ("condition, numpy (entries_of + Engine.condition)",
+                  chunked(lambda x, ss, lo: eng.condition(eng.entries_of(x, ss)))),
+        "compiled": ("condition, compiled (block_kernel.condition)",
+                     chunked(lambda x, ss, lo: block_kernel.condition(eng, X=x, s=ss))),
+        "trig": ("condition, compiled, given the crank's cos and sin",
+                 chunked(lambda x, ss, lo: block_kernel.condition(eng, X=x, s=ss, trig=trig[lo]))),
+        "der_numpy": ("kin.derivatives as stage 1 calls it, compiled=False", derivatives(False)),
+        "der_compiled": ("kin.derivatives as stage 1 calls it, compiled=True", derivatives(True)),
     }
 
 
@@ -120,31 +125,31 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     model, sweep, s, s_dot, s_ddot = setup(args.steps)
     fns = cases(model, sweep, s, s_dot, s_ddot)
-    results = {name: fn() for name, fn in fns.items()}  # warm-up (and the compile's cache)
-    names = list(fns)
-    np.testing.assert_array_equal(results[names[1]], results[names[0]])
-    for key, value in results[names[2]].items():
+    results = {key: fn() for key, (_, fn) in fns.items()}  # warm-up (and the compile's cache)
+    for key in ("compiled", "trig"):
+        np.testing.assert_array_equal(results[key], results["numpy"])
+    for key, value in results["der_numpy"].items():
         if value is not None:
-            np.testing.assert_array_equal(results[names[3]][key], value, err_msg=key)
-    cpu = {name: np.inf for name in names}
+            np.testing.assert_array_equal(results["der_compiled"][key], value, err_msg=key)
+    cpu = {key: np.inf for key in fns}
     wall = dict(cpu)
     for _ in range(args.repeats):  # alternately: old and new in the same seconds
-        for name, fn in fns.items():
+        for key, (_, fn) in fns.items():
             t0, c0 = time.perf_counter(), time.process_time()
             fn()
-            cpu[name] = min(cpu[name], time.process_time() - c0)
-            wall[name] = min(wall[name], time.perf_counter() - t0)
+            cpu[key] = min(cpu[key], time.process_time() - c0)
+            wall[key] = min(wall[key], time.perf_counter() - t0)
     warm, cold = first_call(False), first_call(True)
     print(f"crank-rocker, {args.steps:,} steps, best of {args.repeats}; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    for name in names:
-        print(f"  {name:55s} {cpu[name]:7.4f} s CPU  {wall[name]:7.4f} s wall")
-    for old, new in ((names[0], names[1]), (names[2], names[3])):
-        print(f"  {new.split(',')[0]}: compiled saves {1e3 * (cpu[old] - cpu[new]):6.1f} ms CPU "
+    for key, (name, _) in fns.items():
+        print(f"  {name:55s} {cpu[key]:7.4f} s CPU  {wall[key]:7.4f} s wall")
+    for old, new in (("numpy", "compiled"), ("numpy", "trig"), ("der_numpy", "der_compiled")):
+        print(f"  {fns[new][0]}: saves {1e3 * (cpu[old] - cpu[new]):5.1f} ms CPU "
               f"({cpu[old] / cpu[new]:.2f}x)")
     print(f"  first call in a fresh process: {warm:.3f} s (numba imported, the loop from its "
           f"cache), {cold:.3f} s with an empty cache (compiled)")
-    ok = cpu[names[1]] < cpu[names[0]] and cpu[names[3]] < cpu[names[2]]
+    ok = cpu["compiled"] < cpu["numpy"] and cpu["der_compiled"] < cpu["der_numpy"]
     print(f"  verdict: {'PASS' if ok else 'FAIL'} (compiled faster than numpy, the same bits); "
           f"issue 29's target is run's marginal at 360k, benchmarks/bench_sweep.py")
     return 0 if ok else 1

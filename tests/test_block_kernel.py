@@ -12,7 +12,8 @@ finite numbers to the last bit, inf at the same steps), from the entries and fro
   their limits: toggle steps and steps beyond reach), with exactly singular steps (two points
   coincident, every point at the origin: a zero determinant), steps one ulp from those, and
   NaN and inf coordinates;
-* ``kin.derivatives(..., compiled=True)`` against ``compiled=False``: every returned array.
+* ``kin.derivatives(..., compiled=True)`` (and given the drivers' cos and sin, as the dyads
+  have them) against ``compiled=False``: every returned array.
 """
 import pathlib
 import sys
@@ -43,11 +44,18 @@ def _same_condition(eng, X, s):
         norm1, sums = eng.norm1(E), eng.inverse_column_sums(E)
         from_entries = block_kernel.condition(eng, E)
         from_positions = block_kernel.parts(eng, None, X, s)
+        with_trig = block_kernel.condition(eng, None, X, s, _trig(eng, s))
     np.testing.assert_array_equal(from_entries, ref)
+    np.testing.assert_array_equal(with_trig, ref)  # the caller's cos and sin, per driver
     np.testing.assert_array_equal(from_positions[0], ref)
     np.testing.assert_array_equal(from_positions[1], norm1)  # and the loop's parts: the same
     np.testing.assert_array_equal(from_positions[2], sums)   # sums (NaN where numpy's are)
     return ref
+
+
+def _trig(eng, s):
+    """{angle driver: (cos, sin)} of s's columns, as a caller (the dyads) computes them."""
+    return {int(j): (np.cos(s[:, j]), np.sin(s[:, j])) for j in eng.angle}
 
 
 def _sweep(model):
@@ -176,22 +184,26 @@ def _calls(monkeypatch):
 
 
 def _derivatives_same(model, sweep, s, s_dot, s_ddot, given=True, **kw):
-    """kin.derivatives with compiled True and False: every returned array equal to the bit
-    (``given``: the sweep's own rates passed in, as stage 1 passes the dyads')."""
+    """kin.derivatives with compiled False, True, and True given the drivers' cos and sin:
+    every returned array equal to the bit (``given``: the sweep's own rates passed in, as
+    stage 1 passes the dyads')."""
     out = []
     X = np.where(np.isfinite(sweep.position), sweep.position, 0.0)
-    for compiled in (False, True):
+    eng = engine(model)
+    trig = None if eng is None else _trig(eng, s)
+    for compiled, trig_ in ((False, None), (True, None), (True, trig)):
         rates = {k: None if getattr(sweep, k) is None else getattr(sweep, k).copy()
                  for k in ("velocity", "acceleration")} if given else {}
         out.append(kin.derivatives(model, X, s, s_dot, s_ddot, sweep.status, True,
-                                   compiled=compiled, **rates, **kw))
-    numpy_, compiled_ = out
-    assert numpy_.keys() == compiled_.keys()
-    for key, value in numpy_.items():
-        if value is None:
-            assert compiled_[key] is None, key
-        else:
-            np.testing.assert_array_equal(compiled_[key], value, err_msg=key)
+                                   compiled=compiled, trig=trig_, **rates, **kw))
+    numpy_ = out[0]
+    for compiled_ in out[1:]:
+        assert numpy_.keys() == compiled_.keys()
+        for key, value in numpy_.items():
+            if value is None:
+                assert compiled_[key] is None, key
+            else:
+                np.testing.assert_array_equal(compiled_[key], value, err_msg=key)
     return numpy_
 
 

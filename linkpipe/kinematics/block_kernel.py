@@ -131,12 +131,17 @@ def _tables(eng) -> Tables:
 
 
 def condition(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
-              s: np.ndarray | None = None) -> np.ndarray:
+              s: np.ndarray | None = None, trig: dict | None = None) -> np.ndarray:
     """The exact 1-norm condition (S,) of the engine's Jacobians, :meth:`.sparse.Engine.condition`
     without an inverse to the bit, compiled (the engine :func:`supported`): from entries E
     (nnz, S), or from positions X (S, P, 2) and driver values s (S, nd), the entries then made
-    in the loop (by numpy first where the engine has relative angle rows)."""
-    return _run(eng, E, X, s, False)[0]
+    in the loop (by numpy first where the engine has relative angle rows).
+
+    ``trig``: {driver: (cos, sin) (S,)} of the angle drivers' values, numpy's ``np.cos`` and
+    ``np.sin`` of ``s[:, driver]`` already computed by the caller (the dyads' own: numpy's
+    functions are elementwise, so these are the numbers :meth:`.sparse.Engine.entries_T`
+    takes); without every angle driver's, they are computed here."""
+    return _run(eng, E, X, s, False, trig)[0]
 
 
 def parts(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
@@ -147,7 +152,7 @@ def parts(eng, E: np.ndarray | None = None, X: np.ndarray | None = None,
     return _run(eng, E, X, s, True)
 
 
-def _run(eng, E, X, s, keep: bool) -> tuple:
+def _run(eng, E, X, s, keep: bool, trig: dict | None = None) -> tuple:
     t = tables(eng)
     if E is None and not t.fused:
         E = eng.entries_of(X, s)
@@ -159,8 +164,7 @@ def _run(eng, E, X, s, keep: bool) -> tuple:
     if given:
         E, X, cos, sin = np.ascontiguousarray(E), np.empty((0, 1, 2)), np.empty((0, 0)), np.empty((0, 0))
     else:
-        th = np.ascontiguousarray(s.T)[eng.angle]  # cos and sin as entries_T takes them
-        cos, sin = (np.cos(th), np.sin(th)) if len(eng.angle) else (np.empty((0, S)),) * 2
+        cos, sin = _trig(eng, s, trig or {})
         E, X = np.empty((0, 0)), np.ascontiguousarray(X, dtype=float)
     _loop()(E, given, X, cos, sin, t.t_ptr, t.t_f, t.t_c, t.c0, t.add_c0, t.q_point,
             t.q_axis, t.n, t.b_start, t.b_end, t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e,
@@ -170,6 +174,22 @@ def _run(eng, E, X, s, keep: bool) -> tuple:
     by_row = np.empty_like(sums)
     by_row[t.order] = sums  # block order -> the rows' order, as inverse_column_sums
     return out, n1, by_row
+
+
+def _trig(eng, s: np.ndarray, trig: dict) -> tuple:
+    """cos and sin (na, S) of the engine's angle drivers, in its order: the caller's where it
+    gave them, else as :meth:`.sparse.Engine.entries_T` takes them."""
+    S, angle = s.shape[0], [int(j) for j in eng.angle]
+    if not angle:
+        return np.empty((0, S)), np.empty((0, S))
+    if all(j in trig for j in angle):
+        cos, sin = ([trig[j][k] for j in angle] for k in (0, 1))
+        if len(angle) == 1:  # a (1, S) view of the caller's array, no copy
+            return (np.ascontiguousarray(cos[0], dtype=float).reshape(1, S),
+                    np.ascontiguousarray(sin[0], dtype=float).reshape(1, S))
+        return np.array(cos, dtype=float), np.array(sin, dtype=float)
+    th = np.ascontiguousarray(s.T)[eng.angle]
+    return np.cos(th), np.sin(th)
 
 
 def _condition_loop(E, from_entries, X, cos, sin, t_ptr, t_f, t_c, c0, add_c0, q_point, q_axis,

@@ -22,7 +22,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
                 need_influence: bool = True, chunk: int = CHUNK, dense: bool = False,
                 fixed_per_row: bool = False, rows=None, residuals: bool = False,
-                need_velocity: bool = True, compiled: bool = False):
+                need_velocity: bool = True, compiled: bool = False, trig: dict | None = None):
     """Velocities, accelerations, condition and influence coefficients of a solved sweep: the
     one place they are solved, from one factorisation of each ok step's Jacobian.
 
@@ -53,7 +53,9 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     ``compiled``: the caller's :func:`.compiled.wanted` for the whole sweep (this call may be
     one segment of it): the exact condition without an inverse then comes from the compiled
     loop (:func:`.block_kernel.condition`, the entries made in it), where the engine's blocks
-    are all 1x1 or 2x2; the same numbers to the bit, only sooner.
+    are all 1x1 or 2x2; the same numbers to the bit, only sooner. ``trig``: {driver: (cos,
+    sin) (S,)} of s's angle drivers, numpy's, where the caller has them (the dyads'), for that
+    loop (else it takes numpy's cos and sin itself).
 
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
     acceleration_residual (None without ``residuals``), status, influence (S, n_q, n_drivers) NaN where not ok, or None.
@@ -85,7 +87,8 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         ok_rows = slice(lo, hi) if len(at) == hi - lo else at  # every step ok: views, not copies
         Xc, sc_ = X[ok_rows], s[ok_rows]
         rows_c = None if rows is None else rows.take(ok_rows)
-        cond, regular_steps = factorise(model, Xc, sc_, rows_c)
+        trig_c = trig and {j: (c[ok_rows], sn[ok_rows]) for j, (c, sn) in trig.items()}
+        cond, regular_steps = factorise(model, Xc, sc_, rows_c, trig_c)
         condition[ok_rows] = cond
         sing = is_singular(cond, rcond)
         status[at[sing]] = SINGULAR
@@ -169,16 +172,16 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
     ``uses_inverse`` False (small Jacobians whose solves are not wanted): the exact condition
     from the inverse's column sums (:meth:`.sparse.Engine.inverse_column_sums`), no inverse;
     ``solve`` then takes block solves. ``compiled`` (with ``uses_inverse`` False): that exact
-    condition from the compiled loop (:func:`.block_kernel.condition`) where the engine's blocks
-    allow it; its entries are made in the loop, and here only if a solve or a product wants
-    them."""
+    condition from the compiled loop (:func:`.block_kernel.condition`, given the chunk's
+    ``trig`` where :func:`derivatives` has it) where the engine's blocks allow it; its entries
+    are made in the loop, and here only if a solve or a product wants them."""
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
     kernel = compiled and with_inverse and not uses_inverse and block_kernel.supported(eng)
 
-    def factorise(model: Model, X, s, rows=None):
+    def factorise(model: Model, X, s, rows=None, trig=None):
         E = entries_at(eng, X, s, rows) if fixed_per_row else None
         if kernel:
-            inv, cond = None, block_kernel.condition(eng, E, X, s)
+            inv, cond = None, block_kernel.condition(eng, E, X, s, trig)
         else:
             E = eng.entries_of(X, s) if E is None else E
             if with_inverse:
@@ -232,7 +235,7 @@ def engine_condition(eng, E: np.ndarray, rcond: float, threshold: float = SINGUL
                                rcond, threshold, within)
 
 
-def _dense_factors(model: Model, X, s, rows=None):
+def _dense_factors(model: Model, X, s, rows=None, trig=None):
     """The dense factorisation of a chunk, as :func:`_engine_factors` returns it."""
     J = model.jacobian(X, s, rows)
     cond, inv = condition_and_inverse(J)  # inv (k, n, m)
