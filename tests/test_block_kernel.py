@@ -36,20 +36,29 @@ CONFIGS = [c for c in sorted((ROOT / "configs").rglob("*.toml")) if "studies" no
 
 
 def _same_condition(eng, X, s):
-    """Assert the compiled condition from the entries and from the positions equals
-    ``Engine.condition`` at positions X (S, P, 2), driver values s (S, nd); return it."""
+    """Assert the compiled condition, from the entries, from the positions and given the
+    drivers' cos and sin, by the engine's own loop and by the general loop, equals
+    ``Engine.condition`` at positions X (S, P, 2), driver values s (S, nd), and the loops' 1-norm
+    and column sums equal ``Engine.norm1`` and ``Engine.inverse_column_sums``; return it."""
     E = eng.entries_of(X, s)
     with np.errstate(all="ignore"):
         ref = eng.condition(E)
         norm1, sums = eng.norm1(E), eng.inverse_column_sums(E)
-        from_entries = block_kernel.condition(eng, E)
-        from_positions = block_kernel.parts(eng, None, X, s)
-        with_trig = block_kernel.condition(eng, None, X, s, _trig(eng, s))
-    np.testing.assert_array_equal(from_entries, ref)
-    np.testing.assert_array_equal(with_trig, ref)  # the caller's cos and sin, per driver
-    np.testing.assert_array_equal(from_positions[0], ref)
-    np.testing.assert_array_equal(from_positions[1], norm1)  # and the loop's parts: the same
-    np.testing.assert_array_equal(from_positions[2], sums)   # sums (NaN where numpy's are)
+    for loop in ("own", "general"):
+        own = block_kernel._own_loop
+        if loop == "general":  # as where the own loop cannot be written
+            block_kernel._own_loop = lambda *args: None
+        try:
+            from_entries = block_kernel.condition(eng, E)
+            from_positions = block_kernel.parts(eng, None, X, s)
+            with_trig = block_kernel.condition(eng, None, X, s, _trig(eng, s))
+        finally:
+            block_kernel._own_loop = own
+        np.testing.assert_array_equal(from_entries, ref, err_msg=loop)
+        np.testing.assert_array_equal(from_positions[0], ref, err_msg=loop)
+        np.testing.assert_array_equal(with_trig, ref, err_msg=loop)  # the caller's cos, sin
+        np.testing.assert_array_equal(from_positions[1], norm1, err_msg=loop)  # the parts too
+        np.testing.assert_array_equal(from_positions[2], sums, err_msg=loop)   # (NaN as numpy's)
     return ref
 
 
@@ -128,6 +137,43 @@ def _assembles(kind, a, b, c, d, start) -> bool:
         r = np.hypot(A[0] - d, A[1])
         return abs(b - c) + 1e-3 < r < b + c - 1e-3
     return abs(A[1] - (c - 2.0)) < b - 1e-3
+
+
+def test_an_engines_own_loop_is_written_once_and_else_the_general_loop_serves(tmp_path,
+                                                                             monkeypatch):
+    """The own loop's source is written once under OWN_FOLDER (the same text keeps its file,
+    so numba's cache of it stays valid) and gives Engine.condition's numbers; where it cannot
+    be written, no own loop: the general loop's numbers, the same."""
+    model = build_model(linkpipe.load_scene(ROOT / "configs" / "jansen.toml"))
+    eng = engine(model)
+    t = block_kernel.tables(eng)
+    monkeypatch.setattr(block_kernel, "_OWN", {})
+    monkeypatch.setattr(block_kernel, "OWN_FOLDER", tmp_path / "kernels")
+    own = block_kernel._own_compiled(t, len(eng.angle), False)
+    (path,) = (tmp_path / "kernels").glob("block_*.py")
+    stamp = path.stat().st_mtime_ns
+    monkeypatch.setattr(block_kernel, "_OWN", {})
+    assert block_kernel._own_compiled(t, len(eng.angle), False) is not None
+    assert path.stat().st_mtime_ns == stamp and len(list(path.parent.glob("*.py"))) == 1
+    sweep, s, _, _ = _sweep(model)
+    X = sweep.position
+    cos, sin = np.cos(s.T[eng.angle]), np.sin(s.T[eng.angle])
+    out = np.empty(len(s))
+    own(X, cos, sin, t.t_c, t.c0, out)
+    np.testing.assert_array_equal(out, eng.condition(eng.entries_of(X, s)))
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(block_kernel, "_OWN", {})
+    monkeypatch.setattr(block_kernel, "OWN_FOLDER", tmp_path / "file" / "kernels")
+    assert block_kernel._own_compiled(t, len(eng.angle), False) is None
+
+
+def test_a_long_engine_takes_the_general_loop():
+    """An engine past OWN_STATEMENTS (the 41 two-by-two blocks of n_fourbar_a02, 82 unknowns)
+    has no own loop; the general loop's numbers are numpy's."""
+    model = build_model(linkpipe.load_scene(ROOT / "configs" / "dynamics" / "n_fourbar_a02.toml"))
+    eng = engine(model)
+    assert block_kernel._source(block_kernel.tables(eng), len(eng.angle), False) is None
+    _same_condition(eng, _sweep(model)[0].position, _sweep(model)[1])
 
 
 def _family(kind, a, b, c, d, start):

@@ -18,18 +18,37 @@ block is solved by LAPACK (``np.linalg.solve``), whose blocked, FMA-using factor
 loop cannot repeat to the bit, so those engines (the dump truck's and the excavator's 4x4
 blocks) stay on the numpy path.
 
-The steps go in runs of a few dozen, each operation a loop over the run's steps (contiguous,
-so the compiler vectorises it without reordering any sum), every intermediate in the cache.
+Two loops do it, the same operations in the same order. An engine's own loop
+(:func:`_source`): this engine's blocks and terms written out once as straight-line Python,
+one statement per operation, every intermediate a local, compiled by numba as one loop over
+the steps (its coordinates gathered into contiguous rows first), which the compiler
+vectorises across the steps; the source is written under this package's ``__pycache__``
+(``block_kernels/``, named by its text's hash) so that numba caches its machine code beside
+it, and an engine of the same structure on other numbers (a fit's trials) takes the same
+loop (the coefficients are its arguments). The general loop (:func:`_condition_loop`): one
+function for every engine, reading the structure from flat tables (:class:`Tables`) in runs
+of a few dozen steps, each operation a loop over the run; it serves where an engine's own
+loop would be too long (:data:`OWN_STATEMENTS`) or cannot be written (a read-only install).
+The own loop is 2-3x faster (``benchmarks/bench_condition.py``); each new structure costs
+one compile (about a second), once per install.
+
 With positions instead of entries (:func:`condition`'s ``X``, ``s``), the Jacobian's entries
 are made in the loop too, from the engine's own affine terms (:attr:`.sparse.Engine._terms`,
 read off ``model/equations.py``'s Jacobian) in :meth:`.sparse.Engine.entries_T`'s order, with
-cos and sin of the angle drivers taken from numpy as ``entries_T`` takes them: no (nnz, S)
-array and no gather of the coordinates. An engine with relative angle rows (their entries come
-from the equations at every step, :func:`.affine.relative_entries`) has its entries made by
-numpy and only the condition compiled.
+cos and sin of the angle drivers taken from numpy as ``entries_T`` takes them (or from the
+caller, ``trig``): no (nnz, S) array and no gather of the coordinates. An engine with relative
+angle rows (their entries come from the equations at every step,
+:func:`.affine.relative_entries`) has its entries made by numpy and only the condition
+compiled.
 """
 from __future__ import annotations
 
+import hashlib
+import importlib.util
+import os
+import pathlib
+import sys
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +61,15 @@ from . import compiled
 RUN = 64
 #: scratch doubles the solves' run may hold (the run is shortened for larger Jacobians)
 RUN_DOUBLES = 1 << 16
+#: steps per run of an engine's own loop (its coordinates gathered first, contiguous)
+OWN_RUN = 256
+#: the longest own loop written (statements per step); a larger engine takes the general loop
+OWN_STATEMENTS = 1500
+#: where the engines' own loops are written, beside this package's compiled files (numba keeps
+#: their machine code beside them); where it cannot be written, the general loop serves
+OWN_FOLDER = pathlib.Path(__file__).resolve().parent / "__pycache__" / "block_kernels"
+_OWN: dict[str, object] = {}
+_OWN_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -159,6 +187,15 @@ def _run(eng, E, X, s, keep: bool, trig: dict | None = None) -> tuple:
     S = E.shape[1] if E is not None else X.shape[0]
     out = np.empty(S)
     n1, sums = (np.empty(S), np.empty((t.n, S))) if keep else (np.empty(0), np.empty((0, 0)))
+    own = _own_loop(t, len(eng.angle), E is not None, keep)
+    if own is not None:
+        kept = (n1, sums) if keep else ()
+        if E is not None:
+            own(np.ascontiguousarray(E), t.t_c, t.c0, out, *kept)
+        else:
+            cos, sin = _trig(eng, s, trig or {})
+            own(np.ascontiguousarray(X, dtype=float), cos, sin, t.t_c, t.c0, out, *kept)
+        return _kept(t, out, n1, sums, keep)
     run = max(4, min(RUN, RUN_DOUBLES // max(1, t.n * t.n)))
     given = E is not None
     if given:
@@ -169,6 +206,10 @@ def _run(eng, E, X, s, keep: bool, trig: dict | None = None) -> tuple:
     _loop()(E, given, X, cos, sin, t.t_ptr, t.t_f, t.t_c, t.c0, t.add_c0, t.q_point,
             t.q_axis, t.n, t.b_start, t.b_end, t.b_size, t.b_cols, t.b_inner, t.o_ptr, t.o_e,
             t.o_c, t.col_end, t.ce_ptr, t.ce_e, t.nnz, run, out, n1, sums)
+    return _kept(t, out, n1, sums, keep)
+
+
+def _kept(t: Tables, out, n1, sums, keep: bool) -> tuple:
     if not keep:
         return out, None, None
     by_row = np.empty_like(sums)
@@ -315,3 +356,123 @@ def _condition_loop(E, from_entries, X, cos, sin, t_ptr, t_f, t_c, c0, add_c0, q
 
 
 _loop = compiled.loop(_condition_loop)
+
+
+# ---------------------------------------------------------------------- an engine's own loop
+def _own_loop(t: Tables, na: int, from_entries: bool, keep: bool = False):
+    """The engine's own loop, compiled (:func:`_source`), or None where it is too long or
+    cannot be written (the general loop :func:`_condition_loop` serves then); once per
+    engine's tables."""
+    return derived(t, f"own {na} {from_entries} {keep}",
+                   lambda t: _own_compiled(t, na, from_entries, keep))
+
+
+def _own_compiled(t: Tables, na: int, from_entries: bool, keep: bool = False):
+    text = _source(t, na, from_entries, keep)
+    if text is None:
+        return None
+    key = hashlib.sha1(text.encode()).hexdigest()[:20]
+    with _OWN_LOCK:  # a study's worker threads: one compile
+        if key not in _OWN:
+            try:
+                _OWN[key] = _load(text, key)
+            except OSError:  # a read-only install: the general loop
+                _OWN[key] = None
+        return _OWN[key]
+
+
+def _load(text: str, key: str):
+    """Write the source (once: the same text keeps its file, so numba's cache of it stays
+    valid), import it and return its loop compiled as :func:`.compiled.loop` compiles."""
+    OWN_FOLDER.mkdir(parents=True, exist_ok=True)
+    path = OWN_FOLDER / f"block_{key}.py"
+    if not path.exists() or path.read_text() != text:
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)  # whole or not at all, for another process reading it
+    name = f"linkpipe.kinematics._block_{key}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # numba's cache finds the module of what it loads by name
+    spec.loader.exec_module(module)
+    return compiled.loop(module.loop)()
+
+
+def _source(t: Tables, na: int, from_entries: bool, keep: bool = False) -> str | None:
+    """The source of one engine's loop: :func:`_condition_loop`'s operations for this
+    engine's blocks and terms written out as one statement each (every intermediate a local:
+    no scratch arrays, and one loop over the steps the compiler vectorises), in the same order
+    (so the same numbers to the bit). The coefficients are arguments, so engines of one
+    structure on other numbers (a fit's trials) share it. ``keep``: the 1-norm and the column
+    sums (block order) written too, as :func:`_condition_loop` writes them. None: longer than
+    OWN_STATEMENTS."""
+    n, nnz = t.n, t.nnz
+    if n * n + 2 * nnz + len(t.o_e) * n > OWN_STATEMENTS:
+        return None
+    args = ("E, tc, tk, out" if from_entries else "X, cos, sin, tc, tk, out") + (
+        ", n1_out, sums_out" if keep else "")
+    head = ["import numpy as np", "", "", f"def loop({args}):", "    S = out.shape[0]"]
+    if not from_entries:  # the coefficients as locals (loaded once, not per step)
+        head += [f"    k{p} = tc[{p}]" for p in range(len(t.t_c))]
+        head += [f"    h{e} = tk[{e}]" for e in range(nnz)]
+        head += [f"    F = np.empty(({n}, {OWN_RUN}))"]
+    head += [f"    for lo in range(0, S, {OWN_RUN}):", f"        m = min({OWN_RUN}, S - lo)"]
+    if not from_entries:  # the run's coordinates, gathered into contiguous rows
+        for k in range(n):
+            head += ["        for i in range(m):",
+                     f"            F[{k}, i] = X[lo + i, {t.q_point[k]}, {t.q_axis[k]}]"]
+    body = []
+    if from_entries:
+        body += [f"e{e} = E[{e}, lo + i]" for e in range(nnz)]
+    else:
+        body += [f"f{1 + k} = F[{k}, i]" for k in range(n)]
+        for a in range(na):
+            body += [f"f{1 + n + a} = cos[{a}, lo + i]", f"f{1 + n + na + a} = sin[{a}, lo + i]"]
+        for e in range(nnz):  # Engine.entries_T: f0 c (+ c0) + f1 c1 + ...
+            p0, p1 = t.t_ptr[e], t.t_ptr[e + 1]
+            if p0 == p1:
+                body.append(f"e{e} = h{e}")
+                continue
+            expr = f"f{t.t_f[p0]} * k{p0}"
+            if t.add_c0[e]:
+                expr = f"({expr}) + h{e}"
+            for p in range(p0 + 1, p1):
+                expr = f"({expr}) + f{t.t_f[p]} * k{p}"
+            body.append(f"e{e} = {expr}")
+    body.append(f"e{nnz} = 0.0")
+    for col in range(n):  # Engine.norm1
+        es = t.ce_e[t.ce_ptr[col]:t.ce_ptr[col + 1]]
+        expr = f"abs(e{es[0]})"
+        for e in es[1:]:
+            expr = f"({expr}) + abs(e{e})"
+        body += ([f"n1 = {expr}"] if col == 0 else
+                 [f"v = {expr}", "n1 = v if (v > n1) | (v != v) else n1"])
+    for b in range(len(t.b_start)):  # Engine.inverse_column_sums
+        start, end, k = t.b_start[b], t.b_end[b], t.b_size[b]
+        for j in range(k):
+            body += [f"r{j}_{i} = {1.0 if i == start + j else 0.0}" for i in range(end)]
+            for p in range(t.o_ptr[2 * b + j], t.o_ptr[2 * b + j + 1]):
+                e, c = t.o_e[p], t.o_c[p]
+                body += [f"r{j}_{i} = r{j}_{i} - e{e} * x{c}_{i}" for i in range(t.col_end[c])]
+        c0_ = t.b_cols[b, 0]
+        if k == 1:
+            body += [f"x{c0_}_{i} = r0_{i} / e{t.b_inner[b, 0]}" for i in range(end)]
+        else:
+            c1_ = t.b_cols[b, 1]
+            ia, ib, ic, id_ = t.b_inner[b]
+            body.append(f"idet = 1.0 / (e{ia} * e{id_} - e{ib} * e{ic})")
+            for i in range(end):
+                body += [f"x{c0_}_{i} = (r0_{i} * e{id_} - r1_{i} * e{ib}) * idet",
+                         f"x{c1_}_{i} = (e{ia} * r1_{i} - e{ic} * r0_{i}) * idet"]
+    for i in range(n):
+        expr = "0.0"
+        for c in range(n):
+            if t.col_end[c] > i:
+                expr = f"({expr}) + abs(x{c}_{i})"
+        body.append(f"q{i} = {expr}")
+    body.append("big = q0")
+    body += [f"big = q{i} if (q{i} > big) | (q{i} != q{i}) else big" for i in range(1, n)]
+    body += ["cond = n1 * big", "out[lo + i] = cond if abs(cond) < np.inf else np.inf"]
+    if keep:
+        body += ["n1_out[lo + i] = n1"] + [f"sums_out[{i}, lo + i] = q{i}" for i in range(n)]
+    return "\n".join(head + ["        for i in range(m):"] + ["            " + s for s in body]) + "\n"
