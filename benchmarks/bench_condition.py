@@ -13,6 +13,7 @@ in the same minutes, best CPU seconds (``time.process_time``) and wall seconds o
 * condition, compiled: ``block_kernel.condition(eng, X=..., s=...)`` on the same chunks (the
   entries made in the loop), the same numbers to the bit (checked here); and the same given
   the crank's cos and sin (``trig=``, computed before the timing, as the dyads have them);
+  and by the general loop (where the engine's own loop cannot be written);
 * ``kin.derivatives`` as stage 1 calls it (the dyads' rates given, no influence
   coefficients) with ``compiled=False`` and ``compiled=True``: the whole "jacobian" stage;
 * the first call in a fresh process: ``import numba`` and the loop loaded from numba's cache
@@ -80,6 +81,15 @@ def cases(model, sweep, s, s_dot, s_ddot):
     trig = {lo: {0: (np.cos(s[lo:lo + CHUNK, 0]), np.sin(s[lo:lo + CHUNK, 0]))}
             for lo in range(0, S, CHUNK)}  # the crank's cos and sin, as the dyads have them
 
+    def general(fn):  # as where the engine's own loop cannot be written
+        def run():
+            own, block_kernel._own_loop = block_kernel._own_loop, lambda *args: None
+            try:
+                return fn()
+            finally:
+                block_kernel._own_loop = own
+        return run
+
     def chunked(fn):
         def run():
             out = np.empty(S)
@@ -102,6 +112,8 @@ def cases(model, sweep, s, s_dot, s_ddot):
                      chunked(lambda x, ss, lo: block_kernel.condition(eng, X=x, s=ss))),
         "trig": ("condition, compiled, given the crank's cos and sin",
                  chunked(lambda x, ss, lo: block_kernel.condition(eng, X=x, s=ss, trig=trig[lo]))),
+        "general": ("condition, compiled, the general loop",
+                    general(chunked(lambda x, ss, lo: block_kernel.condition(eng, X=x, s=ss)))),
         "der_numpy": ("kin.derivatives as stage 1 calls it, compiled=False", derivatives(False)),
         "der_compiled": ("kin.derivatives as stage 1 calls it, compiled=True", derivatives(True)),
     }
@@ -126,7 +138,7 @@ def main(argv=None) -> int:
     model, sweep, s, s_dot, s_ddot = setup(args.steps)
     fns = cases(model, sweep, s, s_dot, s_ddot)
     results = {key: fn() for key, (_, fn) in fns.items()}  # warm-up (and the compile's cache)
-    for key in ("compiled", "trig"):
+    for key in ("compiled", "trig", "general"):
         np.testing.assert_array_equal(results[key], results["numpy"])
     for key, value in results["der_numpy"].items():
         if value is not None:
@@ -144,7 +156,8 @@ def main(argv=None) -> int:
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     for key, (name, _) in fns.items():
         print(f"  {name:55s} {cpu[key]:7.4f} s CPU  {wall[key]:7.4f} s wall")
-    for old, new in (("numpy", "compiled"), ("numpy", "trig"), ("der_numpy", "der_compiled")):
+    for old, new in (("numpy", "compiled"), ("numpy", "trig"), ("numpy", "general"),
+                     ("der_numpy", "der_compiled")):
         print(f"  {fns[new][0]}: saves {1e3 * (cpu[old] - cpu[new]):5.1f} ms CPU "
               f"({cpu[old] / cpu[new]:.2f}x)")
     print(f"  first call in a fresh process: {warm:.3f} s (numba imported, the loop from its "
