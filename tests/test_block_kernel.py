@@ -282,3 +282,30 @@ def test_derivatives_compiled_equals_numpy_for_families(kind, a, b, c, d, start)
     model = build_model(linkpipe.parse_scene(_family(kind, a, b, c, d, start), "m.toml"))
     sweep, s, s_dot, s_ddot = _sweep(model)
     _derivatives_same(model, sweep, s, s_dot, s_ddot, need_influence=False, residuals=True)
+
+
+def test_derivatives_compiled_on_worker_threads():
+    """The loop on four worker threads at once (chunks of 1024 steps of a 40,000-step
+    crank-rocker, the loops released from the GIL): the same arrays as numpy's in one thread."""
+    import dataclasses as dc
+
+    from linkpipe import workers
+
+    scene = linkpipe.load_scene(ROOT / "configs" / "fourbar_crank_rocker.toml")
+    scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=40_000, step=None)
+                                            for d in scene.drivers))
+    model = build_model(scene)
+    sweep, s, s_dot, s_ddot = _sweep(model)
+    with workers.using(1):
+        numpy_ = kin.derivatives(model, sweep.position, s, s_dot, s_ddot, sweep.status, True,
+                                 velocity=sweep.velocity.copy(),
+                                 acceleration=sweep.acceleration.copy(), need_influence=False)
+    with workers.using(4):
+        threads = kin.derivatives(model, sweep.position, s, s_dot, s_ddot, sweep.status, True,
+                                  velocity=sweep.velocity.copy(),
+                                  acceleration=sweep.acceleration.copy(), need_influence=False,
+                                  compiled=True, chunk=1024)
+    for key, value in numpy_.items():
+        if value is not None:
+            np.testing.assert_array_equal(threads[key], value, err_msg=key)
+    assert np.isfinite(numpy_["condition"]).all()
