@@ -40,8 +40,8 @@ def _same_condition(eng, X, s):
     drivers' cos and sin, by the engine's own loop and by the general loop, equals
     ``Engine.condition`` at positions X (S, P, 2), driver values s (S, nd), and the loops' 1-norm
     and column sums equal ``Engine.norm1`` and ``Engine.inverse_column_sums``; return it."""
-    E = eng.entries_of(X, s)
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"):  # inf and NaN coordinates: numpy's entries warn
+        E = eng.entries_of(X, s)
         ref = eng.condition(E)
         norm1, sums = eng.norm1(E), eng.inverse_column_sums(E)
     for loop in ("own", "general"):
@@ -49,9 +49,10 @@ def _same_condition(eng, X, s):
         if loop == "general":  # as where the own loop cannot be written
             block_kernel._own_loop = lambda *args: None
         try:
-            from_entries = block_kernel.condition(eng, E)
-            from_positions = block_kernel.parts(eng, None, X, s)
-            with_trig = block_kernel.condition(eng, None, X, s, _trig(eng, s))
+            with np.errstate(all="ignore"):  # numpy's entries of a relative angle row
+                from_entries = block_kernel.condition(eng, E)
+                from_positions = block_kernel.parts(eng, None, X, s)
+                with_trig = block_kernel.condition(eng, None, X, s, _trig(eng, s))
         finally:
             block_kernel._own_loop = own
         np.testing.assert_array_equal(from_entries, ref, err_msg=loop)
@@ -309,3 +310,52 @@ def test_derivatives_compiled_on_worker_threads():
         if value is not None:
             np.testing.assert_array_equal(threads[key], value, err_msg=key)
     assert np.isfinite(numpy_["condition"]).all()
+
+
+TWO_LINK_ARM = """
+[scene]
+name = "two_link_arm"
+[points]
+O = { x = 0.0, y = 0.0, fixed = true }
+A = { x = 1.0, y = 0.0 }
+B = { x = 1.5, y = 0.8 }
+[[links]]
+name = "upper"
+points = ["O", "A"]
+[[links]]
+name = "fore"
+points = ["A", "B"]
+[[drivers]]
+name = "shoulder"
+angle = ["O", "A"]
+from = 0.0
+to = 90.0
+steps = 2001
+rate = 10.0
+[[drivers]]
+name = "elbow"
+angle = ["A", "B"]
+relative_to = ["A", "O"]
+from = 120.0
+to = -30.0
+steps = 2001
+rate = -9.0
+[outputs]
+kinematics = ["velocity", "acceleration"]
+"""
+
+
+def test_a_relative_angle_drivers_entries_by_numpy_then_the_loop():
+    """A motor between two links (a relative angle row: its entries from the equations at
+    every step, by numpy), then exactly singular, NaN and inf steps: the loop from those
+    entries, the same numbers; kin.derivatives the same arrays."""
+    model = build_model(linkpipe.parse_scene(TWO_LINK_ARM, "arm.toml"))
+    eng = engine(model)
+    assert len(eng.relative) and block_kernel.supported(eng)
+    assert not block_kernel.tables(eng).fused
+    sweep, s, s_dot, s_ddot = _sweep(model)
+    cond = _same_condition(eng, sweep.position, s)
+    assert np.isfinite(cond).all()  # both motors prescribe the arm: regular throughout
+    bad = _same_condition(eng, _degenerate(model, sweep.position, np.random.default_rng(5)), s)
+    assert np.isinf(bad[3::8]).all()
+    _derivatives_same(model, sweep, s, s_dot, s_ddot, need_influence=False, residuals=True)

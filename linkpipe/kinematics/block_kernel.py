@@ -111,7 +111,9 @@ def supported(eng) -> bool:
 
 
 def tables(eng) -> Tables:
-    """The engine's :class:`Tables`, built once per engine."""
+    """The engine's :class:`Tables`, built once per engine (one :func:`supported`)."""
+    if not supported(eng):
+        raise ValueError("a diagonal block larger than 2x2: the numpy path (block_kernel.supported)")
     return derived(eng, "block_kernel", _tables)
 
 
