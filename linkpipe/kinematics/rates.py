@@ -3,11 +3,14 @@
 links' angles and rates: :mod:`.angles`)."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..model import Model
 from .linalg import (CHUNK, ESTIMATE_FROM, EXACT_WITHIN, SINGULAR_AT, condition_and_inverse,
                      estimated_condition, is_singular)
+from . import block_kernel
 from .affine import entries_at
 from .sparse import engine
 from .sparse_lu import uses_sparse
@@ -19,7 +22,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
                 velocity: np.ndarray | None = None, acceleration: np.ndarray | None = None,
                 need_influence: bool = True, chunk: int = CHUNK, dense: bool = False,
                 fixed_per_row: bool = False, rows=None, residuals: bool = False,
-                need_velocity: bool = True):
+                need_velocity: bool = True, compiled: bool = False, trig: dict | None = None):
     """Velocities, accelerations, condition and influence coefficients of a solved sweep: the
     one place they are solved, from one factorisation of each ok step's Jacobian.
 
@@ -47,6 +50,13 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
     with per-row constants (:class:`linkpipe.model.equations.Rows`; a study's variants of other
     link lengths), read at X's rows the same way.
 
+    ``compiled``: the caller's :func:`.compiled.wanted` for the whole sweep (this call may be
+    one segment of it): the exact condition without an inverse then comes from the compiled
+    loop (:func:`.block_kernel.condition`, the entries made in it), where the engine's blocks
+    are all 1x1 or 2x2; the same numbers to the bit, only sooner. ``trig``: {driver: (cos,
+    sin) (S,)} of s's angle drivers, numpy's, where the caller has them (the dyads'), for that
+    loop (else it takes numpy's cos and sin itself).
+
     Returns a dict: velocity, acceleration (or None), condition, velocity_residual,
     acceleration_residual (None without ``residuals``), status, influence (S, n_q, n_drivers) NaN where not ok, or None.
     """
@@ -58,7 +68,7 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
                     or (need_acceleration and acceleration is None))
     factorise = (_dense_factors if eng is None else
                  _engine_factors(eng, model.n_q <= ESTIMATE_FROM, rcond,
-                                 fixed_per_row or rows is not None, uses_inverse))
+                                 fixed_per_row or rows is not None, uses_inverse, compiled))
     S = X.shape[0]
     status = status.copy()
     condition = np.full(S, np.nan)
@@ -77,7 +87,8 @@ def derivatives(model: Model, X: np.ndarray, s, s_dot, s_ddot, status, need_acce
         ok_rows = slice(lo, hi) if len(at) == hi - lo else at  # every step ok: views, not copies
         Xc, sc_ = X[ok_rows], s[ok_rows]
         rows_c = None if rows is None else rows.take(ok_rows)
-        cond, regular_steps = factorise(model, Xc, sc_, rows_c)
+        trig_c = trig and {j: (c[ok_rows], sn[ok_rows]) for j, (c, sn) in trig.items()}
+        cond, regular_steps = factorise(model, Xc, sc_, rows_c, trig_c)
         condition[ok_rows] = cond
         sing = is_singular(cond, rcond)
         status[at[sing]] = SINGULAR
@@ -147,7 +158,7 @@ def dense_chunk(model: Model) -> int:
 
 
 def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool = False,
-                    uses_inverse: bool = True):
+                    uses_inverse: bool = True, compiled: bool = False):
     """The sparse engine's factorisation of a chunk of k steps: (condition (k,),
     ``regular_steps(rows (k,) bool)`` -> the g picked steps' ``solve(b (g, m)) -> J^-1 b``
     (n, g), ``driver_columns(phi_s (g, nd)) -> -J^-1 Phi_s`` over the driver rows (g, n, nd)
@@ -160,23 +171,34 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
     status never rests on an estimate. ``fixed_per_row``: as :func:`derivatives` says.
     ``uses_inverse`` False (small Jacobians whose solves are not wanted): the exact condition
     from the inverse's column sums (:meth:`.sparse.Engine.inverse_column_sums`), no inverse;
-    ``solve`` then takes block solves."""
+    ``solve`` then takes block solves. ``compiled`` (with ``uses_inverse`` False): that exact
+    condition from the compiled loop (:func:`.block_kernel.condition`, given the chunk's
+    ``trig`` where :func:`derivatives` has it) where the engine's blocks allow it; its entries
+    are made in the loop, and here only if a solve or a product wants them."""
     rows_d = slice(eng.model.n_constraints, eng.model.n_rows)
+    kernel = compiled and with_inverse and not uses_inverse and block_kernel.supported(eng)
 
-    def factorise(model: Model, X, s, rows=None):
-        E = entries_at(eng, X, s, rows) if fixed_per_row else eng.entries_of(X, s)
-        if with_inverse:
-            inv = eng.inverse(E) if uses_inverse else None  # (n, m, k)
-            cond = eng.condition(E, inv)
+    def factorise(model: Model, X, s, rows=None, trig=None):
+        E = entries_at(eng, X, s, rows) if fixed_per_row else None
+        if kernel:
+            inv, cond = None, block_kernel.condition(eng, E, X, s, trig)
         else:
-            inv = None
-            cond = engine_condition(eng, E, rcond)
+            E = eng.entries_of(X, s) if E is None else E
+            if with_inverse:
+                inv = eng.inverse(E) if uses_inverse else None  # (n, m, k)
+                cond = eng.condition(E, inv)
+            else:
+                inv = None
+                cond = engine_condition(eng, E, rcond)
 
         def regular_steps(rows):
-            Eg = E if rows.all() else E[:, rows]
+            @functools.cache
+            def entries():  # the picked steps' entries, made on the first solve or product
+                E_ = eng.entries_of(X, s) if E is None else E
+                return E_ if rows.all() else E_[:, rows]
 
             def times_jacobian(x):
-                return np.stack(eng.matvec(Eg, list(x)))
+                return np.stack(eng.matvec(entries(), list(x)))
 
             if inv is not None:
                 invg = inv if rows.all() else inv[:, :, rows]
@@ -189,10 +211,11 @@ def _engine_factors(eng, with_inverse: bool, rcond: float, fixed_per_row: bool =
                 for j in range(phi_s.shape[1]):
                     b = [0.0] * model.n_rows
                     b[rows_d.start + j] = -phi_s[:, j]
-                    cols.append(np.stack(eng.solve(Eg, b), axis=1))
+                    cols.append(np.stack(eng.solve(entries(), b), axis=1))
                 return np.stack(cols, axis=2)
 
-            return lambda b: np.stack(eng.solve(Eg, list(b.T))), driver_columns, times_jacobian
+            return (lambda b: np.stack(eng.solve(entries(), list(b.T))), driver_columns,
+                    times_jacobian)
 
         return cond, regular_steps
 
@@ -212,7 +235,7 @@ def engine_condition(eng, E: np.ndarray, rcond: float, threshold: float = SINGUL
                                rcond, threshold, within)
 
 
-def _dense_factors(model: Model, X, s, rows=None):
+def _dense_factors(model: Model, X, s, rows=None, trig=None):
     """The dense factorisation of a chunk, as :func:`_engine_factors` returns it."""
     J = model.jacobian(X, s, rows)
     cond, inv = condition_and_inverse(J)  # inv (k, n, m)
