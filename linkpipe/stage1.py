@@ -218,7 +218,8 @@ class Stage1:
         der = kin.derivatives(model, Xz, s, s_dot, s_ddot, sweep.status, stages.acceleration,
                               velocity=sweep.velocity, acceleration=sweep.acceleration,
                               need_influence=stages.forces, need_velocity=stages.velocity,
-                              residuals=self.scene.solver.rate_residuals)
+                              residuals=self.scene.solver.rate_residuals,
+                              compiled=self.plan.compiled, trig=sweep.trig)
         self._add("jacobian", t0)
         if self.scene.solver.derivatives == "finite_difference" and stages.velocity:
             if (lo, hi) != (0, self.n_steps):
