@@ -103,8 +103,9 @@ def _degenerate(model, X, rng):
 def test_the_crank_rocker_takes_the_loop():
     """The shipped crank-rocker's engine has 2x2 and 1x1 blocks only (the loop's case); a
     4x4 block (the dump truck's) keeps numpy."""
-    rocker = engine(build_model(linkpipe.load_scene(ROOT / "configs" / "fourbar_crank_rocker.toml")))
-    truck = engine(build_model(linkpipe.load_scene(ROOT / "configs" / "dump_truck.toml")))
+    configs = ROOT / "configs"
+    rocker = engine(build_model(linkpipe.load_scene(configs / "fourbar_crank_rocker.toml")))
+    truck = engine(build_model(linkpipe.load_scene(configs / "dump_truck.toml")))
     assert block_kernel.supported(rocker) and block_kernel.tables(rocker).fused
     assert sorted(len(b[1]) for b in rocker.blocks) == [1, 1, 2, 2]
     assert not block_kernel.supported(truck) and max(len(b[1]) for b in truck.blocks) == 4
@@ -208,7 +209,8 @@ def test_toggle_steps_of_a_triple_rocker_bit_for_bit():
     """A non-Grashof four-bar driven up to its limits (the shipped triple rocker): steps up to
     a toggle, where the coupler and the rocker come into line and the condition grows to
     1e6 and beyond, and the steps beyond reach, NaN."""
-    model = build_model(linkpipe.load_scene(ROOT / "configs" / "hard" / "triple_rocker_limits.toml"))
+    path = ROOT / "configs" / "hard" / "triple_rocker_limits.toml"
+    model = build_model(linkpipe.load_scene(path))
     eng = engine(model)
     _, s, s_dot, s_ddot = kin.driver_motion(model)
     fine = np.linspace(s[0, 0], s[-1, 0], 20_001)[:, None]  # close to the limits
