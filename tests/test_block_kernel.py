@@ -5,15 +5,17 @@ bit for bit.
 sums by block solves, numpy) is the independent method; the compiled loop repeats its
 arithmetic in its order, so the answer is exact equality (``assert_array_equal``: the same
 finite numbers to the last bit, inf at the same steps), from the entries and from the positions
-(the entries then made in the loop from the engine's affine terms), on:
+(the entries then made in the loop from the engine's affine terms), by the engine's own
+(written) loop and by the general loop, with their 1-norms and column sums too, on:
 
 * every shipped scene with an engine, at its own sweep and at random shapes;
 * hypothesis-drawn four-bars and slider-cranks of any link lengths (non-Grashof ones reach
   their limits: toggle steps and steps beyond reach), with exactly singular steps (two points
   coincident, every point at the origin: a zero determinant), steps one ulp from those, and
   NaN and inf coordinates;
+* a relative angle driver (its entries by numpy, then the loop);
 * ``kin.derivatives(..., compiled=True)`` (and given the drivers' cos and sin, as the dyads
-  have them) against ``compiled=False``: every returned array.
+  have them; on four worker threads) against ``compiled=False``: every returned array.
 """
 import pathlib
 import sys
