@@ -61,7 +61,8 @@ def setup(S: int):
     from linkpipe.model import build_model
 
     scene = linkpipe.load_scene(ROOT / "configs" / "fourbar_crank_rocker.toml")
-    scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=S, step=None) for d in scene.drivers))
+    scene = dc.replace(scene, drivers=tuple(dc.replace(d, steps=S, step=None)
+                                            for d in scene.drivers))
     model = build_model(scene)
     _, s, s_dot, s_ddot = kin.driver_motion(model)
     sweep = kin.solve_sweep(model, s, s_dot, s_ddot, order=2)

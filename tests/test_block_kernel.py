@@ -5,15 +5,17 @@ bit for bit.
 sums by block solves, numpy) is the independent method; the compiled loop repeats its
 arithmetic in its order, so the answer is exact equality (``assert_array_equal``: the same
 finite numbers to the last bit, inf at the same steps), from the entries and from the positions
-(the entries then made in the loop from the engine's affine terms), on:
+(the entries then made in the loop from the engine's affine terms), by the engine's own
+(written) loop and by the general loop, with their 1-norms and column sums too, on:
 
 * every shipped scene with an engine, at its own sweep and at random shapes;
 * hypothesis-drawn four-bars and slider-cranks of any link lengths (non-Grashof ones reach
   their limits: toggle steps and steps beyond reach), with exactly singular steps (two points
   coincident, every point at the origin: a zero determinant), steps one ulp from those, and
   NaN and inf coordinates;
+* a relative angle driver (its entries by numpy, then the loop);
 * ``kin.derivatives(..., compiled=True)`` (and given the drivers' cos and sin, as the dyads
-  have them) against ``compiled=False``: every returned array.
+  have them; on four worker threads) against ``compiled=False``: every returned array.
 """
 import pathlib
 import sys
@@ -103,8 +105,9 @@ def _degenerate(model, X, rng):
 def test_the_crank_rocker_takes_the_loop():
     """The shipped crank-rocker's engine has 2x2 and 1x1 blocks only (the loop's case); a
     4x4 block (the dump truck's) keeps numpy."""
-    rocker = engine(build_model(linkpipe.load_scene(ROOT / "configs" / "fourbar_crank_rocker.toml")))
-    truck = engine(build_model(linkpipe.load_scene(ROOT / "configs" / "dump_truck.toml")))
+    configs = ROOT / "configs"
+    rocker = engine(build_model(linkpipe.load_scene(configs / "fourbar_crank_rocker.toml")))
+    truck = engine(build_model(linkpipe.load_scene(configs / "dump_truck.toml")))
     assert block_kernel.supported(rocker) and block_kernel.tables(rocker).fused
     assert sorted(len(b[1]) for b in rocker.blocks) == [1, 1, 2, 2]
     assert not block_kernel.supported(truck) and max(len(b[1]) for b in truck.blocks) == 4
@@ -208,7 +211,8 @@ def test_toggle_steps_of_a_triple_rocker_bit_for_bit():
     """A non-Grashof four-bar driven up to its limits (the shipped triple rocker): steps up to
     a toggle, where the coupler and the rocker come into line and the condition grows to
     1e6 and beyond, and the steps beyond reach, NaN."""
-    model = build_model(linkpipe.load_scene(ROOT / "configs" / "hard" / "triple_rocker_limits.toml"))
+    path = ROOT / "configs" / "hard" / "triple_rocker_limits.toml"
+    model = build_model(linkpipe.load_scene(path))
     eng = engine(model)
     _, s, s_dot, s_ddot = kin.driver_motion(model)
     fine = np.linspace(s[0, 0], s[-1, 0], 20_001)[:, None]  # close to the limits

@@ -113,7 +113,8 @@ def supported(eng) -> bool:
 def tables(eng) -> Tables:
     """The engine's :class:`Tables`, built once per engine (one :func:`supported`)."""
     if not supported(eng):
-        raise ValueError("a diagonal block larger than 2x2: the numpy path (block_kernel.supported)")
+        raise ValueError("a diagonal block larger than 2x2: the numpy path "
+                         "(block_kernel.supported)")
     return derived(eng, "block_kernel", _tables)
 
 
@@ -202,7 +203,8 @@ def _run(eng, E, X, s, keep: bool, trig: dict | None = None) -> tuple:
     run = max(4, min(RUN, RUN_DOUBLES // max(1, t.n * t.n)))
     given = E is not None
     if given:
-        E, X, cos, sin = np.ascontiguousarray(E), np.empty((0, 1, 2)), np.empty((0, 0)), np.empty((0, 0))
+        E, X = np.ascontiguousarray(E), np.empty((0, 1, 2))
+        cos, sin = np.empty((0, 0)), np.empty((0, 0))
     else:
         cos, sin = _trig(eng, s, trig or {})
         E, X = np.empty((0, 0)), np.ascontiguousarray(X, dtype=float)
@@ -478,4 +480,5 @@ def _source(t: Tables, na: int, from_entries: bool, keep: bool = False) -> str |
     body += ["cond = n1 * big", "out[lo + i] = cond if abs(cond) < np.inf else np.inf"]
     if keep:
         body += ["n1_out[lo + i] = n1"] + [f"sums_out[{i}, lo + i] = q{i}" for i in range(n)]
-    return "\n".join(head + ["        for i in range(m):"] + ["            " + s for s in body]) + "\n"
+    lines = head + ["        for i in range(m):"] + ["            " + line for line in body]
+    return "\n".join(lines) + "\n"
