@@ -12,7 +12,6 @@ four-bars, slider-cranks, slider-driven dead centres and six-bars drawn at rando
 their assembly range included), in chunks of 8,192 steps and of 7, in one call and in three
 segments; and through ``linkpipe.solve``: every array a Result stores.
 """
-import dataclasses as dc
 import pathlib
 import sys
 

@@ -23,7 +23,7 @@ import os
 
 #: a sweep of this many steps or more takes the compiled loops where they are not loaded yet:
 #: about where their saving (~0.2 us a step) repays loading them (~0.45 s)
-COLD_FROM = 2_000_000
+COLD_FROM = 3_000_000
 #: ... and from this many where they are (shorter sweeps gain too little to matter)
 WARM_FROM = 100_000
 _loaded = False  # a module of compiled loops has been imported in this process
