@@ -441,9 +441,9 @@ def run_cli(S: int, folder: pathlib.Path, h5: bool, repeats: int, cpu: bool = Fa
     return best, best_cpu
 
 
-def disk_floor(n_bytes: int, folder: pathlib.Path, repeats: int) -> float:
-    """Best seconds to write ``n_bytes`` to a new file in ``folder``, fsync it and rename it
-    into place: what a durable write of that many bytes costs on this disk."""
+def disk_write(n_bytes: int, folder: pathlib.Path):
+    """A function that writes ``n_bytes`` to a new file in ``folder``, fsyncs it and renames it
+    into place (over the last one, as a run's file replaces its last)."""
     data = np.random.default_rng(0).bytes(n_bytes)
 
     def once():
@@ -454,7 +454,7 @@ def disk_floor(n_bytes: int, folder: pathlib.Path, repeats: int) -> float:
             os.fsync(f.fileno())
         os.replace(tmp, final)
 
-    return best_of(once, repeats)[0]
+    return once
 
 
 class _Compiled:
@@ -502,17 +502,23 @@ def run_targets(S: int, repeats: int, pylinkage_seconds: float | None,
         small, small_cpu = run_cli(361, folder, False, repeats, cpu=True)
         big_cpu = run_cli(S, folder, False, repeats, cpu=True)[1]
         run_cli(S, folder, True, 1)  # warm: the file's folder, the writer's thread
-        pairs = [(run_cli(S, folder, False, 1), run_cli(S, folder, True, 1))
-                 for _ in range(max(3, repeats))]
-    bare, with_h5 = min(p[0] for p in pairs), min(p[1] for p in pairs)
-    diffs = sorted(h - b for b, h in pairs)
-    n_bytes = (folder / "out" / f"crank_rocker_{S}.h5").stat().st_size
-    floor = disk_floor(n_bytes, folder, repeats)
+        n_bytes = (folder / "out" / f"crank_rocker_{S}.h5").stat().st_size
+        write = disk_write(n_bytes, folder)
+        write()
+        # triples in the same minutes: the run without and with its file, and the disk's own
+        # durable write of as many bytes; each compared by its median
+        triples = [(run_cli(S, folder, False, 1), run_cli(S, folder, True, 1), best_of(write, 1)[0])
+                   for _ in range(max(5, 2 * repeats + 1))]
+    bare, with_h5 = min(p[0] for p in triples), min(p[1] for p in triples)
+    diffs = sorted(h - b for b, h, _ in triples)
+    floors = sorted(f for _, _, f in triples)
+    floor = floors[len(floors) // 2]
     return dict(steps=S, run_361=small, run=bare, run_361_cpu=small_cpu, run_cpu=big_cpu,
                 numpy_cpu=numpy_cpu, load=None if was_loaded else load,
                 pylinkage_cpu=pylinkage_cpu, floor_cpu=floor_cpu, run_h5=with_h5, h5_bytes=n_bytes,
-                floor=floor, pylinkage=pylinkage_seconds, write=diffs[len(diffs) // 2],
-                write_spread=(diffs[0], diffs[-1]))
+                floor=floor, floor_best=floors[0], pylinkage=pylinkage_seconds,
+                write=diffs[len(diffs) // 2], write_spread=(diffs[0], diffs[-1]),
+                n_triples=len(triples))
 
 
 def fresh_runs(steps=(360_000, 5_000_000)) -> list[tuple]:
@@ -566,10 +572,11 @@ def print_run_targets(r) -> str:
              f"| the sweep's marginal (run at {S:,} less run at 361) | {marginal:.4f} |",
              f"| the sweep's marginal in CPU seconds (process_time, best of each) | "
              f"{r['run_cpu'] - r['run_361_cpu']:.4f} |",
-             f"| the .h5 write's marginal (with .h5 less without: median of alternating "
-             f"pairs; spread {r['write_spread'][0]:+.4f} .. {r['write_spread'][1]:+.4f}) | "
-             f"{write:.4f} |",
-             f"| the disk's floor: write + fsync + rename of {r['h5_bytes'] / 2**20:.1f} MiB | "
+             f"| the .h5 write's marginal (with .h5 less without: median of {r['n_triples']} "
+             f"alternating pairs; spread {r['write_spread'][0]:+.4f} .. "
+             f"{r['write_spread'][1]:+.4f}) | {write:.4f} |",
+             f"| the disk's floor: write + fsync + rename of {r['h5_bytes'] / 2**20:.1f} MiB "
+             f"(median of as many, one beside each pair; best {r['floor_best']:.4f}) | "
              f"{r['floor']:.4f} |", ""]
     if r["pylinkage"] is not None and r.get("pylinkage_cpu") is not None:
         # judged in CPU seconds: both are one thread here, and a loaded machine's wall clock

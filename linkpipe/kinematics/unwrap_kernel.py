@@ -18,10 +18,15 @@ def unwrap(ang: np.ndarray, last: np.ndarray, correction: np.ndarray):
     carry's ``last`` angle (NaN: none) and summed ``correction`` per link, as
     :func:`.angles.unwrap_runs`; None where an angle is NaN (numpy's path handles the gaps)."""
     S, L = ang.shape
-    at_step, at_link, dd = np.empty(S * L, np.int64), np.empty(S * L, np.int64), np.empty(S * L)
-    n = _jumps(ang, last, at_step, at_link, dd)
-    if n < 0:
-        return None
+    room = 64  # jumps are a few per turn: room for them, more only where a segment has more
+    while True:
+        at_step, at_link, dd = np.empty(room, np.int64), np.empty(room, np.int64), np.empty(room)
+        n = _jumps(ang, last, at_step, at_link, dd)
+        if n < 0:
+            return None
+        if n <= room:
+            break
+        room = n
     d = dd[:n]
     ddmod = np.mod(d - (-np.pi), 2 * np.pi) + (-np.pi)  # np.unwrap's, as unwrap_runs takes it
     np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (d > 0))
@@ -33,8 +38,9 @@ def unwrap(ang: np.ndarray, last: np.ndarray, correction: np.ndarray):
 @jit
 def _jumps(ang, last, at_step, at_link, dd):
     """The steps (and links) where an angle changes from the one before (the carry's last, or
-    the first step itself where there is none) by pi or more: their count, their differences
-    into ``dd``; -1 where an angle is NaN."""
+    the first step itself where there is none) by pi or more: their count, the first
+    ``len(dd)`` of them and their differences into ``at_step``, ``at_link``, ``dd``; -1 where
+    an angle is NaN."""
     S, L = ang.shape
     n = 0
     for j in range(L):
@@ -47,7 +53,8 @@ def _jumps(ang, last, at_step, at_link, dd):
                 return -1
             d = a - prev
             if not (abs(d) < np.pi):
-                at_step[n], at_link[n], dd[n] = i, j, d
+                if n < dd.shape[0]:
+                    at_step[n], at_link[n], dd[n] = i, j, d
                 n += 1
             prev = a
     return n
