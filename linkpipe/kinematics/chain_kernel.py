@@ -72,11 +72,9 @@ def encode(chain: DyadChain):
 
 def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_phi,
           carry: dict | None, links: bool, chunk: int = CHUNK):
-    """:func:`.dyads.solve_chain` (its arguments and its :class:`.dyads.ChainSweep`) by the
-    compiled loop, chunk by chunk as numpy's (its residual and branch margins see the same
-    chunks)."""
-    from .dyads import ChainSweep
-
+    """:func:`.dyads.solve_chain` (its arguments) by the compiled loop, chunk by chunk as
+    numpy's (its residual and branch margins see the same chunks): the fields of its
+    :class:`.dyads.ChainSweep`, in their order."""
     model = chain.model
     S, P, L = s.shape[0], model.n_points, len(model.link_a)
     X0 = model.start_position
@@ -147,10 +145,10 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
                 R[idx] = np.nan
         if residual is not None:
             residual[bad] = np.nan
-    return ChainSweep(X, V if order >= 1 else None, A if order >= 2 else None, ok, residual,
-                      gap if gaps else None, angle,
-                      (w, al if order >= 2 else None) if links and order >= 1 else None,
-                      miss if gaps else None, trig_all)
+    return (X, V if order >= 1 else None, A if order >= 2 else None, ok, residual,
+            gap if gaps else None, angle,
+            (w, al if order >= 2 else None) if links and order >= 1 else None,
+            miss if gaps else None, trig_all)
 
 
 @jit

@@ -362,8 +362,8 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             st.take(slice(0, 1)) is st for st in plan.steps):
         from . import chain_kernel  # imports numba: only where the compiled loop is taken
 
-        return chain_kernel.solve(plan, s, s_dot, s_ddot, order, gaps, max_abs_phi, carry,
-                                  links, chunk)
+        return ChainSweep(*chain_kernel.solve(plan, s, s_dot, s_ddot, order, gaps, max_abs_phi,
+                                              carry, links, chunk))
     model = plan.model
     S = s.shape[0]
     P = model.n_points
