@@ -12,8 +12,11 @@ four-bars, slider-cranks, slider-driven dead centres and six-bars drawn at rando
 their assembly range included), in chunks of 8,192 steps and of 7, in one call and in three
 segments; and through ``linkpipe.solve``: every array a Result stores.
 """
+import dataclasses as dc
+import os
 import pathlib
 import sys
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -29,6 +32,7 @@ from linkpipe.kinematics.dyads import solve_chain
 from linkpipe.kinematics.plan import start_branches
 from linkpipe.kinematics.vectorised import max_abs_phi
 from linkpipe.model import build_model
+from linkpipe.status import OK
 
 from conftest import CONFIG_DIR, CONFIGS
 
@@ -252,3 +256,44 @@ def test_the_compiled_loops_are_taken_where_they_pay(monkeypatch):
     assert not compiled.wanted(10 * compiled.COLD_FROM)
     monkeypatch.setenv("LINKPIPE_COMPILED", "1")
     assert compiled.wanted(2)
+
+
+@settings(max_examples=25, deadline=None)
+@given(family=st_h.sampled_from(["fourbar", "slider_crank", "lines"]),
+       a=st_h.floats(0.5, 1.2), b=st_h.floats(3.0, 4.0), c=st_h.floats(2.5, 3.5),
+       start=st_h.floats(0.0, 360.0), scale=st_h.sampled_from([1e-3, 1.0, 1e3]))
+def test_the_compiled_stage_1_meets_the_models_own_equations(family, a, b, c, start, scale):
+    """Independently of the numpy path: the compiled loops' stage 1 (LINKPIPE_COMPILED=1,
+    through ``linkpipe.solve``) solves model/equations.py's rows: Phi = 0 to 1e-12 of the size,
+    Phi_q v = -Phi_t and Phi_q a = gamma to 1e-12 and 1e-11 of the rates' scales, and its
+    condition is numpy's dense 1-norm condition of Phi_q to rounding times the condition (Grashof crank-rockers,
+    offset slider-cranks and a point on two lines, at three scales)."""
+    if family == "fourbar":
+        text = hs.fourbar_text(a, b, c, 4.0, start, start + 90.0, 31, scale=scale,
+                               coupler_uv=(1.2, 0.7))
+    elif family == "slider_crank":
+        text = hs.slider_crank_text(a, b, 0.3 * a, start, start + 90.0, 31, scale=scale)
+    else:
+        text = _two_lines_text(a, b, start, 90.0)
+    scene = linkpipe.parse_scene(text, f"{family}.toml")
+    scene = dc.replace(scene, solver=dc.replace(scene.solver, method="dyads"),
+                       outputs=dc.replace(scene.outputs, kinematics=("velocity", "acceleration")))
+    with mock.patch.dict(os.environ, {"LINKPIPE_COMPILED": "1"}):
+        r = linkpipe.solve(scene)
+    assert r.solver_method_used == "dyads"
+    ok = r.status == OK
+    if not ok.any():
+        return
+    model = r.model
+    _, s, s_dot, s_ddot = kin.driver_motion(model)
+    X, V, A = r.position[ok], r.velocity[ok], r.acceleration[ok]
+    s, s_dot, s_ddot = s[ok], s_dot[ok], s_ddot[ok]
+    assert np.abs(model.phi(X, s)).max() <= 1e-12 * model.size
+    J = model.jacobian(X, s)
+    v_scale, a_scale = max(np.abs(V).max(), 1e-300), max(np.abs(A).max(), 1e-300)
+    vel = np.einsum("sij,sj->si", J, model.q_of(V)) + model.phi_t(X, s, s_dot)
+    acc = np.einsum("sij,sj->si", J, model.q_of(A)) - model.gamma(X, V, s, s_dot, s_ddot)
+    assert np.abs(vel).max() <= 1e-12 * v_scale
+    assert np.abs(acc).max() <= 1e-11 * a_scale  # gamma's terms are products of two rates
+    dense = np.linalg.cond(J, 1)  # LAPACK's inverse: the two inverses differ by ~eps x condition
+    assert (np.abs(r.condition[ok] - dense) <= dense * (1e-14 + 1e-15 * dense)).all()

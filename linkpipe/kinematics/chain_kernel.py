@@ -108,30 +108,32 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
     geo, g2, total = np.empty((P, 5, m)), np.empty((G, m)), np.empty(m)
     rt, lc = np.empty((2, m)), np.empty((4, L, m))  # driven radii's terms; links' columns
     cosv, sinv = np.zeros((nd, m)), np.zeros((nd, m))
-    trig_all = {j: (np.empty(S), np.empty(S)) for j in angle_drivers}
+    s_rows = np.ascontiguousarray(s.T)  # (nd, S)
+    trig_all = {j: (np.cos(s_rows[j]), np.sin(s_rows[j])) for j in angle_drivers}  # numpy's
+    XS = np.empty((P, 2, S)) if max_abs_phi is not None else None  # the residual's columns
     zeros = np.zeros((nd, m))
+    x0, y0 = X0[:, 0].copy(), X0[:, 1].copy()
     with np.errstate(invalid="ignore", divide="ignore"):
         for lo in range(0, S, chunk):
             hi = min(S, lo + chunk)
             n = hi - lo
-            sT = np.ascontiguousarray(s[lo:hi].T)
+            sT = np.ascontiguousarray(s_rows[:, lo:hi])
             sdT = np.ascontiguousarray(s_dot[lo:hi].T) if order >= 1 else zeros[:, :n]
             sddT = np.ascontiguousarray(s_ddot[lo:hi].T) if order >= 2 else zeros[:, :n]
-            trig = {}
             for j in angle_drivers:
-                c, sn = trig_all[j][0][lo:hi], trig_all[j][1][lo:hi]
-                trig[j] = (np.cos(sT[j], out=c), np.sin(sT[j], out=sn))
-                cosv[j, :n], sinv[j, :n] = c, sn
-            _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, X0[:, 0].copy(),
-                   X0[:, 1].copy(), fixed, moving, link_a, link_b, sT, sdT, sddT, cosv, sinv,
-                   order, 1 if gaps else 0, 1 if links else 0, BRANCH_MARGIN, *cols, geo, g2,
-                   total, rt, lc, X[lo:hi], V[lo:hi], A[lo:hi], ok[lo:hi], miss[lo:hi], gap[lo:hi],
-                   prev, has_prev, w[lo:hi], al[lo:hi])
+                cosv[j, :n], sinv[j, :n] = trig_all[j][0][lo:hi], trig_all[j][1][lo:hi]
+            _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, link_a,
+                   link_b, sT, sdT, sddT, cosv, sinv, order, 1 if gaps else 0,
+                   1 if links else 0, BRANCH_MARGIN, *cols, geo, g2, total, rt, lc, X[lo:hi],
+                   V[lo:hi], A[lo:hi], ok[lo:hi], miss[lo:hi], gap[lo:hi], prev, has_prev,
+                   w[lo:hi], al[lo:hi])
             if links:  # the links' directions from the kernel's (dx, dy) columns (L, n)
                 angle[lo:hi] = np.arctan2(lc[1, :, :n], lc[0, :, :n]).T
-            if max_abs_phi is not None:
-                pts = {int(p): (cols[0][p, :n], cols[1][p, :n]) for p in moving}
-                residual[lo:hi] = max_abs_phi(pts, sT if nd else np.zeros((0, n)), trig)
+            if XS is not None:
+                XS[:, 0, lo:hi], XS[:, 1, lo:hi] = cols[0][:, :n], cols[1][:, :n]
+        if XS is not None:  # every row's |Phi| is its own step's: one call for the segment
+            pts = {int(p): (XS[p, 0], XS[p, 1]) for p in moving}
+            residual[:] = max_abs_phi(pts, s_rows if nd else np.zeros((0, S)), trig_all)
     if gaps:
         for k, p in enumerate(gap_points):
             if has_prev[k]:
