@@ -124,7 +124,7 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
                 cosv[j, :n], sinv[j, :n] = trig_all[j][0][lo:hi], trig_all[j][1][lo:hi]
             _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, link_a,
                    link_b, sT, sdT, sddT, cosv, sinv, order, 1 if gaps else 0,
-                   1 if links else 0, BRANCH_MARGIN, *cols, geo, g2, total, rt, lc, X[lo:hi],
+                   1 if links else 0, BRANCH_MARGIN, lo == 0, *cols, geo, g2, total, rt, lc, X[lo:hi],
                    V[lo:hi], A[lo:hi], ok[lo:hi], miss[lo:hi], gap[lo:hi], prev, has_prev,
                    w[lo:hi], al[lo:hi])
             if links:  # the links' directions from the kernel's (dx, dy) columns (L, n)
@@ -155,21 +155,23 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
 
 @jit
 def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, link_a,
-           link_b, sT, sdT, sddT, cosv, sinv, order, gaps, links, margin, PX, PY, VX, VY,
+           link_b, sT, sdT, sddT, cosv, sinv, order, gaps, links, margin, first, PX, PY, VX, VY,
            AX, AY, GEO, G2, TOT, RT, LC, X, V, A, ok, miss, gap, prev, has_prev, w, al):
     """One chunk of n steps (``sT``, ``sdT``, ``sddT`` (nd, n)), dyad by dyad, each over the
     chunk's steps (loops the compiler vectorises, as numpy's passes are), on columns (point,
-    step) ``PX`` .. ``AY`` (P, >= n), ``GEO`` (P, 5, >= n), ``G2`` (G, >= n): writes X, V, A
+    step) ``PX`` .. ``AY`` (P, >= n; the fixed points' rows filled on the ``first`` chunk),
+    ``GEO`` (P, 5, >= n), ``G2`` (G, >= n): writes X, V, A
     (n, P, 2), ok, miss, gap (n,), the links' (dx, dy) into ``LC[0]``, ``LC[1]`` (L, >= n)
     and their rates into w, al (n, L); ``prev`` (G, 3) / ``has_prev`` (G,): each two-root dyad's (x, y, gap^2) at the
     step before the chunk, updated to its last step."""
     n, P = sT.shape[1], x0.shape[0]
     K, G, L = ops_i.shape[0], gap_points.shape[0], link_a.shape[0]
-    for q in range(P):
-        if fixed[q]:
-            for i in range(n):
-                PX[q, i], PY[q, i] = x0[q], y0[q]
-                VX[q, i], VY[q, i], AX[q, i], AY[q, i] = 0.0, 0.0, 0.0, 0.0
+    if first:  # the fixed points' columns: their positions, zero rates (kept chunk to chunk)
+        for q in range(P):
+            if fixed[q]:
+                for i in range(PX.shape[1]):
+                    PX[q, i], PY[q, i] = x0[q], y0[q]
+                    VX[q, i], VY[q, i], AX[q, i], AY[q, i] = 0.0, 0.0, 0.0, 0.0
     # -------------------------------------------------------------------- positions
     for k in range(K):
         kind, t0, tn, a, b = ops_i[k, 0], ops_i[k, 1], ops_i[k, 2], ops_i[k, 3], ops_i[k, 4]

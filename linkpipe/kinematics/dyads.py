@@ -503,8 +503,8 @@ def _branch_margins(ch: _Chunk, gap: np.ndarray, prev: dict, lo: int, hi: int) -
         np.minimum(gap[lo + 1:hi], g, out=gap[lo + 1:hi])
         if p in prev and not (ch.period and lo % ch.period == 0):
             x0, y0, g0 = prev[p]
-            m0 = abs(x[0] - x0) + abs(y[0] - y0)
-            gap[lo] = min(gap[lo], min(g0, g2[0]) - (BRANCH_MARGIN * m0) ** 2)
+            m0 = BRANCH_MARGIN * (abs(x[0] - x0) + abs(y[0] - y0))
+            gap[lo] = min(gap[lo], min(g0, g2[0]) - m0 * m0)  # a product, as the arrays' ** 2
         prev[p] = (x[-1], y[-1], g2[-1])
     ch.gap2 = []
 
