@@ -56,6 +56,16 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
 
         for_chunks(work, X.shape[0], CHUNK)
     drawn = drawn_link_angles(model) if drawings is None else model.link_angles(drawings)
+    if carry is not None and compiled and drawings is None and not np.isnan(carry.shift).any():
+        from . import unwrap_kernel  # imports numba: only where the compiled loops are taken
+
+        # the whole turns known (every segment after the first): one pass adds them and the
+        # driven links' (the same numbers as the steps below)
+        got = unwrap_kernel.unwrap(ang, carry.last, carry.correction, carry.shift,
+                                   driven_links(model) if s is not None else (), s)
+        if got is not None:
+            out, last, summed = got
+            return out, AngleCarry(last, summed, np.where(np.isnan(last), np.nan, carry.shift))
     if carry is not None:
         out, after = unwrap_runs(ang, carry, compiled)
         shift = (carry.shift if not np.isnan(carry.shift).any() else  # set: no pass over out
