@@ -1,11 +1,12 @@
 """Whether stage 1 takes its compiled loops (numba) or numpy: the one place that decides.
 
 The compiled loops (:mod:`.chain_kernel`: the closed-form dyads; :mod:`.block_kernel`: the
-sparse engine's exact condition) run the numpy path's arithmetic in its order, step by step,
-with the same transcendental functions taken from numpy beforehand (cos and sin of the
-drivers, arctan2 of the links): they give the numpy path's numbers to the bit, which
-``tests/test_compiled.py`` proves on families of mechanisms. So the choice changes no stored
-number, only the time.
+sparse engine's exact condition; :mod:`.unwrap_kernel`: the links' angles unwrapped) run the
+numpy path's arithmetic in its order, with the transcendental functions taken from numpy
+around them (cos and sin of the drivers, arctan2 of the links, mod): they give the numpy
+path's numbers to the bit (a zero's sign aside), which ``tests/test_chain_kernel.py``,
+``tests/test_block_kernel.py`` and ``tests/test_unwrap_kernel.py`` prove on every shipped
+scene and on families of mechanisms. So the choice changes no stored number, only the time.
 
 They are taken where they pay for themselves. Loading them costs about 0.45 s once per
 process (importing numba, starting its compiler and loading the machine code it cached in
@@ -26,7 +27,7 @@ import os
 COLD_FROM = 3_000_000
 #: ... and from this many where they are (shorter sweeps gain too little to matter)
 WARM_FROM = 100_000
-_loaded = False  # a module of compiled loops has been imported in this process
+_loaded = False  # a compiled loop has been made (compiled, or loaded from the cache) here
 
 
 def wanted(n_steps: int) -> bool:
@@ -40,7 +41,7 @@ def wanted(n_steps: int) -> bool:
 
 
 def loaded() -> bool:
-    """True once a module of compiled loops has been imported in this process."""
+    """True once a compiled loop has been made in this process (its cost is paid)."""
     return _loaded
 
 
@@ -55,10 +56,11 @@ def available() -> bool:
 
 
 def jit(fn=None, *, inline: bool = False):
-    """``fn`` compiled by numba, now (numba is imported here: a module of compiled loops is
-    imported only where :func:`wanted` said so), with :func:`loop`'s options; ``inline``: a
-    small function inlined where it is called (so that a loop calling it stays one loop the
-    compiler can vectorise)."""
+    """``fn`` compiled by numba, now: for a module of compiled loops that is imported only
+    where :func:`wanted` said so (numba is imported here). Cached on disk, without the GIL,
+    IEEE semantics (division by zero gives inf or NaN, as numpy's; no fast-math, so no fused
+    multiply-adds: every operation rounds as numpy's); ``inline``: a small function inlined
+    where it is called (so that a loop calling it stays one loop the compiler can vectorise)."""
     import numba
 
     global _loaded
@@ -72,15 +74,11 @@ def jit(fn=None, *, inline: bool = False):
 
 
 def loop(fn):
-    """``fn``, a module-level function of scalar loops over steps, to be compiled by numba on
-    first use: returns ``get()`` -> the compiled function (numba is imported then, not when
-    the module defining ``fn`` is). Cached on disk, without the GIL, IEEE semantics (division
-    by zero gives inf or NaN, as numpy's; no fast-math, so no fused multiply-adds: every
-    operation rounds as numpy's)."""
+    """``fn``, a module-level function of loops over steps in a module imported whatever the
+    path, compiled by :func:`jit` on first use: returns ``get()`` -> the compiled function
+    (numba is imported then, not when the module defining ``fn`` is)."""
     @functools.cache
     def get():
-        import numba
-
-        return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=False)(fn)
+        return jit(fn)
 
     return get
