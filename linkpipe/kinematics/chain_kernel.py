@@ -188,13 +188,8 @@ def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, li
                     yp[i] = cy[i] + ry
             continue
         if kind == 1:  # linear
-            ix, iy, jx, jy = PX[a], PY[a], PX[b], PY[b]
             for t in range(t0, t0 + tn):
-                u, v, xp, yp = tg_u[t], tg_v[t], PX[tg_p[t]], PY[tg_p[t]]
-                for i in range(n):
-                    dx, dy = jx[i] - ix[i], jy[i] - iy[i]
-                    xp[i] = ix[i] + (u * dx - v * dy)
-                    yp[i] = iy[i] + (u * dy + v * dx)
+                _linear(PX[a], PY[a], PX[b], PY[b], tg_u[t], tg_v[t], PX[tg_p[t]], PY[tg_p[t]], n)
             continue
         p = tg_p[t0]
         xp, yp, sg = PX[p], PY[p], ops_f[k, 2]
@@ -284,14 +279,10 @@ def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, li
                             ox[i] = bx[i] + (-ar[i] * gy[i] - w2 * gx[i])
                             oy[i] = by[i] + (ar[i] * gx[i] - w2 * gy[i])
                 continue
-            if kind == 1:
-                bx, by, ex, ey = RX[a], RY[a], RX[b], RY[b]
+            if kind == 1:  # linear in the points: the rates by the same map
                 for t in range(t0, t0 + tn):
-                    u, v, ox, oy = tg_u[t], tg_v[t], RX[tg_p[t]], RY[tg_p[t]]
-                    for i in range(n):
-                        dx, dy = ex[i] - bx[i], ey[i] - by[i]
-                        ox[i] = bx[i] + (u * dx - v * dy)
-                        oy[i] = by[i] + (u * dy + v * dx)
+                    _linear(RX[a], RY[a], RX[b], RY[b], tg_u[t], tg_v[t], RX[tg_p[t]],
+                            RY[tg_p[t]], n)
                 continue
             p = tg_p[t0]
             ox, oy, d1, d2 = RX[p], RY[p], ops_i[k, 5], ops_i[k, 6]
@@ -361,6 +352,16 @@ def _steps(ops_i, ops_f, tg_p, tg_u, tg_v, gap_points, x0, y0, fixed, moving, li
             for i in range(n):
                 for j in range(L):
                     al[i, j] = LC[3, j, i]
+
+
+@jit(inline=True)
+def _linear(ix, iy, jx, jy, u, v, ox, oy, n):
+    """A point of a body from two of its points (or its rates from theirs: the map is linear):
+    ``o = i + u d + v perp(d)``, d = j - i (:func:`.dyads._position`'s ``linear``)."""
+    for i in range(n):
+        dx, dy = jx[i] - ix[i], jy[i] - iy[i]
+        ox[i] = ix[i] + (u * dx - v * dy)
+        oy[i] = iy[i] + (u * dy + v * dx)
 
 
 @jit(inline=True)
