@@ -109,6 +109,33 @@ def test_enospc_from_the_library_becomes_an_output_error(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["shear_press.h5"]
 
 
+@pytest.mark.parametrize("failing", [1, 3])
+def test_a_part_whose_sync_fails_fails_the_streamed_write_cleanly(tmp_path, monkeypatch, failing):
+    """The parts are synced on a thread of their own while the next is written: a sync that
+    finds the disk full (the writeback's ENOSPC, its ``failing``-th) fails the write all the
+    same: one OutputError naming the file, the previous file kept, no temporary left."""
+    from linkpipe.segments import stream
+
+    calls = []
+    real = hdf5._sync_data
+
+    def sync(fd):
+        calls.append(fd)
+        if len(calls) == failing:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(fd)
+
+    monkeypatch.setattr(hdf5, "_sync_data", sync)
+    scene = linkpipe.parse_scene(CRANK_ROCKER.replace("steps = 361", "steps = 40001"), "big.toml")
+    (tmp_path / "big.h5").write_bytes(b"previous")
+    with pytest.raises(stores.OutputError, match="big.h5: not written: the disk is full"):
+        with hdf5.SweepWriter(tmp_path / "big.h5", scene.n_steps) as writer:
+            stream(scene, [writer], segment=2048)
+    assert len(calls) >= failing
+    assert (tmp_path / "big.h5").read_bytes() == b"previous"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.h5"]
+
+
 def test_stale_temporaries_of_dead_processes_are_removed_live_ones_kept(tmp_path):
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True).stdout.strip()
