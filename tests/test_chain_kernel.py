@@ -219,6 +219,74 @@ def test_solve_takes_the_compiled_loop_on_a_long_sweep_and_every_stored_array_is
     assert not calls
 
 
+@pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
+def test_every_shipped_scene_stores_the_same_numbers_with_the_compiled_loops(config, monkeypatch):
+    """``linkpipe.solve`` of every shipped scene (dyads, Newton, forces, friction, dynamics,
+    logs) with LINKPIPE_COMPILED=1 and =0: every variable the Result stores, equal to the bit
+    (where a scene's path takes no compiled loop, trivially so)."""
+    scene = linkpipe.load_scene(config)
+    monkeypatch.setenv("LINKPIPE_COMPILED", "0")
+    a = linkpipe.solve(scene)
+    monkeypatch.setenv("LINKPIPE_COMPILED", "1")
+    b = linkpipe.solve(scene)
+    assert [v.name for v in a.variables()] == [v.name for v in b.variables()]
+    for x, y in zip(a.variables(), b.variables()):
+        np.testing.assert_array_equal(y.data, x.data, err_msg=x.name)
+
+
+def _inverted_slider_text(a, start):
+    """A crank (O, A, B) and a rocker (Q, P) whose end P slides on the line through A and B:
+    the circle and line dyad on a moving line (an inverted slider-crank)."""
+    import math
+
+    th = math.radians(start)
+    ax, ay = a * math.cos(th), a * math.sin(th)
+    bx = ax - 0.3 * a * math.sin(th) + 0.5 * a * math.cos(th)
+    by = ay + 0.3 * a * math.cos(th) + 0.5 * a * math.sin(th)
+    px, py = ax + 2.0 * (bx - ax), ay + 2.0 * (by - ay)
+    return f"""
+[scene]
+name = "inverted_slider"
+[points]
+O = {{ x = 0.0, y = 0.0, fixed = true }}
+Q = {{ x = 3.0, y = 0.5, fixed = true }}
+A = {{ x = {ax!r}, y = {ay!r} }}
+B = {{ x = {bx!r}, y = {by!r} }}
+P = {{ x = {px!r}, y = {py!r} }}
+[[links]]
+name = "crank"
+points = ["O", "A", "B"]
+[[links]]
+name = "rocker"
+points = ["Q", "P"]
+[[sliders]]
+name = "on_crank"
+point = "P"
+along = ["A", "B"]
+[[drivers]]
+name = "crank"
+angle = ["O", "A"]
+from = {start!r}
+to = {start + 360.0!r}
+steps = 2001
+rate = 57.3
+"""
+
+
+@pytest.mark.parametrize("a, start", [(0.5, 0.0), (1.0, 45.0), (1.7, 200.0)])
+def test_a_moving_line_and_two_lines_give_numpys_numbers(a, start):
+    """The kinds no shipped scene holds: a circle and a moving line (an inverted
+    slider-crank, a full turn), and a point on two lines, one of them moving."""
+    kinds = set()
+    for text in (_inverted_slider_text(a, start), _two_lines_text(a, 3.0, start, 90.0)):
+        got = _chain_of(linkpipe.parse_scene(text, "kinds.toml"))
+        kinds |= {(st.kind, ln.kind) for st in got[0].steps for ln in (st.line1, st.line2)
+                  if ln is not None}
+        _assert_same(*got, chunk=7, segments=3)
+        _assert_same(*got)
+    assert {("circle_line", "moving"), ("lines", "moving")} <= kinds
+
+
 def test_a_studys_per_row_numbers_stay_on_numpy(monkeypatch):
     """What the loop does not take (per-row constants of a study's variants) goes to numpy,
     whatever the flag: the chain with per-row radii is solved, and not by the loop."""
@@ -297,3 +365,38 @@ def test_the_compiled_stage_1_meets_the_models_own_equations(family, a, b, c, st
     assert np.abs(acc).max() <= 1e-11 * a_scale  # gamma's terms are products of two rates
     dense = np.linalg.cond(J, 1)  # LAPACK's inverse: the two inverses differ by ~eps x condition
     assert (np.abs(r.condition[ok] - dense) <= dense * (1e-14 + 1e-15 * dense)).all()
+
+
+NO_CACHE_ANYWHERE = """
+import numba.core.caching as caching
+import numpy as np
+
+def deny(self):  # every cache folder numba tries is unwritable (a read-only install, no home)
+    raise PermissionError(13, "Permission denied", self.get_cache_path())
+
+caching._CacheLocator.ensure_cache_path = deny
+import os
+import linkpipe
+scene = linkpipe.load_scene(os.path.join("configs", "fourbar_crank_rocker.toml"))
+os.environ["LINKPIPE_COMPILED"] = "0"
+a = linkpipe.solve(scene)
+os.environ["LINKPIPE_COMPILED"] = "1"
+b = linkpipe.solve(scene)
+from linkpipe.kinematics import compiled
+assert compiled.loaded()
+for x, y in zip(a.variables(), b.variables()):
+    np.testing.assert_array_equal(y.data, x.data, err_msg=x.name)
+print("same", len(a.variables()))
+"""
+
+
+def test_with_nowhere_to_write_numbas_cache_the_loops_compile_in_the_process():
+    """A read-only install run by a user without a writable home: numba finds no folder for
+    its cache. The compiled loops are then compiled in the process (not cached), and give
+    numpy's numbers; the run does not fail (a fresh interpreter: numba's state is global)."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, "-c", NO_CACHE_ANYWHERE], capture_output=True,
+                          text=True, timeout=300, cwd=CONFIG_DIR.parent)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.startswith("same")

@@ -381,8 +381,8 @@ def _own_compiled(t: Tables, na: int, from_entries: bool, keep: bool = False):
         if key not in _OWN:
             try:
                 _OWN[key] = _load(text, key)
-            except OSError:  # a read-only install: the general loop
-                _OWN[key] = None
+            except Exception:  # noqa: BLE001 - its source not written or not loaded (a
+                _OWN[key] = None  # read-only install): the general loop, the same numbers
         return _OWN[key]
 
 

@@ -13,8 +13,9 @@ process (importing numba, starting its compiler and loading the machine code it 
 ``__pycache__``; about 7 s the first time after an install, when it compiles them), and they
 save about 0.2 us a step (``benchmarks/bench_sweep.py``). So a sweep takes them from
 :data:`COLD_FROM` steps in a process that has not loaded them, and from :data:`WARM_FROM` steps
-once it has (a second long scene of ``run configs/*.toml``, a study, a fit, a notebook's later
-solves). As the numbers are the same either way, this history decides only the time.
+once it has (a second long scene of ``run configs/*.toml``, a fit's trials, a study's variants
+solved one by one, a notebook's later solves; a study's vectorised variants, with per-row
+numbers, stay on numpy: :func:`.dyads.solve_chain`). As the numbers are the same either way, this history decides only the time.
 ``LINKPIPE_COMPILED=0`` in the environment turns them off, ``=1`` takes them at any length.
 """
 from __future__ import annotations
@@ -59,16 +60,22 @@ def jit(fn=None, *, inline: bool = False):
     """``fn`` compiled by numba, now: for a module of compiled loops that is imported only
     where :func:`wanted` said so (numba is imported here). Cached on disk, without the GIL,
     IEEE semantics (division by zero gives inf or NaN, as numpy's; no fast-math, so no fused
-    multiply-adds: every operation rounds as numpy's); ``inline``: a small function inlined
-    where it is called (so that a loop calling it stays one loop the compiler can vectorise)."""
+    multiply-adds: every operation rounds as numpy's); where numba finds nowhere to write its
+    cache, compiled afresh in each process (the same machine code). ``inline``: a small
+    function inlined where it is called (so that a loop calling it stays one loop the
+    compiler can vectorise)."""
     import numba
 
-    global _loaded
-    _loaded = True
-
     def wrap(f):
-        return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=False,
-                          inline="always" if inline else "never")(f)
+        global _loaded
+        options = dict(nogil=True, error_model="numpy", fastmath=False,
+                       inline="always" if inline else "never")
+        try:
+            made = numba.njit(cache=True, **options)(f)
+        except Exception:  # noqa: BLE001 - nowhere to write numba's cache (a read-only
+            made = numba.njit(cache=False, **options)(f)  # install, no writable home):
+        _loaded = True                                    # compiled in each process instead
+        return made
 
     return wrap if fn is None else wrap(fn)
 

@@ -179,8 +179,8 @@ class SweepWriter:
         HDF5's metadata left to wait for. Measured on the 360k-step
         crank-rocker (134 MB, 22 parts, 2026-11-25): a run 0.84 -> 0.68 s (median of 6),
         the final fsync 0.17 -> 0.00 s; starting the writeback alone
-        (``posix_fadvise(DONTNEED)``) had left 0.17 s. A Ctrl-C meanwhile waits for at most
-        this part's sync (12 MB: milliseconds on a local disk)."""
+        (``posix_fadvise(DONTNEED)``) had left 0.17 s. A Ctrl-C meanwhile waits for the sync in
+        flight (the parts written since the last one: milliseconds on a local disk)."""
         self._datasets["step"][rows] = steps
         for var in part.variables():
             if var.dims[:1] == ("step",):

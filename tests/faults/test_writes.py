@@ -109,21 +109,21 @@ def test_enospc_from_the_library_becomes_an_output_error(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["shear_press.h5"]
 
 
-@pytest.mark.parametrize("failing", [1, 3])
-def test_a_part_whose_sync_fails_fails_the_streamed_write_cleanly(tmp_path, monkeypatch, failing):
+@pytest.mark.parametrize("slow", [False, True])
+def test_a_part_whose_sync_fails_fails_the_streamed_write_cleanly(tmp_path, monkeypatch, slow):
     """The parts are synced on a thread of their own while the next is written: a sync that
-    finds the disk full (the writeback's ENOSPC, its ``failing``-th) fails the write all the
-    same: one OutputError naming the file, the previous file kept, no temporary left."""
+    finds the disk full (the writeback's ENOSPC) fails the write all the same, whether it
+    fails at once or after the next parts were written (``slow``: collected at a later part
+    or at the end): one OutputError naming the file, the previous file kept, no temporary."""
     from linkpipe.segments import stream
 
     calls = []
-    real = hdf5._sync_data
 
     def sync(fd):
         calls.append(fd)
-        if len(calls) == failing:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        real(fd)
+        if slow:
+            time.sleep(0.3)
+        raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(hdf5, "_sync_data", sync)
     scene = linkpipe.parse_scene(CRANK_ROCKER.replace("steps = 361", "steps = 40001"), "big.toml")
@@ -131,7 +131,7 @@ def test_a_part_whose_sync_fails_fails_the_streamed_write_cleanly(tmp_path, monk
     with pytest.raises(stores.OutputError, match="big.h5: not written: the disk is full"):
         with hdf5.SweepWriter(tmp_path / "big.h5", scene.n_steps) as writer:
             stream(scene, [writer], segment=2048)
-    assert len(calls) >= failing
+    assert calls  # the first part's sync, at least, was started (and failed)
     assert (tmp_path / "big.h5").read_bytes() == b"previous"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.h5"]
 
