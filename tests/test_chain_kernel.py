@@ -154,21 +154,22 @@ def test_families_drawn_at_random_give_numpys_numbers(family, a, b, c, start, sp
     _assert_same(*got, chunk=chunk, segments=2)
 
 
-def _two_lines_text(a, b, start, span):
-    """A crank (O, A, B) and a point P on two lines: the line through A and B, and a fixed
-    guide y = b: the ``lines`` dyad, with a moving and a fixed line."""
+def _crank_text(name, a, start, span, steps, arm, point_p, tables):
+    """A crank (O, A, B: B ``arm`` = (along, across) of OA's length from A, in its frame) and
+    a point P that slides on the line through A and B, with ``tables`` of its own."""
     import math
 
     th = math.radians(start)
     ax, ay = a * math.cos(th), a * math.sin(th)
-    bx, by = ax - 0.3 * a * math.sin(th), ay + 0.3 * a * math.cos(th)
-    t = (b - ay) / (by - ay) if by != ay else 1.0
-    px, py = ax + t * (bx - ax), b
+    bx = ax + arm[0] * a * math.cos(th) - arm[1] * a * math.sin(th)
+    by = ay + arm[0] * a * math.sin(th) + arm[1] * a * math.cos(th)
+    px, py = point_p(ax, ay, bx, by)
     return f"""
 [scene]
-name = "two_lines"
+name = "{name}"
 [points]
 O = {{ x = 0.0, y = 0.0, fixed = true }}
+Q = {{ x = 3.0, y = 0.5, fixed = true }}
 A = {{ x = {ax!r}, y = {ay!r} }}
 B = {{ x = {bx!r}, y = {by!r} }}
 P = {{ x = {px!r}, y = {py!r} }}
@@ -179,18 +180,28 @@ points = ["O", "A", "B"]
 name = "on_crank"
 point = "P"
 along = ["A", "B"]
-[[sliders]]
-name = "guide"
-point = "P"
-along = {{ through = [0.0, {b!r}], direction = [1.0, 0.0] }}
+{tables}
 [[drivers]]
 name = "crank"
 angle = ["O", "A"]
 from = {start!r}
 to = {start + span!r}
-steps = 41
+steps = {steps}
 rate = 57.3
 """
+
+
+def _two_lines_text(a, b, start, span):
+    """A point P on two lines: the line through the crank's A and B, and a fixed guide y = b:
+    the ``lines`` dyad, with a moving and a fixed line."""
+    def on_guide(ax, ay, bx, by):
+        t = (b - ay) / (by - ay) if by != ay else 1.0
+        return ax + t * (bx - ax), b
+
+    return _crank_text("two_lines", a, start, span, 41, (0.0, 0.3), on_guide, f"""[[sliders]]
+name = "guide"
+point = "P"
+along = {{{{ through = [0.0, {b!r}], direction = [1.0, 0.0] }}}}""".replace("{{", "{").replace("}}", "}"))
 
 
 def test_solve_takes_the_compiled_loop_on_a_long_sweep_and_every_stored_array_is_the_same(
@@ -235,42 +246,13 @@ def test_every_shipped_scene_stores_the_same_numbers_with_the_compiled_loops(con
 
 
 def _inverted_slider_text(a, start):
-    """A crank (O, A, B) and a rocker (Q, P) whose end P slides on the line through A and B:
-    the circle and line dyad on a moving line (an inverted slider-crank)."""
-    import math
+    """A rocker (Q, P) whose end P slides on the line through the crank's A and B: the circle
+    and line dyad on a moving line (an inverted slider-crank), a full turn."""
+    def on_line(ax, ay, bx, by):
+        return ax + 2.0 * (bx - ax), ay + 2.0 * (by - ay)
 
-    th = math.radians(start)
-    ax, ay = a * math.cos(th), a * math.sin(th)
-    bx = ax - 0.3 * a * math.sin(th) + 0.5 * a * math.cos(th)
-    by = ay + 0.3 * a * math.cos(th) + 0.5 * a * math.sin(th)
-    px, py = ax + 2.0 * (bx - ax), ay + 2.0 * (by - ay)
-    return f"""
-[scene]
-name = "inverted_slider"
-[points]
-O = {{ x = 0.0, y = 0.0, fixed = true }}
-Q = {{ x = 3.0, y = 0.5, fixed = true }}
-A = {{ x = {ax!r}, y = {ay!r} }}
-B = {{ x = {bx!r}, y = {by!r} }}
-P = {{ x = {px!r}, y = {py!r} }}
-[[links]]
-name = "crank"
-points = ["O", "A", "B"]
-[[links]]
-name = "rocker"
-points = ["Q", "P"]
-[[sliders]]
-name = "on_crank"
-point = "P"
-along = ["A", "B"]
-[[drivers]]
-name = "crank"
-angle = ["O", "A"]
-from = {start!r}
-to = {start + 360.0!r}
-steps = 2001
-rate = 57.3
-"""
+    return _crank_text("inverted_slider", a, start, 360.0, 2001, (0.5, 0.3), on_line,
+                       '[[links]]\nname = "rocker"\npoints = ["Q", "P"]')
 
 
 @pytest.mark.parametrize("a, start", [(0.5, 0.0), (1.0, 45.0), (1.7, 200.0)])
