@@ -498,7 +498,9 @@ def run_targets(S: int, repeats: int, pylinkage_seconds: float | None,
         t0 = time.perf_counter()
         run_cli(361, folder, False, 1)  # the first call loads them (numba, its cache)
         load = time.perf_counter() - t0
-    with _Compiled(None):
+    # linkpipe's own choice once the loops are loaded (a sweep shorter than WARM_FROM, as
+    # --quick's, would keep numpy: the loops asked for there)
+    with _Compiled(None if S >= compiled.WARM_FROM else "1"):
         assert compiled.wanted(S), "the compiled loops should be loaded now"
         # the short and the long run alternately, each run's wall and CPU seconds together:
         # the best of each in the same minutes (the machine's noise drifts)
