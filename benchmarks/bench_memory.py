@@ -2,7 +2,7 @@
 ``linkpipe.solve`` writing the ``.h5`` from the whole Result (what a Python user of the API
 holds), and ``python -m linkpipe run --no-rrd`` (the sweep streamed in segments:
 ``linkpipe.segments``); each prints the process's peak resident memory next to
-``pipeline.memory_needed`` (the upper bound ``run`` and ``check`` refuse a sweep by: of the
+``memory.memory_needed`` (the upper bound ``run`` and ``check`` refuse a sweep by: of the
 whole sweep for the API, of one segment and what stays whole for ``run``).
 
     .venv/bin/python benchmarks/bench_memory.py            # about a minute
@@ -46,7 +46,7 @@ def scene_text(config: str, steps: int, extra: str) -> str:
 
 def child(name: str, scale: float, mode: str) -> None:
     import linkpipe
-    from linkpipe.pipeline import memory_needed
+    from linkpipe.memory import memory_needed
     from linkpipe.stores import hdf5
     from bench_sweep import scratch
     config, steps, extra = CASES[name]

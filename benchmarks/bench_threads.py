@@ -79,7 +79,7 @@ def main(argv=None) -> int:
         print(f"  BLAS threads {threads}: {ts[0]:.2f} / {ts[len(ts) // 2]:.2f} / {ts[-1]:.2f}")
     ratio = min(times[cores]) / min(times[1])
     print(f"  {cores} threads take {ratio:.2f}x the time of 1 thread (run's default: "
-          f"{linkpipe.pipeline.DEFAULT_THREADS} thread)")
+          f"{linkpipe.workers.DEFAULT_THREADS} thread)")
     return 0
 
 

@@ -266,7 +266,7 @@ def _reporting(path, outcome: _Outcome):
         yield
     except LinkpipeError as exc:  # a user's mistake (2), or an output not written (OutputError: 1)
         outcome.fail(path, getattr(exc, "exit_code", 2), str(exc))
-    except MemoryError:  # the estimate in pipeline.check_memory passed, the machine did not
+    except MemoryError:  # the estimate in memory.check_memory passed, the machine did not
         outcome.fail(path, 2, f"{path}: out of memory for this sweep: use fewer steps, or "
                               "split it into several scenes")
     except OSError as exc:  # a file that cannot be read or written (disk full, permissions)
@@ -323,7 +323,7 @@ def _read_scene(load, path):
 
 
 def _run(args) -> int:
-    from .pipeline import check_memory
+    from .memory import check_memory
     from .segments import steps_per_segment
 
     out = pathlib.Path(args.out)

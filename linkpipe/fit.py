@@ -451,7 +451,7 @@ def blas_pool():
     solve costs milliseconds: threadpoolctl finds the libraries each time)."""
     from threadpoolctl import threadpool_limits
 
-    from .pipeline import DEFAULT_THREADS
+    from .workers import DEFAULT_THREADS
 
     return threadpool_limits(limits=DEFAULT_THREADS, user_api="blas")
 

@@ -30,12 +30,13 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from .memory import bytes_per_step, check_memory
 from .model import build_model
-from .pipeline import DEFAULT_THREADS, bytes_per_step, check_memory
 from .result import Result, Totals, combine_flags
 from .scene import Scene
 from .spine import finished
 from .stage1 import RESTART  # what stream's sinks are told where the sweep starts again
+from .workers import DEFAULT_THREADS
 
 #: the bytes of stored arrays one segment may hold (its transients come on top: about 1.3 x):
 #: 12 MB, 16,384-step segments of the crank-rocker with every rate (A/B, 8 runs of a 360k-step
@@ -79,7 +80,8 @@ def steps_per_segment(scene: Scene) -> int:
     return min(scene.n_steps, segment_steps(scene))
 
 
-def segments(scene: Scene, segment: int, seconds: dict, progress=None):
+def segments(scene: Scene, segment: int, seconds: dict, progress=None,
+             wanted: frozenset | None = None):
     """Yield the Result of each segment of ``segment`` steps of ``scene``'s sweep, in step
     order (``step_numbers`` set), or :data:`RESTART` where the sweep goes to the general path
     after some segments (the segments then come again from the first step): the spine,
@@ -87,7 +89,7 @@ def segments(scene: Scene, segment: int, seconds: dict, progress=None):
     t0 = _time.perf_counter()
     model = build_model(scene)
     seconds["model"] = seconds.get("model", 0.0) + _time.perf_counter() - t0
-    yield from finished(scene, model, segment, seconds, progress)
+    yield from finished(scene, model, segment, seconds, progress, wanted)
 
 
 class Sampled:
@@ -136,7 +138,7 @@ class Sampled:
 
 def stream(scene: Scene, sinks=(), recording=None, progress=None,
            threads: int | None = DEFAULT_THREADS, segment: int | None = None,
-           between=None, check: bool = True) -> Result:
+           between=None, check: bool = True, wanted: frozenset | None = None) -> Result:
     """Solve ``scene`` in segments (:func:`steps_per_segment`, or ``segment`` steps), handing
     each segment's Result to every sink (``sink.add(part)``; ``sink.restart()`` at
     :data:`RESTART`; ``sink.finish(result)`` at the end, ``sink.stage`` names its seconds);
@@ -145,11 +147,12 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
     recording's stride of steps (``linkpipe.stores.rrd.plan`` with the CLI's caps), or None
     for no recording (one row kept).
 
-    A sweep of one segment (short, or solved whole: :func:`why_whole`) comes from the same
-    loop as :func:`linkpipe.solve`'s Result (the spine over one segment): every row, its
+    A sweep of one segment (short, or solved whole: :func:`why_whole`) is
+    :func:`linkpipe.solve`'s Result (solve is this function over one segment): every row, its
     measurements compared. ``between``: called after each segment (the CLI stops there on a
     signal whose exception a finaliser swallowed). ``check``: the memory check first (the CLI
-    makes it itself, before its progress bar)."""
+    makes it itself, before its progress bar). ``wanted``: the variables the caller will read
+    (:func:`linkpipe.spine.finish`)."""
     segment = segment or steps_per_segment(scene)
     S = scene.n_steps
     seconds: dict[str, float] = {}
@@ -162,7 +165,7 @@ def stream(scene: Scene, sinks=(), recording=None, progress=None,
     pools = (contextlib.nullcontext() if threads is None
              else threadpool_limits(limits=threads, user_api="blas"))
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"), pools:
-        for part in segments(scene, segment, seconds, tell):
+        for part in segments(scene, segment, seconds, tell, wanted):
             if part is RESTART:
                 kept.restart()
                 for sink in sinks:

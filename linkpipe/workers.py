@@ -100,3 +100,9 @@ def held_interrupts(call) -> KeyboardInterrupt | None:
             return held
         except KeyboardInterrupt as stop:
             held = held or stop
+
+
+#: BLAS threads while a scene is solved: its solves are many small systems (stacks of 2x2 to
+#: few-hundred-square blocks), where a multi-threaded BLAS only adds overhead (measured:
+#: benchmarks/bench_threads.py; docs/performance.md)
+DEFAULT_THREADS = 1

@@ -1,4 +1,4 @@
-"""The memory estimate ``run`` and ``check`` refuse a sweep by (pipeline.memory_needed): it
+"""The memory estimate ``run`` and ``check`` refuse a sweep by (memory.memory_needed): it
 counts every array a Result stores, so it can never be below what the run keeps. Peaks of whole
 runs against it: benchmarks/bench_memory.py (1.8-1.9x at 1-2M steps, 2026-11-24)."""
 import pathlib
@@ -6,7 +6,7 @@ import pathlib
 import pytest
 
 import linkpipe
-from linkpipe.pipeline import bytes_per_step
+from linkpipe.memory import bytes_per_step
 
 CONFIGS = pathlib.Path(__file__).parent.parent / "configs"
 SCENES = sorted(p.relative_to(CONFIGS).with_suffix("").as_posix()
@@ -40,10 +40,10 @@ def test_a_small_scene_is_not_refused_on_a_machine_with_little_memory_free(monke
     """What the steps need is what is compared with the memory free: the estimate's fixed
     part (the libraries, already loaded) is no reason to refuse a 9-step scene; a sweep whose
     steps alone need more is refused with the scene's error."""
-    import linkpipe.pipeline as pipeline
+    import linkpipe.memory as memory
     from linkpipe.errors import MemoryRefused
 
-    monkeypatch.setattr(pipeline, "available_memory", lambda: 50 * 2**20)
+    monkeypatch.setattr(memory, "available_memory", lambda: 50 * 2**20)
     assert linkpipe.solve(CONFIGS / "shear_press.toml").n_ok == 9
     text = (CONFIGS / "fourbar_crank_rocker.toml").read_text().replace("steps = 361", "steps = 1000000")
     with pytest.raises(MemoryRefused, match="steps of 5 points need about"):

@@ -18,7 +18,7 @@ from hypothesis import given, settings, strategies as st
 
 import linkpipe
 from linkpipe.kinematics.angles import AngleCarry, unwrap_runs
-from linkpipe.pipeline import memory_needed
+from linkpipe.memory import memory_needed
 from linkpipe.result import Totals, stride_of
 from linkpipe.segments import RESTART, segment_steps, segments, steps_per_segment, stream
 from linkpipe.stores import hdf5

@@ -566,12 +566,12 @@ def test_a_metric_that_is_not_finite_is_said_in_the_summary(tmp_path, capsys):
 def test_a_sweep_too_long_for_memory_stops_the_study_not_a_row(tmp_path, monkeypatch):
     """The memory refusal is the scene's error (exit 2 on the command line), never a
     variant's failed row nor a fit's failed trial."""
-    import linkpipe.pipeline as pipeline
+    import linkpipe.memory as memory
     from linkpipe.errors import MemoryRefused
     from linkpipe.study.variants import solve_variant
 
     study = load_study(str(write_study(tmp_path)))
-    monkeypatch.setattr(pipeline, "available_memory", lambda: 1)
+    monkeypatch.setattr(memory, "available_memory", lambda: 1)
     with pytest.raises(MemoryRefused):
         solve_variant(study, 0)
 

@@ -12,7 +12,7 @@ import pytest
 import linkpipe
 from linkpipe import kinematics as kin
 from linkpipe.model import build_model
-from linkpipe.pipeline import Stages
+from linkpipe.spine import Stages
 from linkpipe.stage1 import Stage1
 from linkpipe.status import finite_rows
 from linkpipe.workers import count, default_count, for_chunks, using

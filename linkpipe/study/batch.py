@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from ..pipeline import DEFAULT_THREADS
+from ..workers import DEFAULT_THREADS
 from ..status import NO_ASSEMBLY
 from .metrics import BatchArrays, batch_metrics, transmission_pins
 from .paths import variant_arrays

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from ..errors import MemoryRefused, SceneError
 from ..fit import scene_with
-from ..pipeline import DEFAULT_THREADS, solve
+from ..pipeline import solve
+from ..workers import DEFAULT_THREADS
 
 
 def variant_scene(study, v: int):
