@@ -295,7 +295,7 @@ MEASURABLE = {
 
 
 #: what computes a measurable variable beyond the positions: "velocity" / "acceleration" (a
-#: measurement calls for them: :meth:`linkpipe.pipeline.Stages.of`), "forces" (the force
+#: measurement calls for them: :meth:`linkpipe.spine.Stages.of`), "forces" (the force
 #: stage, which runs only with effects), "springs" (that effect); absent: always computed
 MEASURED_NEEDS = {
     "velocity": "velocity", "link_angular_velocity": "velocity",
