@@ -1,22 +1,29 @@
 """The links' angles unwrapped by compiled loops (linkpipe.kinematics.unwrap_kernel) equal
 numpy's unwrap_runs to the bit: angles that pass +-pi often and rarely, a change of exactly pi
 either way, a carry with and without a last angle, and the carry handed on; a segment with a
-NaN goes to numpy's path (the same function's other branch) and gives its numbers."""
+NaN is left to numpy's path (the kernel declines it) and gives its numbers."""
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st_h
 from hypothesis.extra import numpy as hnp
 
+from linkpipe.kinematics import unwrap_kernel
 from linkpipe.kinematics.angles import AngleCarry, unwrap_runs
 
 
 def _same(ang, carry):
-    a, ca = unwrap_runs(ang, carry, compiled=False)
-    b, cb = unwrap_runs(ang, carry, compiled=True)
-    np.testing.assert_array_equal(b, a)
-    np.testing.assert_array_equal(cb.last, ca.last)
-    np.testing.assert_array_equal(cb.correction, ca.correction)
+    """numpy's unwrap_runs and the kernel's unwrap of the same segment after ``carry``; the
+    kernel declines (None) exactly where an angle is NaN."""
+    a, ca = unwrap_runs(ang, carry)
+    before = carry or AngleCarry(np.full(ang.shape[1], np.nan), np.zeros(ang.shape[1]))
+    got = unwrap_kernel.unwrap(ang, before.last, before.correction)
+    assert (got is None) == bool(np.isnan(ang).any())
+    if got is not None:
+        b, last, correction = got
+        np.testing.assert_array_equal(b, a)
+        np.testing.assert_array_equal(last, ca.last)
+        np.testing.assert_array_equal(correction, ca.correction)
     return a
 
 

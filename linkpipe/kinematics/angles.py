@@ -45,8 +45,8 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
 
     ``raw`` (S, n_links): the links' directions in (-pi, pi] where the caller has them
     (``model.link_angles(X)`` row by row: the closed-form dyads' own pass), else computed here.
-    ``compiled``: the segment's unwrapping by compiled loops (the same numbers:
-    :func:`unwrap_runs`)."""
+    ``compiled`` (with ``carry``): the segment's unwrapping by compiled loops
+    (:mod:`.unwrap_kernel`, the same numbers)."""
     ang = raw
     if ang is None:
         ang = np.empty((X.shape[0], len(model.link_a)))
@@ -56,18 +56,22 @@ def link_angles_unwrapped(model: Model, X: np.ndarray, period: int = 0,
 
         for_chunks(work, X.shape[0], CHUNK)
     drawn = drawn_link_angles(model) if drawings is None else model.link_angles(drawings)
-    if carry is not None and compiled and drawings is None and not np.isnan(carry.shift).any():
+    got = None
+    if carry is not None and compiled and drawings is None:
         from . import unwrap_kernel  # imports numba: only where the compiled loops are taken
 
-        # the whole turns known (every segment after the first): one pass adds them and the
-        # driven links' (the same numbers as the steps below)
-        got = unwrap_kernel.unwrap(ang, carry.last, carry.correction, carry.shift,
-                                   driven_links(model) if s is not None else (), s)
-        if got is not None:
+        # a segment without NaN; where the whole turns are known (every segment after the
+        # first), the same pass adds them and the driven links' (the numbers of the steps below)
+        known = not np.isnan(carry.shift).any()
+        got = unwrap_kernel.unwrap(ang, carry.last, carry.correction,
+                                   carry.shift if known else None,
+                                   driven_links(model) if known and s is not None else (), s)
+        if got is not None and known:
             out, last, summed = got
             return out, AngleCarry(last, summed, np.where(np.isnan(last), np.nan, carry.shift))
     if carry is not None:
-        out, after = unwrap_runs(ang, carry, compiled)
+        out, after = (unwrap_runs(ang, carry) if got is None else
+                      (got[0], AngleCarry(got[1], got[2])))
         shift = (carry.shift if not np.isnan(carry.shift).any() else  # set: no pass over out
                  np.where(np.isnan(carry.shift), _turns_towards(drawn, out), carry.shift))
         after = dataclasses.replace(after, shift=np.where(np.isnan(after.last), np.nan, shift))
@@ -162,22 +166,15 @@ class AngleCarry:
         return cls(np.full(n_links, np.nan), np.zeros(n_links), np.full(n_links, np.nan))
 
 
-def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None, compiled: bool = False):
+def unwrap_runs(ang: np.ndarray, carry: AngleCarry | None = None):
     """``(unwrapped, carry)`` of angles (..., S, n_links) along the steps axis, NaN gaps as
     :func:`link_angles_unwrapped` says: numpy's ``unwrap`` (period 2 pi) written out so that its
     running sum of corrections can start from a ``carry`` (the steps before; None: none) and
     go on in the next segment in the same order of additions (``np.unwrap`` itself restarts
-    it: ``tests/test_segments.py`` checks this against ``np.unwrap`` bit for bit). ``compiled``
-    (:func:`.compiled.wanted`): one run without NaN by :mod:`.unwrap_kernel`'s loops, the
-    same numbers."""
+    it: ``tests/test_segments.py`` checks this against ``np.unwrap`` bit for bit; compiled:
+    :mod:`.unwrap_kernel`)."""
     lead = ang.shape[:-2] + ang.shape[-1:]
     before = carry if carry is not None else AngleCarry(np.full(lead, np.nan), np.zeros(lead))
-    if compiled and ang.ndim == 2:
-        from . import unwrap_kernel  # imports numba: only where the compiled loops are taken
-
-        got = unwrap_kernel.unwrap(ang, before.last, before.correction)
-        if got is not None:
-            return got[0], AngleCarry(got[1], got[2])
     ext = np.concatenate([before.last[..., None, :], ang], axis=-2)  # (..., S + 1, L)
     fin = np.isfinite(ext)
     gaps = not fin.all()

@@ -388,7 +388,7 @@ def _own_compiled(t: Tables, na: int, from_entries: bool, keep: bool = False):
 
 def _load(text: str, key: str):
     """Write the source (once: the same text keeps its file, so numba's cache of it stays
-    valid), import it and return its loop compiled as :func:`.compiled.loop` compiles."""
+    valid), import it and return its loop compiled (:func:`.compiled.jit`)."""
     OWN_FOLDER.mkdir(parents=True, exist_ok=True)
     path = OWN_FOLDER / f"block_{key}.py"
     if not path.exists() or path.read_text() != text:
@@ -400,7 +400,7 @@ def _load(text: str, key: str):
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module  # numba's cache finds the module of what it loads by name
     spec.loader.exec_module(module)
-    return compiled.loop(module.loop)()
+    return compiled.jit(module.loop)
 
 
 def _source(t: Tables, na: int, from_entries: bool, keep: bool = False) -> str | None:

@@ -1,19 +1,20 @@
-"""The closed-form dyads (:mod:`.dyads`) as one compiled loop over the steps: positions,
-velocities, accelerations, the dyads' root gaps and branch margins and the links' directions
-and rates of every step in one pass, with each step's numbers in registers.
+"""The closed-form dyads (:mod:`.dyads`) as compiled loops (numba): positions, velocities,
+accelerations, the dyads' root gaps and branch margins and the links' directions and rates,
+dyad by dyad over each chunk's steps on columns (loops the compiler vectorises, as numpy's
+passes are, without their temporaries).
 
 It is :func:`.dyads.solve_chain`'s arithmetic in its order, operation by operation (``dyads``
-writes each formula once over arrays; here over one step's scalars), with the one
+writes each formula once over arrays; here over one step's numbers), with the one
 transcendental function it takes, cos and sin of the angle drivers, computed by numpy
 beforehand, and the links' arctan2 by numpy afterwards: so the numbers are numpy's to the bit
 (``tests/test_chain_kernel.py`` proves it on every shipped dyad scene and on families of them;
 a zero's sign may differ where numpy skips a term that is exactly zero). The residual max |Phi|
-stays :mod:`linkpipe.model.equations`' own, evaluated by numpy on each chunk's columns.
+stays :mod:`linkpipe.model.equations`' own, evaluated by numpy once over the segment's columns.
 
 The chain is encoded as arrays (:func:`encode`): one row per dyad in ``ops_i`` / ``ops_f``
-(columns below) and its targets in ``tg_*``. What the compiled loop does not take (a study's
+(columns below) and its targets in ``tg_*``. What the compiled loops do not take (a study's
 per-row constants or per-row pivots, runs of variants) stays on numpy (:func:`.dyads.solve_chain`).
-Importing this module imports numba and loads (or, the first time, compiles) the loop:
+Importing this module imports numba and loads (or, the first time, compiles) the loops:
 :mod:`.dyads` imports it only where :func:`.compiled.wanted` said so.
 """
 from __future__ import annotations
@@ -72,9 +73,10 @@ def encode(chain: DyadChain):
 
 def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_phi,
           carry: dict | None, links: bool, chunk: int = CHUNK):
-    """:func:`.dyads.solve_chain` (its arguments) by the compiled loop, chunk by chunk as
-    numpy's (its residual and branch margins see the same chunks): the fields of its
-    :class:`.dyads.ChainSweep`, in their order."""
+    """:func:`.dyads.solve_chain` (its arguments) by the compiled loops, chunk by chunk as
+    numpy's (its branch margins see the same chunks; the residual, elementwise, is taken once
+    over the segment): the fields of its :class:`.dyads.ChainSweep`, in their order, the steps
+    without assembly not yet NaN (``solve_chain`` does that for both paths)."""
     model = chain.model
     S, P, L = s.shape[0], model.n_points, len(model.link_a)
     X0 = model.start_position
@@ -138,15 +140,6 @@ def solve(chain: DyadChain, s, s_dot, s_ddot, order: int, gaps: bool, max_abs_ph
         for k, p in enumerate(gap_points):
             if has_prev[k]:
                 carry[int(p)] = tuple(float(x) for x in prev[k])
-    bad = ~ok
-    if bad.any():
-        idx = np.ix_(bad, moving)
-        X[idx] = np.nan
-        for R in (V, A):
-            if len(R):
-                R[idx] = np.nan
-        if residual is not None:
-            residual[bad] = np.nan
     return (X, V if order >= 1 else None, A if order >= 2 else None, ok, residual,
             gap if gaps else None, angle,
             (w, al if order >= 2 else None) if links and order >= 1 else None,

@@ -362,8 +362,8 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
             st.take(slice(0, 1)) is st for st in plan.steps):
         from . import chain_kernel  # imports numba: only where the compiled loop is taken
 
-        return ChainSweep(*chain_kernel.solve(plan, s, s_dot, s_ddot, order, gaps, max_abs_phi,
-                                              carry, links, chunk))
+        return _unassembled_as_nan(ChainSweep(*chain_kernel.solve(
+            plan, s, s_dot, s_ddot, order, gaps, max_abs_phi, carry, links, chunk)), plan.model)
     model = plan.model
     S = s.shape[0]
     P = model.n_points
@@ -437,17 +437,22 @@ def solve_chain(plan: DyadChain, s: np.ndarray, s_dot: np.ndarray | None = None,
                     (lambda p: (_val(ch.ax[p]), _val(ch.ay[p]))) if al is not None else None,
                     None if w is None else w[lo:hi], None if al is None else al[lo:hi],
                     still=fixed_set, angle=angle[lo:hi])
-    bad = ~ok
+    return _unassembled_as_nan(ChainSweep(X, V, A, ok, residual, gap, angle,
+                                          None if w is None else (w, al), miss, trig), model)
+
+
+def _unassembled_as_nan(sw: ChainSweep, model) -> ChainSweep:
+    """``sw`` with every moving point's position and rates, and the residual, NaN at the steps
+    without assembly (``~sw.ok``), in place."""
+    bad = ~sw.ok
     if bad.any():
-        X[np.ix_(bad, moving)] = np.nan
-        if V is not None:
-            V[np.ix_(bad, moving)] = np.nan
-        if A is not None:
-            A[np.ix_(bad, moving)] = np.nan
-        if residual is not None:
-            residual[bad] = np.nan
-    return ChainSweep(X, V, A, ok, residual, gap, angle, None if w is None else (w, al), miss,
-                      trig)
+        at = np.ix_(bad, model.moving)
+        for arr in (sw.position, sw.velocity, sw.acceleration):
+            if arr is not None:
+                arr[at] = np.nan
+        if sw.residual is not None:
+            sw.residual[bad] = np.nan
+    return sw
 
 
 def _position_pass(plan: DyadChain, ch: _Chunk, fixed_at: dict, lo: int, hi: int,
